@@ -26,7 +26,8 @@ import numpy as np
 
 from .sagmap import Region, SagMap, resolve_region
 from .zernike import (
-    ansi_to_nm, fringe_to_nm, noll_to_nm, wavefront_from_coefficients, zernike_basis_xy,
+    ansi_to_nm, fringe_to_nm, nm_to_ansi, nm_to_fringe, nm_to_noll, noll_to_nm,
+    wavefront_from_coefficients, zernike_basis_xy,
 )
 
 __all__ = [
@@ -44,6 +45,11 @@ _MAX_COND = 1e10  # beyond this the coefficients are noise amplifiers, not a fit
 @dataclass(frozen=True, eq=False)
 class FitResult:
     """A Zernike fit. Coefficients are in µm on the disc ``radius_mm`` about ``center_mm``.
+
+    ``coefficients`` maps ``(n, m)`` to µm; ``coefficient_array`` follows ``terms``.
+    ``norm`` says whether they multiply RMS-normalised (Noll, Zemax Standard) or
+    unnormalised (CODE V ZFR / Zemax Fringe) polynomials. ``index`` is the
+    convention the integer ``terms`` were read in ("nm" if pairs were given).
 
     ``fitted`` and ``residual`` are SagMaps (NaN outside the fitted samples) for
     gridded input, or arrays shaped like the input for scattered points.
@@ -65,6 +71,13 @@ class FitResult:
     captured_fraction: float
     n_points: int
     condition_number: float
+
+    def by_index(self, index: str = "noll") -> dict[int, float]:
+        """Coefficients (µm) keyed by single index in ``index`` ("noll", "ansi", "fringe")."""
+        conv = {"noll": nm_to_noll, "ansi": nm_to_ansi, "fringe": nm_to_fringe}
+        if index not in conv:
+            raise ValueError(f"index={index!r} is unknown; use one of {sorted(conv)}")
+        return {conv[index](*t): c for t, c in self.coefficients.items()}
 
     def evaluate(self, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
         """Fitted surface (µm) at any points (mm); not masked to the aperture."""
@@ -166,11 +179,25 @@ def aperture_geometry(region: Region, x_mm: np.ndarray, y_mm: np.ndarray) -> tup
 
 
 def _solve(A: np.ndarray, d: np.ndarray, what: str) -> tuple[np.ndarray, float]:
-    """SVD least squares of ``A (N, k) c = d``; raises when under-determined."""
+    """Least squares ``A (N, k) c = d``; raises when under-determined.
+
+    Well-conditioned problems (the usual case) go through the k x k normal equations
+    plus one step of iterative refinement: ~30x faster than a QR/SVD of a tall
+    matrix and accurate to ~eps * cond(A). Above ``cond(A) ~ 1e6`` the normal
+    equations square away too many digits, so we fall back to QR of ``[A | d]``
+    (Q never formed: its last column holds ``Q^T d``) and an SVD of the triangle.
+    """
     n_pts, k = A.shape
     if n_pts < k:
         raise ValueError(f"{what}: {n_pts} valid points for {k} terms; need at least {k}")
-    u, s, vt = np.linalg.svd(A, full_matrices=False)
+    G = A.T @ A
+    w, V = np.linalg.eigh(G)
+    if w[0] > 0 and w[-1] / w[0] < 1e12:
+        c = V @ ((V.T @ (A.T @ d)) / w)
+        c = c + V @ ((V.T @ (A.T @ (d - A @ c))) / w)  # refinement
+        return c, float(np.sqrt(w[-1] / w[0]))
+    r = np.linalg.qr(np.column_stack([A, d]), mode="r")
+    u, s, vt = np.linalg.svd(r[:k, :k])
     cond = float(s[0] / s[-1]) if s[-1] > 0 else np.inf
     if not cond < _MAX_COND:
         rank = int(np.sum(s > s[0] / _MAX_COND))
@@ -179,7 +206,7 @@ def _solve(A: np.ndarray, d: np.ndarray, what: str) -> tuple[np.ndarray, float]:
             f"(numerical rank {rank}, condition number {cond:.3g} >= {_MAX_COND:g}); "
             "use fewer terms or a better-sampled aperture"
         )
-    return vt.T @ ((u.T @ d) / s), cond
+    return vt.T @ ((u.T @ r[:k, k]) / s), cond
 
 
 def _stats(d: np.ndarray, model: np.ndarray) -> tuple[float, float, float]:
@@ -224,6 +251,8 @@ def _zernike_fit(x, y, d, terms, index, center, radius, norm, aperture_name, mas
     if not (np.isscalar(radius) and radius > 0):
         raise ValueError(f"radius_mm={radius!r} must be a positive number")
     nm = resolve_terms(terms, index)
+    if not np.isscalar(terms) and all(np.ndim(t) for t in terms):
+        index = "nm"  # integer indices were not used; say so rather than imply Noll
     what = f"Zernike fit over aperture {aperture_name!r}"
     if d.size == 0:
         raise ValueError(f"{what}: no valid points")

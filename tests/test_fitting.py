@@ -85,6 +85,19 @@ def test_fringe_unnormalised_and_index_conventions_agree():
         for t in nm:
             assert f.coefficients[t] == pytest.approx(truth[t], abs=1e-12)
     assert by_fringe.index == "fringe" and nm_to_fringe(*by_fringe.terms[8]) == 9
+    assert by_nm.index == "nm" and by_nm.by_index("fringe")[9] == pytest.approx(truth[(4, 0)])
+
+
+def test_ill_conditioned_but_full_rank_fit_still_exact():
+    # points on a disc 1/20 of the Zernike radius: cond ~ 3e6, beyond the normal-
+    # equation path, so this exercises the QR fallback
+    rng = np.random.default_rng(RNG_SEED + 5)
+    nm = resolve_terms(15)
+    truth = _random_coeffs(rng, nm)
+    x, y = _disc_points(rng, 5000, 0.05)
+    fit = fit_zernike(x, y, wavefront_from_coefficients(truth, x, y, 1.0), 1.0, terms=15)
+    assert 1e6 < fit.condition_number < 1e10
+    np.testing.assert_allclose(fit.coefficient_array, [truth[t] for t in nm], atol=1e-9)
 
 
 def test_noisy_fit_recovered_within_noise():
