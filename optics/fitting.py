@@ -384,7 +384,7 @@ def _fourier_fit(x, y, d, px, py, harmonics, include_cross, include_plane, origi
 
 
 def fit_fourier(sagmap: SagMap, period_x_mm: float = 21.0, period_y_mm: float = 18.0,
-                harmonics: int = 3, aperture: str | Region | None = "center",
+                harmonics: int = 3, aperture: str | Region | None = None,
                 include_cross: bool = True, include_plane: bool = True,
                 phase_origin_mm=(0.0, 0.0)) -> FourierFit:
     """Least-squares fit of a periodic quilt to ``sagmap`` inside ``aperture``.
@@ -398,7 +398,8 @@ def fit_fourier(sagmap: SagMap, period_x_mm: float = 21.0, period_y_mm: float = 
     harmonics : int
         Highest harmonic ``h``: components ``(i/Dx, j/Dy)`` with ``|i|, |j| <= h``.
     aperture : str, Region or None
-        Where to fit; need not hold whole periods (least squares, not FFT).
+        Where to fit (None: every valid sample); need not hold whole periods
+        (least squares, not FFT).
     include_cross : bool
         Keep components with both ``i`` and ``j`` non-zero (an egg-crate quilt needs them).
     include_plane : bool
@@ -423,7 +424,7 @@ def fit_fourier_points(x_mm, y_mm, sag_um, period_x_mm: float = 21.0, period_y_m
 
 
 # --------------------------------------------------------------------- comparison
-def compare_bases(sagmap: SagMap, aperture: str | Region | None = "center", n_zernike: int = 37,
+def compare_bases(sagmap: SagMap, aperture: str | Region | None, n_zernike: int = 37,
                   harmonics: int = 3, n_low: int = 11, period_x_mm: float = 21.0,
                   period_y_mm: float = 18.0) -> dict[str, BasisCapture]:
     """How much of ``sagmap`` over ``aperture`` each basis captures.
