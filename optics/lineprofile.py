@@ -1,0 +1,197 @@
+"""One-call SPIFFI line profiles and PSFs: grating + wavelength + pixel scale + sag map.
+
+:func:`line_profile` and :func:`point_psf` are the public entry points used by the
+``cryograting lsf`` / ``psf`` subcommands; they only assemble the pure functions of
+:mod:`optics.pupil` and :mod:`optics.imaging`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from optics.grating import SPIFFI, Grating, PixelScale, Spectrograph, get_grating, get_pixel_scale
+from optics.imaging import (PSF, Profile, detected_profile, partially_coherent_lsf, psf,
+                            source_points)
+from optics.pupil import (DEFAULT_COLLIMATOR_ZERNIKE_UM, centred_axis, circular_aperture,
+                          collimator_opd_um, grating_opd_um, pupil_field, pupil_shift_along_slit)
+from optics.sagmap import SagMap
+
+__all__ = ["LsfSettings", "LineProfileResult", "line_profile", "point_psf", "pupil_rows"]
+
+
+@dataclass(frozen=True)
+class LsfSettings:
+    """Numerical settings of :func:`line_profile` (defaults: <= 0.5 % L1 from converged,
+    see ``benchmarks/results_lsf.md``).
+
+    Parameters
+    ----------
+    detector_step_um : float
+        Detector sampling of the FFT (µm).
+    n_fft : int
+        FFT length; the detector period is ``n_fft * detector_step_um`` and fixes the
+        pupil step ``lambda f_cam anamorphic / period`` (anti-aliasing of the profile).
+    source_step_mm : float
+        Spacing of the incoherent source points in the pupil (mm); capped at
+        ``source_radius / min_source_rows`` for small NA.
+    min_source_rows : int
+        Minimum number of source rows across the source radius.
+    window_um : float
+        Half width of the returned profile (µm).
+    workers : int
+        scipy.fft worker threads.
+    """
+
+    detector_step_um: float = 1.0
+    n_fft: int = 512
+    source_step_mm: float = 1.25
+    min_source_rows: int = 8
+    window_um: float = 200.0
+    workers: int = 2
+
+    def __post_init__(self) -> None:
+        for name in ("detector_step_um", "source_step_mm", "window_um"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"LsfSettings.{name}={getattr(self, name)!r} must be > 0")
+        if int(self.n_fft) != self.n_fft or self.n_fft < 64:
+            raise ValueError(f"LsfSettings.n_fft={self.n_fft!r} must be an integer >= 64")
+        if self.min_source_rows < 1 or self.workers < 1:
+            raise ValueError("LsfSettings.min_source_rows and workers must be >= 1")
+        if self.window_um > 0.5 * self.n_fft * self.detector_step_um:
+            raise ValueError(
+                f"LsfSettings.window_um={self.window_um} exceeds half the detector period "
+                f"{0.5 * self.n_fft * self.detector_step_um} um (n_fft * detector_step_um / 2)"
+            )
+
+
+@dataclass(frozen=True)
+class LineProfileResult:
+    """Output of :func:`line_profile`: the detected profile, the profile before the
+    pixel, and the numbers needed to interpret them (``info``)."""
+
+    detected: Profile
+    partially_coherent: Profile
+    info: dict = field(default_factory=dict)
+
+
+def _geometry(grating, wavelength_um, order, spectrograph):
+    g = get_grating(grating)
+    m = g.order if order is None else int(order)
+    beta = float(g.beta_deg(wavelength_um, m))  # raises for evanescent orders
+    anam = float(g.anamorphic_factor(wavelength_um, m))
+    return g, m, beta, anam
+
+
+def pupil_rows(grating: Grating, wavelength_um: float, xi_mm: np.ndarray, eta_mm: np.ndarray, beta_deg: float,
+               sag: SagMap | None, shift_mm: tuple[float, float], collimator_zernike_um: dict | None,
+               spectrograph: Spectrograph = SPIFFI, rim_step_mm: float | None = None) -> np.ndarray:
+    """Complex pupil field on ``eta_mm`` × ``xi_mm``: aperture, grating OPD, collimator OPD."""
+    R = 0.5 * spectrograph.pupil_diameter_mm
+    amp = circular_aperture(xi_mm, eta_mm, spectrograph.pupil_diameter_mm, rim_step_mm)
+    opd = collimator_opd_um(xi_mm, eta_mm, collimator_zernike_um, R)
+    if sag is not None:
+        opd = opd + grating_opd_um(sag, xi_mm, eta_mm, grating.incidence_deg, beta_deg, shift_mm, amp)
+    return pupil_field(amp, opd, wavelength_um)
+
+
+def line_profile(grating: str | Grating, wavelength_um: float, pixel_scale_mas: int | str | PixelScale,
+                 sag: SagMap | None = None, *, order: int | None = None,
+                 pupil_shift_mm: tuple[float, float] = (0.0, 0.0), torsion_shift_x_mm: float = 0.0,
+                 slit_position: float = 0.0,
+                 collimator_zernike_um: dict | None = DEFAULT_COLLIMATOR_ZERNIKE_UM,
+                 spectrograph: Spectrograph = SPIFFI, settings: LsfSettings = LsfSettings()) -> LineProfileResult:
+    """Detected spectral line profile of a fully illuminated SPIFFI slit (paper §4.3).
+
+    Parameters
+    ----------
+    grating : str or Grating
+        "J", "H", "K", "HK" (see :data:`optics.grating.GRATINGS`).
+    wavelength_um : float
+        Line wavelength (µm).
+    pixel_scale_mas : int, str or PixelScale
+        25, 100 or 250 (relative illumination NA 0.1, 0.4, 1.0).
+    sag : SagMap, optional
+        Grating sag map (µm along +z, mm, grating frame); None = perfect grating.
+    order : int, optional
+        Diffraction order (default: the grating's blaze order).
+    pupil_shift_mm : (float, float)
+        Footprint shift on the grating (x, y) in mm at the slit centre.
+    torsion_shift_x_mm, slit_position : float
+        Slicer torsion: extra x shift ``torsion_shift_x_mm * slit_position`` with
+        ``slit_position`` in [-1, 1] along the slitlet.
+    collimator_zernike_um : dict {(n, m): µm} or None
+        RMS-normalised Zernike OPD of the collimator over the 110 mm pupil; None or
+        {} disables it. Default :data:`optics.pupil.DEFAULT_COLLIMATOR_ZERNIKE_UM`.
+    settings : LsfSettings
+        Numerical sampling.
+
+    Returns
+    -------
+    LineProfileResult
+        ``detected`` (pixel-convolved, unit area) and ``partially_coherent`` profiles
+        on ``offset_um`` (µm, +x_g direction, see :mod:`optics.pupil`), and ``info``
+        with wavelength_um, order, beta_deg, anamorphic, linear_dispersion_um_per_nm,
+        slit_image_width_um, pixel_um, pixel_scale_mas, relative_na, pupil_shift_mm.
+    """
+    g, m, beta, anam = _geometry(grating, wavelength_um, order, spectrograph)
+    ps = get_pixel_scale(pixel_scale_mas)
+    shift = pupil_shift_along_slit(slit_position, tuple(pupil_shift_mm), torsion_shift_x_mm)
+    s = settings
+    f_cam, f_coll = spectrograph.camera_focal_mm, spectrograph.collimator_focal_mm
+    R = 0.5 * spectrograph.pupil_diameter_mm
+    # Pupil step chosen so the FFT lands exactly on detector_step_um for every wavelength.
+    d_xi = wavelength_um * f_cam * anam / (s.n_fft * s.detector_step_um)
+    xi = centred_axis(d_xi, R)
+    if xi.size > s.n_fft:
+        raise ValueError(f"n_fft={s.n_fft} is smaller than the {xi.size} pupil samples; increase n_fft")
+    r_src = ps.relative_na * R
+    sx, sy, w = source_points(r_src, min(s.source_step_mm, r_src / s.min_source_rows))
+    rows = pupil_rows(g, wavelength_um, xi, sy, beta, sag, shift, collimator_zernike_um, spectrograph, d_xi)
+    w_coll = g.slit_width_collimator_um(spectrograph)
+    pc = partially_coherent_lsf(rows, xi, sx, w, wavelength_um, w_coll, f_coll, f_cam, anam, s.n_fft,
+                                s.window_um, s.workers)
+    info = {
+        "grating": g.name, "wavelength_um": float(wavelength_um), "order": m, "beta_deg": beta,
+        "anamorphic": anam, "linear_dispersion_um_per_nm": float(g.linear_dispersion_um_per_nm(wavelength_um, m, f_cam)),
+        "slit_image_width_um": g.slit_image_width_at_um(wavelength_um, m, spectrograph),
+        "slit_width_collimator_um": w_coll, "pixel_um": spectrograph.pixel_um, "pixel_scale_mas": ps.mas,
+        "relative_na": ps.relative_na, "pupil_shift_mm": shift, "n_sources": pc.meta["n_sources"],
+        "pupil_step_mm": d_xi, "sag": None if sag is None else sag.label,
+        "collimator_zernike_um": {f"{k[0]},{k[1]}": v for k, v in (collimator_zernike_um or {}).items()},
+    }
+    pc = Profile(pc.offset_um, pc.intensity, pc.kind, {**pc.meta, **info})
+    det = detected_profile(pc, spectrograph.pixel_um)
+    return LineProfileResult(det, pc, info)
+
+
+def point_psf(grating: str | Grating, wavelength_um: float, sag: SagMap | None = None, *,
+              order: int | None = None, pupil_shift_mm: tuple[float, float] = (0.0, 0.0),
+              collimator_zernike_um: dict | None = DEFAULT_COLLIMATOR_ZERNIKE_UM,
+              spectrograph: Spectrograph = SPIFFI, detector_step_um: float = 0.5, n_fft: int = 1024,
+              window_um: float = 150.0, workers: int = 2) -> PSF:
+    """Point-source PSF (full 110 mm pupil) on the detector, intensity[y, x], unit volume.
+
+    The pupil steps are chosen so the PSF is sampled at ``detector_step_um`` on both
+    axes with an ``n_fft`` × ``n_fft`` FFT. ``offset_x_um`` is along dispersion
+    (+x_g), ``offset_y_um`` along the slit (+y_g). Other parameters as :func:`line_profile`.
+    """
+    g, m, beta, anam = _geometry(grating, wavelength_um, order, spectrograph)
+    R = 0.5 * spectrograph.pupil_diameter_mm
+    f_cam = spectrograph.camera_focal_mm
+    d_xi = wavelength_um * f_cam * anam / (n_fft * detector_step_um)
+    d_eta = wavelength_um * f_cam / (n_fft * detector_step_um)
+    xi, eta = centred_axis(d_xi, R), centred_axis(d_eta, R)
+    if max(xi.size, eta.size) > n_fft:
+        raise ValueError(f"n_fft={n_fft} is smaller than the pupil ({eta.size} x {xi.size} samples); "
+                         "increase n_fft or detector_step_um")
+    field2d = pupil_rows(g, wavelength_um, xi, eta, beta, sag, tuple(pupil_shift_mm), collimator_zernike_um,
+                         spectrograph, min(d_xi, d_eta))
+    p = psf(field2d, xi, eta, wavelength_um, f_cam, anam, (n_fft, n_fft), window_um, workers)
+    meta = {**p.meta, "grating": g.name, "order": m, "beta_deg": beta, "anamorphic": anam,
+            "linear_dispersion_um_per_nm": float(g.linear_dispersion_um_per_nm(wavelength_um, m, f_cam)),
+            "slit_image_width_um": g.slit_image_width_at_um(wavelength_um, m, spectrograph),
+            "pupil_shift_mm": tuple(pupil_shift_mm), "sag": None if sag is None else sag.label}
+    return PSF(p.offset_x_um, p.offset_y_um, p.intensity, meta)
