@@ -53,7 +53,7 @@ def test_evanescent_order_error_names_wavelength_order_and_range():
     with pytest.raises(ValueError, match=r"wavelength_um=5\.0 .*order -2.*valid range.*4\.57"):
         g.beta_deg(5.0)
     with pytest.raises(ValueError, match="order -4"):
-        g.beta_deg(2.0, -4)
+        g.beta_deg(3.0, -4)
     with pytest.raises(ValueError, match="non-zero integer"):
         g.beta_deg(1.25, 0)
 
