@@ -1,0 +1,122 @@
+"""Sparse symmetric positive-definite solves with a residual check.
+
+Two back-ends:
+
+* ``pardiso`` — MKL PARDISO through pypardiso, real SPD (mtype 2) on the upper
+  triangle: a sparse Cholesky, the fastest option on 2 cores (optional dependency
+  ``cryograting[fast]``).
+* ``amg`` — conjugate gradients preconditioned by pyamg smoothed aggregation with the
+  six rigid-body modes as near-null space; pure Python wheels, works everywhere.
+
+``auto`` picks pardiso when it imports. Every solve checks the relative residual and
+raises :class:`SolverError` when it is not met: a result is never returned silently.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = ["SolverError", "solve_spd", "available_backends"]
+
+
+class SolverError(RuntimeError):
+    """The linear solve failed or did not reach the requested residual."""
+
+
+def _have_pardiso() -> bool:
+    try:
+        import pypardiso  # noqa: F401
+    except Exception:  # pragma: no cover - import failure modes vary by platform
+        return False
+    return True
+
+
+def available_backends() -> list[str]:
+    return (["pardiso"] if _have_pardiso() else []) + ["amg"]
+
+
+def _rigid_modes(coords_mm: np.ndarray) -> np.ndarray:
+    """Six rigid-body modes on the DOF layout 3*d + i, shape (3N, 6)."""
+    x, y, z = coords_mm
+    N = x.size
+    B = np.zeros((3 * N, 6))
+    B[0::3, 0] = 1
+    B[1::3, 1] = 1
+    B[2::3, 2] = 1
+    B[0::3, 3], B[1::3, 3] = -y, x
+    B[1::3, 4], B[2::3, 4] = -z, y
+    B[0::3, 5], B[2::3, 5] = z, -x
+    return B
+
+
+def solve_spd(K: sp.spmatrix, f: np.ndarray, backend: str = "auto", rtol: float = 1e-9,
+              coords_mm: np.ndarray | None = None, free: np.ndarray | None = None) -> np.ndarray:
+    """Solve K u = f for a symmetric positive-definite K.
+
+    Parameters
+    ----------
+    K : sparse matrix, shape (n, n)
+        Condensed (constraints already removed) stiffness.
+    f : ndarray, shape (n,) or (n, k)
+        Load vector(s).
+    backend : {"auto", "pardiso", "amg"}
+    rtol : float
+        Required relative residual ||K u − f|| / ||f||.
+    coords_mm, free : ndarray, optional
+        Node coordinates (3, N) and the free-DOF index, used to build the rigid-body
+        near-null space for the ``amg`` back-end.
+
+    Raises
+    ------
+    SolverError
+        When the back-end fails or the residual exceeds ``rtol``.
+    """
+    if backend not in ("auto", "pardiso", "amg"):
+        raise ValueError(f"backend={backend!r} is unknown; valid values are ['auto', 'pardiso', 'amg']")
+    if backend == "auto":
+        backend = "pardiso" if _have_pardiso() else "amg"
+    K = sp.csr_matrix(K)
+    fnorm = np.linalg.norm(f)
+    if fnorm == 0:
+        return np.zeros_like(f, dtype=float)
+    if backend == "pardiso":
+        if not _have_pardiso():
+            raise SolverError("backend='pardiso' requested but pypardiso is not installed "
+                              "(pip install 'cryograting[fast]')")
+        import pypardiso
+
+        solver = pypardiso.PyPardisoSolver(mtype=2)
+        try:
+            Ku = sp.triu(K, format="csr")
+            Ku.sort_indices()
+            u = solver.solve(Ku, np.asarray(f, dtype=float))
+        except Exception as exc:  # PARDISO reports errors as exceptions with codes
+            raise SolverError(f"PARDISO failed: {exc}") from exc
+        finally:
+            solver.free_memory(everything=True)
+    else:
+        import pyamg
+        from scipy.sparse.linalg import cg
+
+        B = None
+        if coords_mm is not None:
+            B = _rigid_modes(coords_mm)
+            if free is not None:
+                B = B[free]
+        ml = pyamg.smoothed_aggregation_solver(K, B=B, max_coarse=500)
+        M = ml.aspreconditioner(cycle="V")
+        cols = np.atleast_2d(np.asarray(f, float).T).T if np.ndim(f) == 2 else np.asarray(f, float)[:, None]
+        out = np.empty_like(cols)
+        for k in range(cols.shape[1]):
+            u_k, info = cg(K, cols[:, k], rtol=rtol * 0.1, maxiter=5000, M=M)
+            if info != 0:
+                raise SolverError(f"AMG-preconditioned CG did not converge (info={info}) "
+                                  f"on a system of {K.shape[0]} unknowns")
+            out[:, k] = u_k
+        u = out if np.ndim(f) == 2 else out[:, 0]
+    res = np.linalg.norm(K @ u - f) / fnorm
+    if not np.isfinite(res) or res > rtol:
+        raise SolverError(f"linear solve ({backend}) residual {res:.3e} exceeds rtol={rtol:.1e}; "
+                          "the stiffness may be singular (rigid-body motion not removed?)")
+    return u

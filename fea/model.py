@@ -1,0 +1,224 @@
+"""Solve the cooled, NiP-plated blank: stiffness once per mesh, one solve per coating.
+
+Units: mm for geometry and displacement inside the solver, µm for sag and film
+thickness at the interface, kelvin for temperatures, MPa for stresses.
+
+The substrate's own thermal contraction is uniform and stress-free in a free,
+homogeneous body, so the problem is solved for the displacement *relative* to that
+uniform contraction; only the film/substrate mismatch strain loads the body. The
+uniform part is added back for VTU output (``total_displacement_mm``).
+
+Boundary conditions: symmetry planes named ``sym_x``/``sym_y``/``sym_z`` fix the
+normal displacement; whatever rigid-body motion survives them is removed by the
+minimum number of point constraints (statically determinate, so they carry no
+load): none for the eighth model, one for the quarter model, six (3-2-1) for the
+full body.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .assembly import FilmOperators, bulk_stiffness, film_operators, scalar_basis
+from .coating import Coating
+from .linsolve import _rigid_modes, solve_spd
+from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
+from .surface import FrontSag, front_sag
+
+__all__ = ["PreparedBlank", "FEAResult", "ThermalLoad"]
+
+_SYM_COMPONENT = {"sym_x": 0, "sym_y": 1, "sym_z": 2}
+
+
+@dataclass(frozen=True)
+class ThermalLoad:
+    """Uniform cool-down from ``warm_K`` to ``cold_K`` (K)."""
+
+    warm_K: float = 293.0
+    cold_K: float = 80.0
+
+    def __post_init__(self) -> None:
+        for name in ("warm_K", "cold_K"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{name}={v} must be a positive temperature in kelvin")
+
+
+@dataclass(frozen=True)
+class FEAResult:
+    """Displacement field and front-surface sag of one solved case.
+
+    Attributes
+    ----------
+    coords_mm : ndarray, shape (3, N)
+        Positions of the P2 nodes of the (symmetry part of the) mesh.
+    displacement_mm : ndarray, shape (3, N)
+        Displacement relative to the uniform contraction of the substrate.
+    uniform_strain : float
+        Substrate thermal strain warm → cold (adds ``uniform_strain * x`` to the total).
+    sag : FrontSag
+        Front-face sag, mirrored onto the whole face.
+    info : dict
+        Case parameters, mismatch strain, DOF count, timings.
+    """
+
+    coords_mm: np.ndarray
+    displacement_mm: np.ndarray
+    uniform_strain: float
+    sag: FrontSag
+    info: dict = field(default_factory=dict)
+
+    @property
+    def total_displacement_mm(self) -> np.ndarray:
+        return self.displacement_mm + self.uniform_strain * self.coords_mm
+
+
+class PreparedBlank:
+    """A meshed blank with its bulk stiffness assembled, ready to solve many coatings.
+
+    Parameters
+    ----------
+    mesh : skfem.MeshTet2 (or MeshTet)
+        Mesh in mm with named boundaries (``front`` required; film groups and
+        ``sym_*`` planes as present).
+    substrate : Material or str
+        Blank material.
+    intorder : int
+        Volume quadrature order.
+    """
+
+    def __init__(self, mesh, substrate: Material | str = AL6061_T6, intorder: int = 2):
+        t0 = time.perf_counter()
+        self.mesh = mesh
+        self.substrate = get_material(substrate)
+        if "front" not in mesh.boundaries:
+            raise ValueError("the mesh has no 'front' boundary; cannot extract the sag")
+        self.basis = scalar_basis(mesh, intorder)
+        self.ndof = 3 * self.basis.N
+        self.coords_mm = self.basis.doflocs
+        self.K_bulk = bulk_stiffness(self.basis, self.substrate.youngs_modulus_Pa * 1e-6,
+                                     self.substrate.poisson_ratio)
+        self.symmetry_planes = tuple(s for s in _SYM_COMPONENT if s in mesh.boundaries)
+        self.fixed = self._constrained_dofs()
+        self.free = np.setdiff1d(np.arange(self.ndof), self.fixed)
+        self._film_ops: dict[tuple, FilmOperators] = {}
+        self.assembly_s = time.perf_counter() - t0
+
+    def film_ops(self, group: str, film: Material) -> FilmOperators:
+        """Thickness-independent film operators of one surface group (assembled once)."""
+        key = (group, film.youngs_modulus_Pa, film.poisson_ratio)
+        if key not in self._film_ops:
+            if group not in self.mesh.boundaries:
+                raise ValueError(f"surface group {group!r} is not a boundary of this mesh "
+                                 f"(available: {sorted(self.mesh.boundaries)})")
+            self._film_ops[key] = film_operators(
+                self.mesh, self.mesh.boundaries[group], film.youngs_modulus_Pa * 1e-6,
+                film.poisson_ratio, self.coords_mm)
+        return self._film_ops[key]
+
+    # ------------------------------------------------------------------ constraints
+    def _constrained_dofs(self) -> np.ndarray:
+        fixed = [3 * self.basis.get_dofs(self.mesh.boundaries[s]).all() + c
+                 for s, c in _SYM_COMPONENT.items() if s in self.symmetry_planes]
+        fixed = np.unique(np.concatenate(fixed)) if fixed else np.zeros(0, dtype=int)
+        B = _rigid_modes(self.coords_mm - self.coords_mm.mean(axis=1, keepdims=True))
+        # rigid modes that survive the symmetry constraints
+        if fixed.size:
+            _, s, Vt = np.linalg.svd(B[fixed], full_matrices=True)
+            rank = int((s > 1e-9 * s.max()).sum())
+            null = Vt[rank:].T
+        else:
+            null = np.eye(6)
+        k = null.shape[1]
+        if k == 0:
+            return fixed
+        # pick k well-separated DOFs that pin the surviving modes (QR with pivoting)
+        from scipy.linalg import qr
+
+        rng = np.random.default_rng(0)
+        cand_nodes = rng.choice(self.basis.N, size=min(400, self.basis.N), replace=False)
+        cand = (3 * cand_nodes[:, None] + np.arange(3)).ravel()
+        Bs = B[cand] @ null
+        _, _, piv = qr(Bs.T, pivoting=True, mode="economic")
+        extra = cand[piv[:k]]
+        if np.linalg.matrix_rank(Bs[piv[:k]]) < k:
+            raise RuntimeError("could not find point constraints that remove the rigid-body modes")
+        return np.unique(np.concatenate([fixed, extra]))
+
+    # ------------------------------------------------------------------ solve
+    def solve(self, coating: Coating, film: Material | str = NIP_HIGH_P,
+              load: ThermalLoad = ThermalLoad(), stress_scale: float = 1.0,
+              backend: str = "auto", offset: bool = True,
+              thickness_override_um: dict[str, float] | None = None) -> FEAResult:
+        """Solve one coating case.
+
+        Parameters
+        ----------
+        coating : Coating
+            Film layout (thicknesses per surface group).
+        film : Material or str
+            Film material.
+        load : ThermalLoad
+            Warm and cold temperatures (K).
+        stress_scale : float
+            Multiplier on the film mismatch strain: the model's one calibration constant
+            (see :mod:`fea.calibration`); 1.0 means the nominal material data.
+        backend : str
+            Linear solver back-end (:func:`fea.linsolve.solve_spd`).
+        offset : bool
+            Film integrated through its thickness (True) or as a surface membrane.
+        thickness_override_um : dict, optional
+            Explicit film thickness per surface group, replacing ``coating.thickness_um()``
+            (for investigations such as uncoated side faces).
+        """
+        film = get_material(film)
+        self.substrate.check_temperature(load.warm_K, "warm_K")
+        self.substrate.check_temperature(load.cold_K, "cold_K")
+        film.check_temperature(load.cold_K, "cold_K")
+        if not (np.isfinite(stress_scale) and stress_scale >= 0):
+            raise ValueError(f"stress_scale={stress_scale} must be a finite number >= 0")
+        self._check_symmetry(coating)
+        t0 = time.perf_counter()
+        eps_sub = self.substrate.strain_between(load.warm_K, load.cold_K)
+        eps_mis = stress_scale * (film.strain_between(load.warm_K, load.cold_K) - eps_sub)
+        thick = coating.thickness_um() if thickness_override_um is None else dict(thickness_override_um)
+        K = self.K_bulk
+        f = np.zeros(self.ndof)
+        used = {}
+        for group, t_um in thick.items():
+            if t_um <= 0:
+                continue
+            Kf, ff = self.film_ops(group, film).system(t_um * 1e-3, eps_mis, offset=offset)
+            K = K + Kf
+            f = f + ff
+            used[group] = t_um
+        t_asm = time.perf_counter() - t0
+        u = np.zeros(self.ndof)
+        if used and eps_mis != 0:
+            fr = self.free
+            Kc = K[fr][:, fr]
+            u[fr] = solve_spd(Kc, f[fr], backend=backend, coords_mm=self.coords_mm, free=fr)
+        t_solve = time.perf_counter() - t0 - t_asm
+        disp = u.reshape(-1, 3).T
+        sag = front_sag(self.mesh, self.basis, disp, self.symmetry_planes)
+        info = {
+            "coverage": coating.coverage, "t0_um": coating.t0_um,
+            "polish_front": coating.polish_front, "polish_back": coating.polish_back,
+            "film_thickness_um": used, "warm_K": load.warm_K, "cold_K": load.cold_K,
+            "substrate": self.substrate.name, "film": film.name,
+            "mismatch_strain": eps_mis, "stress_scale": stress_scale,
+            "ndof": self.ndof, "assembly_s": t_asm, "solve_s": t_solve,
+            "symmetry_planes": list(self.symmetry_planes), "offset": offset,
+        }
+        return FEAResult(self.coords_mm, disp, eps_sub, sag, info)
+
+    def _check_symmetry(self, coating: Coating) -> None:
+        if "sym_z" in self.symmetry_planes and not coating.is_z_symmetric:
+            raise ValueError(
+                f"coating with polish_front={coating.polish_front} != polish_back={coating.polish_back} "
+                "is not symmetric about the mid-plane; use a quarter or full mesh (MeshSpec(symmetry='quarter'))"
+            )
