@@ -325,3 +325,49 @@ def test_cell_validation():
         cell_mesh(film_layers=1)
     with pytest.raises(ValueError, match="film_hole_um=-1.0"):
         cell_mesh(film_hole_um=-1.0)
+
+
+def test_default_recipe_file_matches_the_code():
+    import json
+    from pathlib import Path
+    path = (Path(__file__).parent.parent / "meshes" / "recipes"
+            / "blank_default_eighth.json")
+    stored = json.loads(path.read_text())["recipe"]
+    current = blank_recipe(Blank(), MeshSpec())
+    ignore = {"gmsh_version"}  # recorded; any gmsh version can rebuild it
+    assert {k: v for k, v in stored.items() if k not in ignore} == \
+        {k: v for k, v in current.items() if k not in ignore}
+    assert Blank(**stored["blank"]) == Blank()
+    assert MeshSpec(**stored["spec"]) == MeshSpec()
+
+
+# --- gmsh state and failures -------------------------------------------------
+def test_gmsh_is_left_clean(tmp_path):
+    import gmsh
+    blank_mesh(Blank(n_holes_x=0, n_holes_y=0), MeshSpec.coarse(),
+               cache_dir=tmp_path)
+    assert not gmsh.isInitialized()
+    # a caller's own gmsh session and model survive our call
+    gmsh.initialize(readConfigFiles=False, interruptible=False)
+    try:
+        gmsh.model.add("callers-model")
+        cell_mesh(size_mm=0.5, size_bulk_mm=1.0, cache_dir=tmp_path)
+        assert gmsh.isInitialized()
+        assert gmsh.model.getCurrent() == "callers-model"
+    finally:
+        gmsh.finalize()
+
+
+def test_gmsh_failure_is_a_clear_runtime_error(tmp_path, monkeypatch):
+    import gmsh
+    import fea.mesh
+
+    def broken(gmsh_module):
+        raise Exception("simulated gmsh error")
+
+    monkeypatch.setattr(fea.mesh, "generate_order2", broken)
+    with pytest.raises(RuntimeError,
+                       match=r"meshing the blank failed: simulated.*n_holes_x"):
+        blank_mesh(Blank(), MeshSpec.coarse(), cache_dir=tmp_path)
+    assert not gmsh.isInitialized()
+    assert not list(tmp_path.glob("*.npz"))
