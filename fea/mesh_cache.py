@@ -130,6 +130,8 @@ def tet2_from_gmsh(gmsh, surface_groups: dict, volume_groups: dict) -> MeshTet2:
     row_to_vertex = np.full(len(node_tags), -1, dtype=np.int64)
     row_to_vertex[corners] = np.arange(len(corners))
     nv = len(corners)
+    if nv**3 >= 2**63:  # facet keys below are base-nv triples in int64
+        raise RuntimeError(f"{nv} vertices: too many for the facet lookup")
 
     m1 = MeshTet1(np.ascontiguousarray(coords[corners].T), t4)
     doflocs = MeshTet2.from_mesh(m1).doflocs.copy()
@@ -166,11 +168,9 @@ def tet2_from_gmsh(gmsh, surface_groups: dict, volume_groups: dict) -> MeshTet2:
         q = (tri[0] * nv + tri[1]) * nv + tri[2]
         boundaries[name] = np.sort(_lookup(fkeys_sorted, forder, q,
                                            f"boundary {name!r}"))
-    etag_to_elem = {}
+    etag_to_elem = np.full(int(elem_tags.max()) + 1, -1, dtype=np.int64)
+    etag_to_elem[elem_tags.astype(np.int64)] = np.arange(len(elem_tags))
     subdomains = {}
-    if volume_groups:
-        etag_to_elem = np.full(int(elem_tags.max()) + 1, -1, dtype=np.int64)
-        etag_to_elem[elem_tags.astype(np.int64)] = np.arange(len(elem_tags))
     for name, ptag in volume_groups.items():
         tags = [gmsh.model.mesh.getElementsByType(11, v)[0]
                 for v in gmsh.model.getEntitiesForPhysicalGroup(3, ptag)]

@@ -190,6 +190,18 @@ def test_off_mid_plane_holes_quarter(tmp_path):
     assert abs(volume_mm3(m) / (b.volume_mm3() / 4) - 1) < 1e-3
 
 
+def test_even_hole_counts_no_hole_on_the_cut(tmp_path):
+    b, r = Blank(n_holes_x=6, n_holes_y=4), 7.5
+    m = blank_mesh(b, MeshSpec.coarse(), cache_dir=tmp_path)
+    assert abs(volume_mm3(m) / (b.volume_mm3() / 8) - 1) < 1e-3
+    # cut planes now cross holes transversally: half discs are removed
+    expected = {"sym_x": 70 * 10 - 2 * math.pi * r**2 / 2,
+                "sym_y": 80 * 10 - 3 * math.pi * r**2 / 2,
+                "sym_z": (80 - 3 * 15) * (70 - 2 * 15)}
+    for name, a in expected.items():
+        assert abs(area_mm2(m, name) / a - 1) < 1e-3, name
+
+
 def test_solid_block(tmp_path):
     m = blank_mesh(Blank(n_holes_x=0, n_holes_y=0), MeshSpec.coarse(),
                    cache_dir=tmp_path)
