@@ -143,6 +143,8 @@ class FilmOperators:
         """
         t = thickness_mm
         sigma_m = self.youngs_modulus_MPa / (1 - self.poisson_ratio) * mismatch_strain
+        if offset == "load":
+            return t * self.Km, sigma_m * (t * self.fm + 0.5 * t**2 * (self.R.T @ self.fm))
         if not offset:
             return t * self.Km, sigma_m * t * self.fm
         KmR = self.Km @ self.R

@@ -25,7 +25,7 @@ import scipy.sparse as sp
 
 from .assembly import FilmOperators, bulk_stiffness, film_operators, scalar_basis
 from .coating import Coating
-from .linsolve import _rigid_modes, solve_spd
+from .linsolve import _rigid_modes, solve_spd_perturbed
 from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
 from .surface import FrontSag, front_sag
 
@@ -186,22 +186,32 @@ class PreparedBlank:
         eps_sub = self.substrate.strain_between(load.warm_K, load.cold_K)
         eps_mis = stress_scale * (film.strain_between(load.warm_K, load.cold_K) - eps_sub)
         thick = coating.thickness_um() if thickness_override_um is None else dict(thickness_override_um)
+        sigma_m = film.biaxial_modulus_Pa * 1e-6 * eps_mis
         K = self.K_bulk
         f = np.zeros(self.ndof)
+        couplings = []  # (t, Km, R) of each film, for the matrix-free offset terms
         used = {}
         for group, t_um in thick.items():
             if t_um <= 0:
                 continue
-            Kf, ff = self.film_ops(group, film).system(t_um * 1e-3, eps_mis, offset=offset)
-            K = K + Kf
-            f = f + ff
+            if group == "back" and "sym_z" in self.symmetry_planes:
+                continue  # the mirror image of the front film through the mid-plane
+            ops = self.film_ops(group, film)
+            t = t_um * 1e-3
+            K = K + t * ops.Km
+            f = f + sigma_m * t * ops.fm
+            if offset:
+                f = f + sigma_m * 0.5 * t**2 * (ops.R.T @ ops.fm)
+                couplings.append((t, ops.Km, ops.R))
             used[group] = t_um
         t_asm = time.perf_counter() - t0
         u = np.zeros(self.ndof)
+        solve_info: dict = {}
         if used and eps_mis != 0:
             fr = self.free
-            Kc = K[fr][:, fr]
-            u[fr] = solve_spd(Kc, f[fr], backend=backend, coords_mm=self.coords_mm, free=fr)
+            u[fr] = solve_spd_perturbed(K[fr][:, fr], self._offset_operator(couplings, fr), f[fr],
+                                        backend=backend, coords_mm=self.coords_mm, free=fr,
+                                        info=solve_info)
         t_solve = time.perf_counter() - t0 - t_asm
         disp = u.reshape(-1, 3).T
         sag = front_sag(self.mesh, self.basis, disp, self.symmetry_planes)
@@ -213,8 +223,27 @@ class PreparedBlank:
             "mismatch_strain": eps_mis, "stress_scale": stress_scale,
             "ndof": self.ndof, "assembly_s": t_asm, "solve_s": t_solve,
             "symmetry_planes": list(self.symmetry_planes), "offset": offset,
+            "solver": solve_info,
         }
         return FEAResult(self.coords_mm, disp, eps_sub, sag, info)
+
+    def _offset_operator(self, couplings, free):
+        """v ↦ Σ [t²/2 (Km R + Rᵀ Km) + t³/3 Rᵀ Km R] v on the free DOFs (film offset terms)."""
+        if not couplings:
+            return None
+        n = self.ndof
+
+        def apply(v_free):
+            v = np.zeros(n)
+            v[free] = v_free
+            out = np.zeros(n)
+            for t, Km, R in couplings:
+                Rv = R @ v
+                KmRv = Km @ Rv
+                out += 0.5 * t**2 * (KmRv + R.T @ (Km @ v)) + (t**3 / 3.0) * (R.T @ KmRv)
+            return out[free]
+
+        return apply
 
     def _check_symmetry(self, coating: Coating) -> None:
         if "sym_z" in self.symmetry_planes and not coating.is_z_symmetric:
