@@ -16,31 +16,7 @@ import numpy as np
 __all__ = ["register", "main", "load_sag_map"]
 
 
-def load_sag_map(path: str | Path):
-    """Read a :class:`optics.sagmap.SagMap` from ``.npz`` (arrays ``x_mm``, ``y_mm``,
-    ``sag_um[y, x]``, optional ``label``) or ``.nc`` (variable ``sag_um`` with
-    coordinates ``y_mm``, ``x_mm``)."""
-    from optics.sagmap import SagMap
-
-    path = Path(path)
-    if not path.exists():
-        raise ValueError(f"--sag {path}: file does not exist")
-    if path.suffix == ".npz":
-        with np.load(path, allow_pickle=False) as d:
-            missing = {"x_mm", "y_mm", "sag_um"} - set(d.files)
-            if missing:
-                raise ValueError(f"--sag {path}: missing arrays {sorted(missing)}; found {sorted(d.files)}")
-            label = str(d["label"]) if "label" in d.files else path.stem
-            return SagMap(d["x_mm"], d["y_mm"], d["sag_um"], label)
-    if path.suffix == ".nc":
-        import xarray as xr
-
-        with xr.open_dataset(path) as ds:
-            if "sag_um" not in ds:
-                raise ValueError(f"--sag {path}: no variable 'sag_um'; found {sorted(ds.data_vars)}")
-            da = ds["sag_um"].transpose("y_mm", "x_mm")
-            return SagMap(da["x_mm"].values, da["y_mm"].values, da.values, ds.attrs.get("label", path.stem))
-    raise ValueError(f"--sag {path}: unknown format {path.suffix!r}; use .npz or .nc")
+from pipeline.interchange import load_sag_map  # noqa: E402  (moved; .npz/.nc/.int/.dat/.csv)
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:

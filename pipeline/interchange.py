@@ -1,0 +1,314 @@
+"""Interchange of sag maps, Zernike lists and measured line profiles with other tools.
+
+One reader/writer pair per sag-map format, registered in :data:`SAG_FORMATS`;
+:func:`write_sag_map` / :func:`read_sag_map` dispatch on the file suffix.
+
+======== ================================ ======================================
+suffix   format                           module / quantisation
+======== ================================ ======================================
+``.int`` CODE V grid interferogram (GRD)  :mod:`pipeline.io_codev`; 0.005 nm
+``.dat`` Zemax Grid Sag                   :mod:`pipeline.io_zemax`; 12 digits
+``.csv`` ``x_mm,y_mm,sag_um`` table        here; 12 significant digits
+``.nc``  NetCDF4 (xarray, default engine)  here; float64, exact
+``.npz`` NumPy arrays                     here; float64, exact
+======== ================================ ======================================
+
+Every writer goes through a temporary file in the target directory and
+``os.replace`` (atomic). All maps follow :mod:`optics.sagmap`: ``x`` dispersion,
+``y`` ruling direction, ``sag_um[y, x]`` along +z, NaN invalid.
+
+Also here: Zernike coefficient lists (re-exported from :mod:`pipeline.io_zernike`),
+:func:`read_line_profile` for measured profiles, and :func:`load_sag_map` used by
+the ``--sag`` option of the CLI.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from optics.sagmap import SagMap
+from pipeline.io_codev import read_codev_int, write_codev_int
+from pipeline.io_common import atomic_path, atomic_write, parse_error, read_text
+from pipeline.io_zemax import read_zemax_grid_sag, write_zemax_grid_sag
+from pipeline.io_zernike import (ZERNIKE_CONVENTIONS, convert_normalisation, read_zernike_list,
+                                 write_zernike_list)
+
+__all__ = [
+    "SAG_FORMATS",
+    "write_sag_map",
+    "read_sag_map",
+    "load_sag_map",
+    "write_codev_int",
+    "read_codev_int",
+    "write_zemax_grid_sag",
+    "read_zemax_grid_sag",
+    "write_sag_csv",
+    "read_sag_csv",
+    "write_sag_netcdf",
+    "read_sag_netcdf",
+    "write_sag_npz",
+    "read_sag_npz",
+    "ZERNIKE_CONVENTIONS",
+    "convert_normalisation",
+    "write_zernike_list",
+    "read_zernike_list",
+    "read_line_profile",
+]
+
+_CSV_COLUMNS = ("x_mm", "y_mm", "sag_um")
+
+
+# ------------------------------------------------------------------ CSV
+def write_sag_csv(sagmap: SagMap, path: str | Path) -> Path:
+    """Write every grid point as ``x_mm,y_mm,sag_um`` (NaN written as ``nan``, so the
+    reader recovers the full grid and its holes). Rows: y increasing, x fastest."""
+    X, Y = sagmap.grid()
+    path = Path(path)
+    with atomic_write(path) as fh:
+        fh.write(",".join(_CSV_COLUMNS) + "\n")
+        np.savetxt(fh, np.column_stack([X.ravel(), Y.ravel(), sagmap.sag_um.ravel()]),
+                   fmt="%.12g", delimiter=",")
+    return path
+
+
+def _read_csv_columns(path: Path, what: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Numeric columns ``names`` of a CSV with a header; returns (values[n, k], line numbers[n])."""
+    text = read_text(path, what)
+    rows = list(csv.reader(io.StringIO(text)))
+    lineno = [i + 1 for i, r in enumerate(rows)]
+    body = [(n, r) for n, r in zip(lineno, rows) if r and any(c.strip() for c in r)]
+    if not body:
+        raise parse_error(path, None, f"file is empty; expected a header with columns {list(names)}")
+    hline, header = body[0]
+    header = [h.strip() for h in header]
+    missing = [c for c in names if c not in header]
+    if missing:
+        raise parse_error(path, hline, f"missing column(s) {missing}; found header {header}, need {list(names)}")
+    idx = [header.index(c) for c in names]
+    vals, lines = [], []
+    for n, r in body[1:]:
+        if len(r) != len(header):
+            raise parse_error(path, n, f"expected {len(header)} values like the header, found {len(r)}")
+        try:
+            vals.append([float(r[i]) for i in idx])
+        except ValueError:
+            raise parse_error(path, n, f"non-numeric value in {','.join(r)!r}") from None
+        lines.append(n)
+    return np.array(vals, dtype=float).reshape(-1, len(names)), np.array(lines, dtype=int)
+
+
+def _uniform_axis(v: np.ndarray) -> np.ndarray | None:
+    u = np.unique(np.round(v, 9))  # coordinates agree to 1 nm in mm
+    if u.size < 2:
+        return None
+    d = np.diff(u)
+    return u if np.allclose(d, d[0], rtol=1e-6, atol=1e-9) else None
+
+
+def read_sag_csv(path: str | Path, spacing_mm: float | None = None) -> SagMap:
+    """Read ``x_mm,y_mm,sag_um`` (extra columns ignored).
+
+    If the points form a complete uniform grid it is used as is (``nan`` sag = hole);
+    otherwise the finite points are treated as scattered and gridded with
+    :meth:`SagMap.from_scattered` at ``spacing_mm`` (required then).
+    """
+    path = Path(path)
+    v, lines = _read_csv_columns(path, "sag CSV", _CSV_COLUMNS)
+    if v.shape[0] < 3:
+        raise parse_error(path, None, f"needs >= 3 data rows, found {v.shape[0]}")
+    bad = ~np.isfinite(v[:, :2]).all(axis=1)
+    if bad.any():
+        raise parse_error(path, int(lines[bad][0]), "x_mm and y_mm must be finite")
+    ux, uy = _uniform_axis(v[:, 0]), _uniform_axis(v[:, 1])
+    if ux is not None and uy is not None and ux.size * uy.size == v.shape[0]:
+        ix = np.searchsorted(ux, np.round(v[:, 0], 9))
+        iy = np.searchsorted(uy, np.round(v[:, 1], 9))
+        sag = np.full((uy.size, ux.size), np.nan)
+        filled = np.zeros(sag.shape, dtype=bool)
+        filled[iy, ix] = True
+        if filled.all():
+            sag[iy, ix] = v[:, 2]
+            return SagMap(ux, uy, sag, path.stem, {"format": "csv", "gridded": True})
+    if spacing_mm is None:
+        raise ValueError(f"{path}: points are not a complete uniform grid; pass spacing_mm (mm) to grid them")
+    ok = np.isfinite(v[:, 2])
+    m = SagMap.from_scattered(v[ok, 0], v[ok, 1], v[ok, 2], spacing_mm=spacing_mm, label=path.stem)
+    return SagMap(m.x_mm, m.y_mm, m.sag_um, m.label, {"format": "csv", "gridded": False, "spacing_mm": spacing_mm})
+
+
+# ------------------------------------------------------------------ NetCDF / NPZ
+def write_sag_netcdf(sagmap: SagMap, path: str | Path) -> Path:
+    """NetCDF via xarray: variable ``sag_um`` on dims ``(y_mm, x_mm)`` with units attrs."""
+    import xarray as xr
+
+    ds = xr.Dataset(
+        {"sag_um": (("y_mm", "x_mm"), sagmap.sag_um,
+                    {"units": "um", "long_name": "surface sag along +z (NaN = no data)"})},
+        coords={"x_mm": ("x_mm", sagmap.x_mm, {"units": "mm", "long_name": "x, dispersion direction"}),
+                "y_mm": ("y_mm", sagmap.y_mm, {"units": "mm", "long_name": "y, ruling direction"})},
+        attrs={"label": sagmap.label, "conventions": "cryograting optics.sagmap frame",
+               "meta_json": json.dumps(sagmap.meta, default=str)},
+    )
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp)  # engine left to xarray: h5netcdf needs h5py, absent here; netCDF4 is used
+    return path
+
+
+def read_sag_netcdf(path: str | Path) -> SagMap:
+    """Read a NetCDF sag map (variable ``sag_um`` with coordinates ``y_mm``, ``x_mm``)."""
+    import xarray as xr
+
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"{path}: file does not exist")
+    with xr.open_dataset(path) as ds:
+        if "sag_um" not in ds:
+            raise ValueError(f"{path}: no variable 'sag_um'; found {sorted(ds.data_vars)}")
+        da = ds["sag_um"]
+        if set(da.dims) != {"y_mm", "x_mm"}:
+            raise ValueError(f"{path}: 'sag_um' has dims {da.dims}; expected ('y_mm', 'x_mm')")
+        da = da.transpose("y_mm", "x_mm")
+        try:
+            meta = json.loads(ds.attrs.get("meta_json", "{}"))
+        except json.JSONDecodeError:
+            meta = {}
+        return SagMap(da["x_mm"].values, da["y_mm"].values, da.values, ds.attrs.get("label", path.stem), meta)
+
+
+def write_sag_npz(sagmap: SagMap, path: str | Path) -> Path:
+    """NumPy ``.npz`` with arrays ``x_mm``, ``y_mm``, ``sag_um[y, x]`` and ``label``."""
+    path = Path(path)
+    with atomic_write(path, "wb") as fh:  # a file object: np.savez would append .npz to a tmp name
+        np.savez(fh, x_mm=sagmap.x_mm, y_mm=sagmap.y_mm, sag_um=sagmap.sag_um, label=np.str_(sagmap.label))
+    return path
+
+
+def read_sag_npz(path: str | Path) -> SagMap:
+    """Read a ``.npz`` sag map (arrays ``x_mm``, ``y_mm``, ``sag_um``, optional ``label``)."""
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"{path}: file does not exist")
+    with np.load(path, allow_pickle=False) as d:
+        missing = {"x_mm", "y_mm", "sag_um"} - set(d.files)
+        if missing:
+            raise ValueError(f"{path}: missing arrays {sorted(missing)}; found {sorted(d.files)}")
+        label = str(d["label"]) if "label" in d.files else path.stem
+        return SagMap(d["x_mm"], d["y_mm"], d["sag_um"], label)
+
+
+# ------------------------------------------------------------------ registry
+#: suffix -> (reader(path, **options) -> SagMap, writer(sagmap, path, **options) -> Path)
+SAG_FORMATS: dict[str, tuple[Callable[..., SagMap], Callable[..., Path]]] = {
+    ".int": (read_codev_int, write_codev_int),
+    ".dat": (read_zemax_grid_sag, write_zemax_grid_sag),
+    ".csv": (read_sag_csv, write_sag_csv),
+    ".nc": (read_sag_netcdf, write_sag_netcdf),
+    ".npz": (read_sag_npz, write_sag_npz),
+}
+
+
+def _format_for(path: Path) -> tuple[Callable, Callable]:
+    try:
+        return SAG_FORMATS[path.suffix.lower()]
+    except KeyError:
+        raise ValueError(
+            f"{path}: unknown sag-map format {path.suffix!r}; valid suffixes are {sorted(SAG_FORMATS)}"
+        ) from None
+
+
+def write_sag_map(sagmap: SagMap, path: str | Path, **options) -> Path:
+    """Write ``sagmap`` in the format given by the suffix of ``path``.
+
+    Parameters
+    ----------
+    sagmap : SagMap
+        The map.
+    path : str or Path
+        Output file; suffix one of :data:`SAG_FORMATS`.
+    **options
+        Passed to the format's writer (e.g. ``kind``, ``wavelength_um`` for ``.int``).
+    """
+    path = Path(path)
+    writer = _format_for(path)[1]
+    if not isinstance(sagmap, SagMap):
+        raise ValueError(f"sagmap must be an optics.sagmap.SagMap, got {type(sagmap).__name__}")
+    try:
+        return writer(sagmap, path, **options)
+    except OSError as exc:  # e.g. a directory in the way, disk full
+        raise ValueError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
+def read_sag_map(path: str | Path, **options) -> SagMap:
+    """Read a sag map, choosing the reader by the suffix of ``path``.
+
+    ``**options`` go to the reader (``extent_mm``/``spacing_mm`` for ``.int``,
+    ``spacing_mm`` for scattered ``.csv``).
+    """
+    path = Path(path)
+    reader = _format_for(path)[0]
+    if not path.exists():
+        raise ValueError(f"{path}: file does not exist")
+    return reader(path, **options)
+
+
+def load_sag_map(path: str | Path) -> SagMap:
+    """Sag map for the CLI ``--sag FILE`` option (any :data:`SAG_FORMATS` suffix);
+    errors are prefixed with ``--sag``."""
+    try:
+        return read_sag_map(path)
+    except ValueError as exc:
+        raise ValueError(f"--sag {exc}") from None
+
+
+# ------------------------------------------------------------------ measured line profiles
+def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Read a measured line profile from a CSV with columns ``offset_um,intensity``.
+
+    Parameters
+    ----------
+    path : str or Path
+        CSV file with a header naming ``offset_um`` and ``intensity`` (any order,
+        other columns ignored). Intensities may have any normalisation.
+    normalise : bool
+        Scale the intensity to unit area (trapezoid rule over ``offset_um``), the
+        normalisation of :mod:`optics.imaging` profiles.
+
+    Returns
+    -------
+    offset_um, intensity : ndarray, shape (n,)
+        Sorted by increasing offset.
+
+    Raises
+    ------
+    ValueError
+        Naming file and (where it applies) line: missing columns, non-numeric or
+        non-finite values, fewer than 5 samples, negative intensities, duplicate
+        offsets, no flux.
+    """
+    path = Path(path)
+    v, lines = _read_csv_columns(path, "line profile", ("offset_um", "intensity"))
+    if v.shape[0] < 5:
+        raise parse_error(path, None, f"needs >= 5 samples, found {v.shape[0]}")
+    nonfinite = ~np.isfinite(v).all(axis=1)
+    if nonfinite.any():
+        raise parse_error(path, int(lines[nonfinite][0]), "offset_um and intensity must be finite numbers")
+    neg = v[:, 1] < 0
+    if neg.any():
+        k = int(np.flatnonzero(neg)[0])
+        raise parse_error(path, int(lines[k]), f"intensity {v[k, 1]:g} is negative; intensities must be >= 0")
+    order = np.argsort(v[:, 0], kind="stable")
+    x, y, ln = v[order, 0], v[order, 1], lines[order]
+    dup = np.flatnonzero(np.diff(x) == 0)
+    if dup.size:
+        raise parse_error(path, int(ln[dup[0] + 1]), f"duplicate offset_um {x[dup[0]]:g}")
+    flux = float(np.trapezoid(y, x))
+    if not flux > 0:
+        raise parse_error(path, None, "no flux: all intensities are zero")
+    return x, (y / flux if normalise else y)

@@ -1,0 +1,177 @@
+"""Zemax OpticStudio Grid Sag files (``.dat``) for sag maps.
+
+Format (OpticStudio help, "Grid Sag" surface, "Importing Grid Data"; the Zemax
+knowledge-base articles "How to use the Grid Sag surface type" and "How to write a
+Grid Sag DAT file programmatically" show the same layout)::
+
+    nx ny delx dely unitflag xdec ydec
+    z dz/dx dz/dy d2z/dxdy nodata        <- nx * ny lines
+
+* ``unitflag``: 0 mm, 1 cm, 2 in, 3 m. Sag and the cross derivative have dimensions
+  and are in these units (OpticStudio rescales them); first derivatives are
+  dimensionless. We write mm (flag 0); the reader accepts all four.
+* ``xdec``, ``ydec``: decentre of the grid centre relative to the base surface. The
+  grid is centred on the decentre: ``x_i = xdec + (i - (nx - 1)/2) delx``. We write
+  the centre of our grid there, so off-centre maps keep their coordinates.
+* Order: the first point is the (-x, +y) corner; x varies fastest along a row, rows
+  go from +y down to -y.
+* ``nodata`` = 1 marks a point without data (NaN here); its other values are 0.
+* OpticStudio requires nx, ny >= 5 (checked by the writer).
+
+Derivatives
+-----------
+OpticStudio uses them only for bicubic interpolation. We write finite differences
+of the map, NaN-aware: central differences where both neighbours are valid,
+one-sided where only one is, 0 where neither is (an isolated valid sample). The
+cross derivative is the NaN-aware y difference of ``dz/dx``. On reading they are
+ignored (the sag column is the data).
+
+Values are written with 12 significant digits (``%.12g``), i.e. a relative round-off
+of 5e-13: far below anything physical.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from optics.sagmap import SagMap
+from pipeline.io_common import atomic_write, numbered_lines, parse_error, read_text
+
+__all__ = ["write_zemax_grid_sag", "read_zemax_grid_sag", "nan_gradient", "ZEMAX_UNITS_MM"]
+
+#: Zemax ``unitflag`` -> millimetres per unit.
+ZEMAX_UNITS_MM: dict[int, float] = {0: 1.0, 1: 10.0, 2: 25.4, 3: 1000.0}
+_MIN_POINTS = 5
+
+
+def nan_gradient(z: np.ndarray, step: float, axis: int) -> np.ndarray:
+    """Finite-difference derivative of ``z`` along ``axis`` that never reads a NaN.
+
+    Central difference where both neighbours are finite, one-sided where one is,
+    0 where neither is; NaN where ``z`` itself is NaN.
+    """
+    z = np.moveaxis(np.asarray(z, float), axis, 0)
+    out = np.zeros_like(z)
+    fwd = np.full_like(z, np.nan)
+    bwd = np.full_like(z, np.nan)
+    fwd[:-1] = (z[1:] - z[:-1]) / step
+    bwd[1:] = (z[1:] - z[:-1]) / step
+    both = np.isfinite(fwd) & np.isfinite(bwd)
+    out[both] = 0.5 * (fwd[both] + bwd[both])
+    only_f = np.isfinite(fwd) & ~np.isfinite(bwd)
+    only_b = np.isfinite(bwd) & ~np.isfinite(fwd)
+    out[only_f] = fwd[only_f]
+    out[only_b] = bwd[only_b]
+    out[~np.isfinite(z)] = np.nan
+    return np.moveaxis(out, 0, axis)
+
+
+def write_zemax_grid_sag(sagmap: SagMap, path: str | Path) -> Path:
+    """Write a map as a Zemax Grid Sag ``.dat`` file in mm (``unitflag`` 0).
+
+    Parameters
+    ----------
+    sagmap : SagMap
+        Map to write (sag µm along +z, coordinates mm); NaN becomes ``nodata = 1``.
+    path : str or Path
+        Output file (written atomically).
+
+    Returns
+    -------
+    Path
+        The written path.
+    """
+    ny, nx = sagmap.sag_um.shape
+    if nx < _MIN_POINTS or ny < _MIN_POINTS:
+        raise ValueError(f"Zemax Grid Sag needs nx, ny >= {_MIN_POINTS}; map {sagmap.label!r} is {nx} x {ny}")
+    dx, dy = sagmap.dx_mm, sagmap.dy_mm
+    z = sagmap.sag_um * 1e-3  # lens units: mm
+    dzdx = nan_gradient(z, dx, axis=1)
+    dzdy = nan_gradient(z, dy, axis=0)
+    d2 = nan_gradient(dzdx, dy, axis=0)
+    nodata = ~np.isfinite(z)
+    cols = [np.where(nodata, 0.0, a) for a in (z, dzdx, dzdy, d2)]
+    # file rows from +y (top) to -y, x increasing along a row; our arrays have y increasing
+    table = np.column_stack([c[::-1].ravel() for c in cols])
+    flags = nodata[::-1].ravel().astype(int)
+    xdec = 0.5 * (sagmap.x_mm[0] + sagmap.x_mm[-1])
+    ydec = 0.5 * (sagmap.y_mm[0] + sagmap.y_mm[-1])
+    path = Path(path)
+    with atomic_write(path) as fh:
+        fh.write(f"{nx} {ny} {dx:.12g} {dy:.12g} 0 {xdec:.12g} {ydec:.12g}\n")
+        np.savetxt(fh, np.column_stack([table, flags]), fmt=["%.12g"] * 4 + ["%d"], delimiter=" ")
+    return path
+
+
+def read_zemax_grid_sag(path: str | Path) -> SagMap:
+    """Read a Zemax Grid Sag ``.dat`` file into a :class:`SagMap`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.dat`` file (any ``unitflag``; converted to mm and µm).
+
+    Returns
+    -------
+    SagMap
+        ``meta`` holds ``unitflag``, ``xdec_mm``, ``ydec_mm``.
+
+    Raises
+    ------
+    ValueError
+        Naming file and line for a bad header, a non-numeric value, a wrong number of
+        columns, a bad ``nodata`` flag, or a truncated / over-long file.
+    """
+    path = Path(path)
+    lines = [(n, s) for n, s in numbered_lines(read_text(path, "Zemax grid sag")) if s.strip()]
+    if not lines:
+        raise parse_error(path, None, "file is empty; expected header 'nx ny delx dely unitflag xdec ydec'")
+    n0, head = lines[0]
+    tok = head.split()
+    if len(tok) != 7:
+        raise parse_error(path, n0, f"header needs 7 values 'nx ny delx dely unitflag xdec ydec', found {len(tok)}")
+    try:
+        nx, ny, unit = int(tok[0]), int(tok[1]), int(tok[4])
+        delx, dely, xdec, ydec = (float(tok[i]) for i in (2, 3, 5, 6))
+    except ValueError:
+        raise parse_error(path, n0, f"header {head.strip()!r}: nx, ny, unitflag must be integers and "
+                                    "delx, dely, xdec, ydec numbers") from None
+    if nx < 2 or ny < 2:
+        raise parse_error(path, n0, f"nx={nx}, ny={ny} must be >= 2")
+    if unit not in ZEMAX_UNITS_MM:
+        raise parse_error(path, n0, f"unitflag={unit} is not valid; use 0 (mm), 1 (cm), 2 (in) or 3 (m)")
+    delx, dely = abs(delx), abs(dely)  # Zemax takes absolute values of the increments
+    if not (delx > 0 and dely > 0):
+        raise parse_error(path, n0, f"delx={delx}, dely={dely} must be non-zero")
+    body = lines[1:]
+    expected = nx * ny
+    if len(body) < expected:
+        last = body[-1][0] if body else n0
+        raise parse_error(path, last, f"truncated: {nx} x {ny} grid needs {expected} data lines, found {len(body)}")
+    if len(body) > expected:
+        raise parse_error(path, body[expected][0], f"wrong count: {nx} x {ny} grid needs {expected} data lines, "
+                                                   f"found {len(body)}")
+    sag = np.empty(expected)
+    bad = np.zeros(expected, dtype=bool)
+    for k, (n, s) in enumerate(body):
+        t = s.split()
+        if len(t) not in (4, 5):
+            raise parse_error(path, n, f"expected 4 or 5 values 'z dz/dx dz/dy d2z/dxdy [nodata]', found {len(t)}")
+        try:
+            v = [float(a) for a in t[:4]]
+        except ValueError:
+            raise parse_error(path, n, f"non-numeric value in {s.strip()!r}") from None
+        if len(t) == 5:
+            if t[4] not in ("0", "1"):
+                raise parse_error(path, n, f"nodata flag {t[4]!r} must be 0 or 1")
+            bad[k] = t[4] == "1"
+        sag[k] = v[0]
+    scale = ZEMAX_UNITS_MM[unit]
+    sag_um = np.where(bad, np.nan, sag * scale * 1e3).reshape(ny, nx)[::-1]  # file is top row first
+    dx, dy = delx * scale, dely * scale
+    x = xdec * scale + (np.arange(nx) - 0.5 * (nx - 1)) * dx
+    y = ydec * scale + (np.arange(ny) - 0.5 * (ny - 1)) * dy
+    meta = {"format": "zemax_grid_sag", "unitflag": unit, "xdec_mm": xdec * scale, "ydec_mm": ydec * scale}
+    return SagMap(x, y, sag_um, path.stem, meta)
