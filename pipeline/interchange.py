@@ -17,6 +17,16 @@ Every writer goes through a temporary file in the target directory and
 ``os.replace`` (atomic). All maps follow :mod:`optics.sagmap`: ``x`` dispersion,
 ``y`` ruling direction, ``sag_um[y, x]`` along +z, NaN invalid.
 
+Sign and frame when loading into a lens file
+--------------------------------------------
+Values are written in the grating frame unchanged: ``+z`` is the outward normal of
+the ruled face (positive sag moves the surface *towards* the incoming light), x is
+the dispersion direction, y the ruling direction. CODE V and Zemax measure sag along
+the surface's *local* +Z, which for a mirror met by light travelling along +Z points
+*away* from the incoming light; if the grating is set up that way the design code
+needs ``-sag`` (and, to stay right-handed, one of x/y mirrored). That depends on the
+lens file, so no flip is applied here; the orientation tests pin our own layout.
+
 Also here: Zernike coefficient lists (re-exported from :mod:`pipeline.io_zernike`),
 :func:`read_line_profile` for measured profiles, and :func:`load_sag_map` used by
 the ``--sag`` option of the CLI.
@@ -25,6 +35,7 @@ the ``--sag`` option of the CLI.
 from __future__ import annotations
 
 import csv
+import inspect
 import io
 import json
 from pathlib import Path
@@ -77,9 +88,29 @@ def write_sag_csv(sagmap: SagMap, path: str | Path) -> Path:
     return path
 
 
+def _fast_csv_columns(text: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray] | None:
+    """NumPy parse of a clean file (header on line 1, no blank or ragged lines); None
+    means "use the line-by-line parser", which is the one that words the errors."""
+    head, _, body = text.partition("\n")
+    header = [h.strip() for h in head.split(",")]
+    if not all(c in header for c in names) or not body.strip() or "\n\n" in body.rstrip("\n"):
+        return None
+    if any(line.count(",") != len(header) - 1 for line in body.rstrip("\n").split("\n")):
+        return None  # ragged: let the slow parser name the line
+    try:
+        v = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, dtype=float,
+                       usecols=[header.index(c) for c in names])
+    except ValueError:
+        return None
+    return v, np.arange(2, v.shape[0] + 2)
+
+
 def _read_csv_columns(path: Path, what: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
     """Numeric columns ``names`` of a CSV with a header; returns (values[n, k], line numbers[n])."""
     text = read_text(path, what)
+    fast = _fast_csv_columns(text, names)
+    if fast is not None:
+        return fast
     rows = list(csv.reader(io.StringIO(text)))
     lineno = [i + 1 for i, r in enumerate(rows)]
     body = [(n, r) for n, r in zip(lineno, rows) if r and any(c.strip() for c in r)]
@@ -212,6 +243,16 @@ SAG_FORMATS: dict[str, tuple[Callable[..., SagMap], Callable[..., Path]]] = {
     ".nc": (read_sag_netcdf, write_sag_netcdf),
     ".npz": (read_sag_npz, write_sag_npz),
 }
+_WRITERS = {w for _, w in SAG_FORMATS.values()}
+
+
+def _check_options(func: Callable, path: Path, options: dict) -> None:
+    """Unknown keyword options become a ValueError listing the valid ones for the format."""
+    params = list(inspect.signature(func).parameters)[2 if func in _WRITERS else 1:]
+    bad = sorted(set(options) - set(params))
+    if bad:
+        raise ValueError(f"{path}: option(s) {bad} are not valid for {func.__name__} "
+                         f"({path.suffix} files); valid are {params}")
 
 
 def _format_for(path: Path) -> tuple[Callable, Callable]:
@@ -239,6 +280,7 @@ def write_sag_map(sagmap: SagMap, path: str | Path, **options) -> Path:
     writer = _format_for(path)[1]
     if not isinstance(sagmap, SagMap):
         raise ValueError(f"sagmap must be an optics.sagmap.SagMap, got {type(sagmap).__name__}")
+    _check_options(writer, path, options)
     try:
         return writer(sagmap, path, **options)
     except OSError as exc:  # e.g. a directory in the way, disk full
@@ -253,6 +295,7 @@ def read_sag_map(path: str | Path, **options) -> SagMap:
     """
     path = Path(path)
     reader = _format_for(path)[0]
+    _check_options(reader, path, options)
     if not path.exists():
         raise ValueError(f"{path}: file does not exist")
     return reader(path, **options)

@@ -87,7 +87,8 @@ def _title(label: str, x_mm: np.ndarray, y_mm: np.ndarray) -> str:
         if len(ext) <= _LINE_MAX - 2:
             break
     room = _LINE_MAX - len(ext) - 1
-    clean = " ".join((label or "cryograting").split())[:room]
+    # a leading '!' would turn the title into a comment line for CODE V and for our reader
+    clean = " ".join((label or "cryograting").split()).lstrip("!").strip()[:room] or "cryograting"
     return f"{clean} {ext}".strip()
 
 
@@ -266,14 +267,15 @@ def read_codev_int(
     try:
         counts = np.array(" ".join(s for _, s in body).split()).astype(np.int64)
     except (ValueError, OverflowError):
-        counts = None
         for n, s in body:  # slow path only to name the offending line
             for t in s.split():
                 try:
-                    int(t)
+                    v = int(t)
                 except ValueError:
                     raise parse_error(path, n, f"data value {t!r} is not an integer") from None
-        raise  # pragma: no cover - the loop above always finds it
+                if abs(v) >= 2**63:
+                    raise parse_error(path, n, f"data value {t} is outside the 64-bit integer range") from None
+        raise parse_error(path, None, "data values could not be read as integers") from None
     expected = nx * ny
     if counts.size < expected:
         last = body[-1][0] if body else hdr_line

@@ -307,3 +307,17 @@ def test_read_line_profile(tmp_path):
 def test_read_line_profile_errors(tmp_path, text, pattern):
     with pytest.raises(ValueError, match=r"lsf\.csv.*" + pattern):
         ic.read_line_profile(_profile(tmp_path, text))
+
+
+def test_unknown_option_is_named(tmp_path, quadrant_map):
+    with pytest.raises(ValueError, match=r"option\(s\) \['spacing_mm'\] are not valid.*\.npz.*valid are \[\]"):
+        ic.read_sag_map(ic.write_sag_map(quadrant_map, tmp_path / "m.npz"), spacing_mm=1.0)
+    with pytest.raises(ValueError, match=r"option\(s\) \['kind'\].*valid are \[\]"):
+        ic.write_sag_map(quadrant_map, tmp_path / "m.dat", kind="WFR")
+
+
+def test_csv_ragged_row_named(tmp_path):
+    f = tmp_path / "rag.csv"
+    f.write_text("x_mm,y_mm,sag_um\n0,0,1\n1,0,2,9\n0,1,3\n1,1,4\n")
+    with pytest.raises(ValueError, match=r"rag\.csv, line 3: expected 3 values"):
+        ic.read_sag_map(f)
