@@ -176,8 +176,13 @@ def atomic_write(path: Path, write) -> None:
             write(f)
 
 
-def save_case(cases_dir: Path, key: str, namespace: str, params: dict, result: dict, elapsed_s: float) -> None:
-    """Store one normalised ``result`` as ``<key>.npz`` then ``<key>.json`` (the commit marker)."""
+def save_case(cases_dir: Path, key: str, namespace: str, params: dict, result: dict, elapsed_s: float,
+              version: str) -> None:
+    """Store one normalised ``result`` as ``<key>.npz`` then ``<key>.json`` (the commit marker).
+
+    ``version`` is the library version recorded in the json (looked up once per sweep
+    by the caller: :func:`library_version` costs ~1 ms).
+    """
     arrays, manifest = {}, {}
     for name, value in result.items():
         if isinstance(value, tuple):
@@ -193,7 +198,7 @@ def save_case(cases_dir: Path, key: str, namespace: str, params: dict, result: d
         "namespace": namespace,
         "params": params,
         "elapsed_s": elapsed_s,
-        "version": library_version(),
+        "version": version,
         "outputs": manifest,
     }
     text = json.dumps(meta, indent=1, ensure_ascii=False).encode()

@@ -316,7 +316,7 @@ def run_sweep(func, cases, out_dir, *, namespace: str, workers: int | None = Non
         except CacheMiss as exc:
             warnings.warn(f"recomputing case {case}: {exc}", CacheWarning, stacklevel=2)
             todo.append(key)
-    n_reused, failures = len(results), []
+    n_reused, failures, version = len(results), [], library_version()
 
     from tqdm.auto import tqdm
 
@@ -334,7 +334,7 @@ def run_sweep(func, cases, out_dir, *, namespace: str, workers: int | None = Non
                 outcomes = iter_processes(func, jobs, workers)
             for key, (status, payload, extra) in outcomes:
                 if status == "ok":
-                    save_case(cases_dir, key, namespace, unique[key].as_dict(), payload, extra)
+                    save_case(cases_dir, key, namespace, unique[key].as_dict(), payload, extra, version)
                     results[key] = payload
                 else:
                     failures.append((unique[key], payload, extra))

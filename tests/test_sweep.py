@@ -50,6 +50,12 @@ def failing(params):
     return {"y": params["x"]}
 
 
+def dies(params):
+    if params["x"] == 2:
+        os._exit(3)  # a segfault or OOM kill, as the pool sees it
+    return {"y": params["x"]}
+
+
 def returns_list(params):
     return {"y": [1, 2]}
 
@@ -245,6 +251,15 @@ def test_failing_case_reported_after_the_others_finish(tmp_path, workers):
     assert err.value.result.n_reused == 2 and n_calls(log) == 4
 
 
+def test_dead_worker_fails_its_cases_not_the_finished_ones(tmp_path):
+    cases = grid(x=[1, 2])
+    with pytest.raises(SweepError, match="worker process died") as err:
+        run_sweep(dies, cases, tmp_path, namespace="t", workers=2, progress=False)
+    assert cases[1] in [c for c, _, _ in err.value.failures]
+    done = [c for c, _ in err.value.result]
+    assert all((tmp_path / "cases" / f"{c.key('t')}.json").exists() for c in done)
+
+
 @pytest.mark.parametrize("func, match", [(returns_list, "output 'y' has unsupported type list"),
                                          (shadows_param, "output 'x' has the same name as a parameter")])
 def test_bad_outputs_are_case_failures(tmp_path, func, match):
@@ -347,6 +362,11 @@ def test_dask_local_cluster_equals_local_run(tmp_path):
     assert_same_results(local, remote)
     names = sorted(p.name for p in (tmp_path / "dask" / "cases").iterdir())
     assert names == sorted(p.name for p in (tmp_path / "local" / "cases").iterdir())
+    # scheduler="local" starts (and closes) its own LocalCluster.
+    own = run_sweep(labelled, cases, tmp_path / "own", namespace="t", scheduler="local", workers=2,
+                    progress=False)
+    assert own.n_computed == 6
+    assert_same_results(local, own)
 
 
 def test_unreachable_scheduler_fails_fast_and_clearly(tmp_path):
