@@ -18,14 +18,14 @@ full body.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
 
 from .assembly import FilmOperators, bulk_stiffness, film_operators, scalar_basis
 from .coating import Coating
-from .linsolve import _rigid_modes, solve_spd_perturbed
+from .linsolve import _rigid_modes, solve_spd, solve_spd_perturbed
 from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
 from .surface import FrontSag, front_sag
 
@@ -89,9 +89,14 @@ class PreparedBlank:
         Blank material.
     intorder : int
         Volume quadrature order.
+    constraints : dict, optional
+        Boundary name → displacement component (0, 1, 2) held at zero. Defaults to
+        the symmetry planes present (``sym_x``→0, ``sym_y``→1, ``sym_z``→2). Rigid
+        modes that survive are removed by point constraints.
     """
 
-    def __init__(self, mesh, substrate: Material | str = AL6061_T6, intorder: int = 2):
+    def __init__(self, mesh, substrate: Material | str = AL6061_T6, intorder: int = 2,
+                 constraints: dict[str, int] | None = None):
         t0 = time.perf_counter()
         self.mesh = mesh
         self.substrate = get_material(substrate)
@@ -103,9 +108,15 @@ class PreparedBlank:
         self.K_bulk = bulk_stiffness(self.basis, self.substrate.youngs_modulus_Pa * 1e-6,
                                      self.substrate.poisson_ratio)
         self.symmetry_planes = tuple(s for s in _SYM_COMPONENT if s in mesh.boundaries)
+        # boundary name -> displacement component held at zero (symmetry planes by default)
+        self.constraints = ({s: _SYM_COMPONENT[s] for s in self.symmetry_planes}
+                            if constraints is None else dict(constraints))
+        self.plane_fixed = self._plane_constrained_dofs()
         self.fixed = self._constrained_dofs()
         self.free = np.setdiff1d(np.arange(self.ndof), self.fixed)
         self._film_ops: dict[tuple, FilmOperators] = {}
+        #: systems up to this size get the offset coupling assembled explicitly
+        self.explicit_offset_max_dof = 100_000
         self.assembly_s = time.perf_counter() - t0
 
     def film_ops(self, group: str, film: Material) -> FilmOperators:
@@ -115,16 +126,25 @@ class PreparedBlank:
             if group not in self.mesh.boundaries:
                 raise ValueError(f"surface group {group!r} is not a boundary of this mesh "
                                  f"(available: {sorted(self.mesh.boundaries)})")
-            self._film_ops[key] = film_operators(
-                self.mesh, self.mesh.boundaries[group], film.youngs_modulus_Pa * 1e-6,
-                film.poisson_ratio, self.coords_mm)
+            ops = film_operators(self.mesh, self.mesh.boundaries[group], film.youngs_modulus_Pa * 1e-6,
+                                 film.poisson_ratio, self.coords_mm)
+            # On a symmetry plane the surface normal lies in the plane and u_k ≡ 0 there, so
+            # θ_k = ∂u_k/∂n = 0 exactly; nodal averaging over elements that only touch the plane
+            # along an edge would not give that, and would load the film ends with a spurious moment.
+            keep = np.ones(self.ndof)
+            keep[self.plane_fixed] = 0.0
+            ops = replace(ops, R=(sp.diags(keep) @ ops.R).tocsr())
+            self._film_ops[key] = ops
         return self._film_ops[key]
 
     # ------------------------------------------------------------------ constraints
-    def _constrained_dofs(self) -> np.ndarray:
+    def _plane_constrained_dofs(self) -> np.ndarray:
         fixed = [3 * self.basis.get_dofs(self.mesh.boundaries[s]).all() + c
-                 for s, c in _SYM_COMPONENT.items() if s in self.symmetry_planes]
-        fixed = np.unique(np.concatenate(fixed)) if fixed else np.zeros(0, dtype=int)
+                 for s, c in self.constraints.items()]
+        return np.unique(np.concatenate(fixed)) if fixed else np.zeros(0, dtype=int)
+
+    def _constrained_dofs(self) -> np.ndarray:
+        fixed = self.plane_fixed
         B = _rigid_modes(self.coords_mm - self.coords_mm.mean(axis=1, keepdims=True))
         # rigid modes that survive the symmetry constraints
         if fixed.size:
@@ -209,9 +229,18 @@ class PreparedBlank:
         solve_info: dict = {}
         if used and eps_mis != 0:
             fr = self.free
-            u[fr] = solve_spd_perturbed(K[fr][:, fr], self._offset_operator(couplings, fr), f[fr],
-                                        backend=backend, coords_mm=self.coords_mm, free=fr,
-                                        info=solve_info)
+            if self.ndof <= self.explicit_offset_max_dof and couplings:
+                # small system: the denser coupled matrix is affordable; a direct solve is
+                # robust even when elements are as thin as the film (CG then converges slowly)
+                for t, Km, R in couplings:
+                    KmR = Km @ R
+                    K = K + 0.5 * t**2 * (KmR + KmR.T) + (t**3 / 3.0) * (R.T @ KmR)
+                u[fr] = solve_spd(K[fr][:, fr], f[fr], backend=backend, coords_mm=self.coords_mm, free=fr)
+                solve_info = {"method": "direct (explicit offset coupling)"}
+            else:
+                u[fr] = solve_spd_perturbed(K[fr][:, fr], self._offset_operator(couplings, fr), f[fr],
+                                            backend=backend, coords_mm=self.coords_mm, free=fr,
+                                            info=solve_info)
         t_solve = time.perf_counter() - t0 - t_asm
         disp = u.reshape(-1, 3).T
         sag = front_sag(self.mesh, self.basis, disp, self.symmetry_planes)
