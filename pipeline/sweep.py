@@ -351,7 +351,7 @@ def run_sweep(func, cases, out_dir, *, namespace: str, workers: int | None = Non
     return result
 
 
-@dataclass
+@dataclass(eq=False)  # outputs hold arrays, so == would be ambiguous
 class SweepResult(Sequence):
     """The cases of a sweep and their outputs, in input order.
 
