@@ -206,10 +206,9 @@ class PreparedBlank:
         eps_sub = self.substrate.strain_between(load.warm_K, load.cold_K)
         eps_mis = stress_scale * (film.strain_between(load.warm_K, load.cold_K) - eps_sub)
         thick = coating.thickness_um() if thickness_override_um is None else dict(thickness_override_um)
-        sigma_m = film.biaxial_modulus_Pa * 1e-6 * eps_mis
         K = self.K_bulk
         f = np.zeros(self.ndof)
-        couplings = []  # (t, Km, R) of each film, for the matrix-free offset terms
+        couplings = []  # (t, FilmOperators) of each film, for the non-local offset terms
         used = {}
         for group, t_um in thick.items():
             if t_um <= 0:
@@ -218,11 +217,10 @@ class PreparedBlank:
                 continue  # the mirror image of the front film through the mid-plane
             ops = self.film_ops(group, film)
             t = t_um * 1e-3
-            K = K + t * ops.Km
-            f = f + sigma_m * t * ops.fm
+            K = K + ops.local_stiffness(t, offset)
+            f = f + ops.load(t, eps_mis, offset)
             if offset:
-                f = f + sigma_m * 0.5 * t**2 * (ops.R.T @ ops.fm)
-                couplings.append((t, ops.Km, ops.R))
+                couplings.append((t, ops))
             used[group] = t_um
         t_asm = time.perf_counter() - t0
         u = np.zeros(self.ndof)
@@ -232,9 +230,8 @@ class PreparedBlank:
             if self.ndof <= self.explicit_offset_max_dof and couplings:
                 # small system: the denser coupled matrix is affordable; a direct solve is
                 # robust even when elements are as thin as the film (CG then converges slowly)
-                for t, Km, R in couplings:
-                    KmR = Km @ R
-                    K = K + 0.5 * t**2 * (KmR + KmR.T) + (t**3 / 3.0) * (R.T @ KmR)
+                for t, ops in couplings:
+                    K = K + ops.coupling_matrix(t)
                 u[fr] = solve_spd(K[fr][:, fr], f[fr], backend=backend, coords_mm=self.coords_mm, free=fr)
                 solve_info = {"method": "direct (explicit offset coupling)"}
             else:
@@ -257,19 +254,19 @@ class PreparedBlank:
         return FEAResult(self.coords_mm, disp, eps_sub, sag, info)
 
     def _offset_operator(self, couplings, free):
-        """v ↦ Σ [t²/2 (Km R + Rᵀ Km) + t³/3 Rᵀ Km R] v on the free DOFs (film offset terms)."""
+        """v ↦ Σ (X R + Rᵀ X + Rᵀ Y R − Rᵀ Z − Zᵀ R) v on the free DOFs (non-local film terms)."""
         if not couplings:
             return None
         n = self.ndof
+        parts = [(ops.R, *ops.coupling_parts(t)) for t, ops in couplings]
 
         def apply(v_free):
             v = np.zeros(n)
             v[free] = v_free
             out = np.zeros(n)
-            for t, Km, R in couplings:
+            for R, X, Y, Z in parts:
                 Rv = R @ v
-                KmRv = Km @ Rv
-                out += 0.5 * t**2 * (KmRv + R.T @ (Km @ v)) + (t**3 / 3.0) * (R.T @ KmRv)
+                out += X @ Rv + R.T @ (X @ v) + R.T @ (Y @ Rv) + R.T @ (Z @ v) + Z.T @ Rv
             return out[free]
 
         return apply
