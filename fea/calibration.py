@@ -66,3 +66,43 @@ def fit_stress_scale(model_pv_um: np.ndarray, paper_pv_um: np.ndarray) -> tuple[
     r = np.asarray(model_pv_um, float) / np.asarray(paper_pv_um, float)
     s = float(np.sum(r) / np.sum(r * r))
     return s, s * r - 1.0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Solve the 15 paper cases at stress scale 1 on the default mesh and fit the scale."""
+    import argparse
+
+    from fea.api import prepare
+    from fea.coating import Coating
+
+    ap = argparse.ArgumentParser(prog="python -m fea.calibration", description=main.__doc__)
+    ap.add_argument("--out", default=None, help="directory for calibration.csv")
+    a = ap.parse_args(argv)
+    model = prepare()
+    cases = paper_cases()
+    pv = []
+    for c in cases:
+        r = model.solve(Coating.symmetric(c.t0_um, c.polish, c.coverage), stress_scale=1.0)
+        pv.append(r.sag.pv_um("center"))
+        print(f"{c.label:28s} paper {c.pv_center_um:5.2f}  model(scale 1) {pv[-1]:.4f}", flush=True)
+    pv = np.array(pv)
+    use = np.array([c.calibrate for c in cases])
+    paper = np.array([c.pv_center_um for c in cases])
+    s, res = fit_stress_scale(pv[use], paper[use])
+    print(f"\nSTRESS_SCALE = {s:.4f}   (mesh {model.ndof} DOFs, {use.sum()} rows)")
+    allres = s * pv / paper - 1
+    for c, e in zip(cases, allres):
+        print(f"  {c.label:28s} {100 * e:+6.1f} %{'' if c.calibrate else '   (excluded)'}")
+    print(f"calibrated rows: RMS {100 * np.sqrt(np.mean(res**2)):.2f} %, max |.| {100 * np.abs(res).max():.2f} %")
+    if a.out:
+        out = Path(a.out)
+        out.mkdir(parents=True, exist_ok=True)
+        with (out / "calibration.csv").open("w") as fh:
+            fh.write("case,paper_pv_um,model_pv_scale1_um,calibrated_error,used\n")
+            for c, m, e in zip(cases, pv, allres):
+                fh.write(f"{c.label},{c.pv_center_um},{m:.5f},{e:+.4f},{c.calibrate}\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

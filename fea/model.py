@@ -116,7 +116,7 @@ class PreparedBlank:
         self.free = np.setdiff1d(np.arange(self.ndof), self.fixed)
         self._film_ops: dict[tuple, FilmOperators] = {}
         #: systems up to this size get the offset coupling assembled explicitly
-        self.explicit_offset_max_dof = 100_000
+        self.explicit_offset_max_dof = 70_000
         self.assembly_s = time.perf_counter() - t0
 
     def film_ops(self, group: str, film: Material) -> FilmOperators:

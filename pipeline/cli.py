@@ -1,0 +1,135 @@
+"""The ``cryograting`` command line: a thin layer, one API call per subcommand.
+
+``main(argv=None)`` is what the console script runs and what the tests call.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+__all__ = ["main"]
+
+
+def _values(text: str) -> list:
+    """'100,150,200' or '100:200:50' or '0.5:1:3n' → floats; anything else stays a string."""
+    from pipeline.sweep import parse_range
+
+    try:
+        return parse_range(text)
+    except ValueError:
+        return [t.strip() for t in text.split(",") if t.strip()]
+
+
+def _cmd_tables(a) -> int:
+    from pipeline.fea_cases import format_table, run_tables
+
+    rows = run_tables(a.out, progress=not a.quiet, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm)
+    print(format_table(rows))
+    print(f"\nwritten: {Path(a.out) / 'tables.csv'}, {Path(a.out) / 'sweep.nc'}")
+    return 0
+
+
+def _cmd_sweep(a) -> int:
+    from pipeline.fea_cases import run_fea_sweep
+
+    axes: dict = {}
+    for flag, name in (("t0_um", "t0_um"), ("polish", "polish"), ("coverage", "coverage"),
+                       ("cold_K", "cold_K")):
+        v = getattr(a, flag)
+        if v is not None:
+            axes[name] = v
+    for item in a.param or []:
+        if "=" not in item:
+            raise SystemExit(f"--param {item!r}: expected NAME=VALUES, e.g. hole_diameter_mm=14,15,16")
+        name, text = item.split("=", 1)
+        axes[name.strip()] = _values(text)
+    res = run_fea_sweep(axes, a.out, scheduler=a.scheduler, workers=a.workers,
+                        progress=not a.quiet, with_maps=not a.no_maps)
+    cols = [k for k in ("coverage", "t0_um", "polish", "cold_K") if k in axes] + \
+           [k for k in axes if k not in ("coverage", "t0_um", "polish", "cold_K")]
+    print(" ".join(f"{c:>12}" for c in cols + ["pv_center_um", "rms_center_um", "pv_full_um"]))
+    for case, out in res:
+        p = case.as_dict()
+        print(" ".join(f"{p[c]!s:>12}" for c in cols) + " " +
+              " ".join(f"{out[k]:12.4f}" for k in ("pv_center_um", "rms_center_um", "pv_full_um")))
+    print(f"\n{res.n_computed} computed, {res.n_reused} reused; written: "
+          f"{Path(a.out) / 'sweep.csv'}, {Path(a.out) / 'sweep.nc'}")
+    return 0
+
+
+def _cmd_calibrate(a) -> int:
+    from fea.calibration import main as calibrate
+
+    return calibrate(["--out", str(a.out)] if a.out else [])
+
+
+def _cmd_run(a) -> int:
+    from pipeline.study import run_study
+
+    run_study(a.out, progress=not a.quiet)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="cryograting", description=(
+        "Cryogenic deformation of lightweighted, NiP-plated grating blanks and its effect on "
+        "spectral line profiles (SINFONI/SPIFFI)."))
+    sub = p.add_subparsers(dest="command", required=True)
+
+    q = sub.add_parser("run", help="the default study: paper tables, sag maps, plots and report")
+    q.add_argument("--out", default="results", help="output directory (default: results)")
+    q.add_argument("--quiet", action="store_true", help="no progress bars")
+    q.set_defaults(func=_cmd_run)
+
+    q = sub.add_parser("tables", help="the paper's 15 P/V cases, model vs paper")
+    q.add_argument("--out", default="results/tables", help="output directory")
+    q.add_argument("--mesh-size-mm", type=float, default=None, help="element size near walls (mm)")
+    q.add_argument("--mesh-bulk-mm", type=float, default=None, help="element size in the bulk (mm)")
+    q.add_argument("--quiet", action="store_true")
+    q.set_defaults(func=_cmd_tables)
+
+    q = sub.add_parser("sweep", help="FEA over every combination of the given values")
+    q.add_argument("--t0-um", dest="t0_um", type=float, nargs="+", help="NiP thickness(es), µm")
+    q.add_argument("--polish", type=float, nargs="+", help="polish fraction(s), (0, 1]")
+    q.add_argument("--coverage", nargs="+", help="all | holes | surfaces | faces | none")
+    q.add_argument("--cold-K", dest="cold_K", type=float, nargs="+", help="cold temperature(s), K")
+    q.add_argument("--param", action="append", metavar="NAME=VALUES",
+                   help="any other model parameter, e.g. hole_diameter_mm=14,15,16 or pitch_x_mm=18:24:3")
+    q.add_argument("--out", required=True, help="output directory (reused on re-run)")
+    q.add_argument("--workers", type=int, default=1, help="local processes (default 1: the solver "
+                   "already uses both cores)")
+    q.add_argument("--scheduler", default=None, help="Dask scheduler address tcp://host:port")
+    q.add_argument("--no-maps", action="store_true", help="do not store sag maps")
+    q.add_argument("--quiet", action="store_true")
+    q.set_defaults(func=_cmd_sweep)
+
+    q = sub.add_parser("calibrate", help="refit the film stress scale to the paper's tables")
+    q.add_argument("--out", default=None, help="directory for the fit's CSV (optional)")
+    q.set_defaults(func=_cmd_calibrate)
+
+    from pipeline.optics_cli import register as register_optics
+
+    register_optics(sub)
+    try:
+        from pipeline.diagnosis.cli import register as register_diagnosis
+    except ImportError:  # the diagnosis stage is optional while it is being built
+        pass
+    else:
+        register_diagnosis(sub)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    a = parser.parse_args(argv)
+    try:
+        return int(a.func(a) or 0)
+    except (ValueError, FileNotFoundError, NotADirectoryError, PermissionError) as exc:
+        print(f"cryograting {a.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

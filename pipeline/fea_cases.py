@@ -1,0 +1,263 @@
+"""FEA cases as sweep cases: any model parameter, the paper's tables, one call each.
+
+Units: µm for film thickness and sag, mm for geometry, K for temperatures.
+
+A case is a flat dict of scalars (see :data:`FEA_PARAMETERS` for names, defaults and
+valid ranges); :class:`FEACaseRunner` turns it into outputs (P/V and RMS over the
+centre and the whole face, the quilt direction, and the sag map on a fixed grid) and
+keeps one prepared model (mesh + bulk stiffness) per geometry/mesh/substrate so that a
+sweep over coatings and temperatures assembles the bulk once.
+"""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from fea.calibration import STRESS_SCALE, paper_cases
+from fea.coating import COVERAGES, Coating
+from fea.geometry import Blank
+from fea.materials import MATERIALS
+from fea.mesh import MeshSpec
+from fea.model import PreparedBlank, ThermalLoad
+
+__all__ = ["FEA_PARAMETERS", "FEACaseRunner", "fea_grid", "run_fea_sweep", "run_tables",
+           "TableRow", "format_table", "SAG_GRID_X_MM", "SAG_GRID_Y_MM"]
+
+#: Fixed output grid of the sag maps (covers the default 160 x 140 mm face).
+SAG_SPACING_MM = 0.5
+SAG_GRID_X_MM = np.round(np.arange(-80.0, 80.0 + 1e-9, SAG_SPACING_MM), 6)
+SAG_GRID_Y_MM = np.round(np.arange(-70.0, 70.0 + 1e-9, SAG_SPACING_MM), 6)
+
+_BLANK_FIELDS = {f.name for f in fields(Blank)}
+_MESH_FIELDS = {"size_mm": "mesh_size_mm", "size_bulk_mm": "mesh_bulk_mm"}
+
+#: name -> (default, description with unit and valid range). Blank geometry fields
+#: (size_x_mm, pitch_x_mm, hole_diameter_mm, n_holes_x, ...) are accepted too.
+FEA_PARAMETERS: dict[str, tuple[object, str]] = {
+    "coverage": ("all", f"film coverage, one of {list(COVERAGES)}"),
+    "t0_um": (200.0, "as-plated NiP thickness, µm, (0, 2000]"),
+    "polish": (0.75, "fraction of t0 left on the front face, (0, 1]"),
+    "polish_back": (None, "fraction left on the back face, (0, 1]; default = polish"),
+    "cold_K": (80.0, "cold temperature, K, 4..300"),
+    "warm_K": (293.0, "warm temperature, K, 4..300"),
+    "substrate": ("Al6061-T6", f"blank material, one of {sorted(MATERIALS)}"),
+    "film": ("NiP", f"film material, one of {sorted(MATERIALS)}"),
+    "stress_scale": (None, "film mismatch-stress multiplier (default: the calibrated one)"),
+    "mesh_size_mm": (None, "element size near walls/faces, mm (default: MeshSpec)"),
+    "mesh_bulk_mm": (None, "element size in the bulk, mm (default: MeshSpec)"),
+}
+
+
+def _check_names(params: dict) -> None:
+    unknown = sorted(set(params) - set(FEA_PARAMETERS) - _BLANK_FIELDS)
+    if unknown:
+        raise ValueError(f"unknown FEA parameter(s) {unknown}; valid names are "
+                         f"{sorted(set(FEA_PARAMETERS) | _BLANK_FIELDS)}")
+
+
+def _split(params: dict):
+    """Case dict → (Blank, MeshSpec, substrate, Coating, film, ThermalLoad, stress scale)."""
+    _check_names(params)
+    p = {k: v[0] for k, v in FEA_PARAMETERS.items()}
+    p.update(params)
+    blank = Blank(**{k: (int(v) if k.startswith("n_holes") else float(v))
+                     for k, v in params.items() if k in _BLANK_FIELDS})
+    polish_back = p["polish"] if p["polish_back"] is None else p["polish_back"]
+    coating = Coating(t0_um=float(p["t0_um"]), polish_front=float(p["polish"]),
+                      polish_back=float(polish_back), coverage=str(p["coverage"]))
+    spec = MeshSpec()
+    if p["mesh_size_mm"] is not None:
+        spec = replace(spec, size_mm=float(p["mesh_size_mm"]))
+    if p["mesh_bulk_mm"] is not None:
+        spec = replace(spec, size_bulk_mm=float(p["mesh_bulk_mm"]))
+    if not coating.is_z_symmetric or not blank.is_z_symmetric:
+        spec = replace(spec, symmetry="quarter")
+    for name in ("substrate", "film"):
+        if p[name] not in MATERIALS:
+            raise ValueError(f"{name}={p[name]!r} is unknown; valid values are {sorted(MATERIALS)}")
+    load = ThermalLoad(warm_K=float(p["warm_K"]), cold_K=float(p["cold_K"]))
+    scale = STRESS_SCALE if p["stress_scale"] is None else float(p["stress_scale"])
+    return blank, spec, p["substrate"], coating, p["film"], load, scale
+
+
+def _quilt_direction_um(sag, blank: Blank) -> float:
+    """Sag over the central hole crossing minus over the adjacent rib crossing (µm)."""
+    xs, ys = blank.hole_x_positions_mm, blank.hole_y_positions_mm
+    if len(xs) == 0 or len(ys) == 0:
+        return 0.0
+    x0 = xs[np.argmin(np.abs(xs))]
+    y0 = ys[np.argmin(np.abs(ys))]
+    return sag.value_at(x0, y0) - sag.value_at(x0 + blank.pitch_x_mm / 2, y0 + blank.pitch_y_mm / 2)
+
+
+class FEACaseRunner:
+    """Callable case function for :func:`pipeline.sweep.run_sweep`.
+
+    Keeps prepared models (mesh + bulk stiffness) per (blank, mesh, substrate) in the
+    instance; pickling sends an empty cache, so each worker process builds its own.
+    """
+
+    def __init__(self, with_maps: bool = True):
+        self.with_maps = with_maps
+        self._models: dict = {}
+
+    def __getstate__(self):
+        return {"with_maps": self.with_maps, "_models": {}}
+
+    def model(self, blank: Blank, spec: MeshSpec, substrate: str) -> PreparedBlank:
+        from fea.mesh import blank_mesh
+
+        key = (blank, spec, substrate)
+        if key not in self._models:
+            self._models = {key: PreparedBlank(blank_mesh(blank, spec), substrate)}  # keep one: memory
+        return self._models[key]
+
+    def __call__(self, params: dict) -> dict:
+        blank, spec, substrate, coating, film, load, scale = _split(params)
+        model = self.model(blank, spec, substrate)
+        r = model.solve(coating, film, load, stress_scale=scale)
+        s = r.sag
+        out = {
+            "pv_center_um": s.pv_um("center"), "rms_center_um": s.rms_um("center"),
+            "pv_full_um": s.pv_um("full"), "rms_full_um": s.rms_um("full"),
+            "quilt_direction_um": _quilt_direction_um(s, blank),
+            "ndof": int(r.info["ndof"]), "solve_s": float(r.info["solve_s"]),
+            "stress_scale_used": float(scale),
+        }
+        if self.with_maps:
+            m = s.sag_map(SAG_SPACING_MM).resampled(SAG_GRID_X_MM, SAG_GRID_Y_MM)
+            out["sag_um"] = (("y_mm", "x_mm"), m.sag_um.astype(np.float32))
+            out["coord:y_mm"] = SAG_GRID_Y_MM
+            out["coord:x_mm"] = SAG_GRID_X_MM
+        return out
+
+
+def fea_grid(**axes) -> list:
+    """Cartesian product of FEA parameter values, validated before any meshing."""
+    from pipeline.sweep import grid
+
+    cases = grid(**axes)
+    for c in cases:
+        _split(c.as_dict())  # raises with the parameter's name, value and range
+    return cases
+
+
+def _namespace() -> str:
+    # the cache must not survive a recalibration or a change of the solver's physics
+    return f"fea-v3-scale{STRESS_SCALE:.8g}"
+
+
+def run_fea_sweep(axes: dict, out_dir, *, scheduler: str | None = None, workers: int | None = 1,
+                  progress: bool = True, with_maps: bool = True):
+    """Run every combination of ``axes`` (name → list of values) and write the results.
+
+    Writes ``out_dir/sweep.csv`` (one row per case: parameters, P/V and RMS) and
+    ``out_dir/sweep.nc`` (the same plus sag maps on a fixed grid); finished cases are
+    cached under ``out_dir/cases`` and reused on re-run, so a killed sweep resumes.
+    ``workers=1`` (default) solves in this process: PARDISO already uses both cores.
+    """
+    from pipeline.sweep import run_sweep
+
+    cases = fea_grid(**axes)
+    res = run_sweep(FEACaseRunner(with_maps), cases, out_dir, namespace=_namespace(),
+                    workers=workers, scheduler=scheduler, progress=progress, description="FEA sweep")
+    out = Path(out_dir)
+    res.write_csv(out / "sweep.csv")
+    res.write_netcdf(out / "sweep.nc")
+    return res
+
+
+@dataclass(frozen=True)
+class TableRow:
+    table: str
+    coverage: str
+    t0_um: float
+    polish: float
+    paper_pv_um: float
+    model_pv_um: float
+    paper_direction: str
+    model_direction_um: float
+    calibrated: bool
+
+    @property
+    def error(self) -> float:
+        return self.model_pv_um / self.paper_pv_um - 1.0
+
+    @property
+    def direction_ok(self) -> bool:
+        return (self.model_direction_um > 0) == (self.paper_direction == "up")
+
+
+def run_tables(out_dir, *, progress: bool = True, mesh_size_mm: float | None = None,
+               mesh_bulk_mm: float | None = None, stress_scale: float | None = None,
+               return_maps: bool = False):
+    """Solve the paper's 15 cases (Tables 1 and 2) and compare with the paper.
+
+    Writes ``out_dir/tables.csv`` (model vs paper, % error, quilt direction) and
+    ``out_dir/sweep.nc`` with the sag maps. Returns the rows, or ``(rows, maps)``
+    with ``maps[(coverage, t0_um, polish)]`` a :class:`optics.sagmap.SagMap` when
+    ``return_maps``.
+    """
+    from pipeline.sweep import Case, run_sweep
+
+    extra = {k: v for k, v in (("mesh_size_mm", mesh_size_mm), ("mesh_bulk_mm", mesh_bulk_mm),
+                               ("stress_scale", stress_scale)) if v is not None}
+    paper = paper_cases()
+    cases = [Case({"coverage": c.coverage, "t0_um": c.t0_um, "polish": c.polish, **extra}) for c in paper]
+    res = run_sweep(FEACaseRunner(), cases, out_dir, namespace=_namespace(), workers=1,
+                    progress=progress, description="paper tables")
+    rows = [TableRow(c.table, c.coverage, c.t0_um, c.polish, c.pv_center_um, float(out["pv_center_um"]),
+                     c.direction, float(out["quilt_direction_um"]), c.calibrate)
+            for c, (_, out) in zip(paper, res)]
+    out = Path(out_dir)
+    res.write_netcdf(out / "sweep.nc")
+    _write_rows(rows, out / "tables.csv")
+    if not return_maps:
+        return rows
+    from optics.sagmap import SagMap
+
+    maps = {(c.coverage, c.t0_um, c.polish): SagMap(SAG_GRID_X_MM, SAG_GRID_Y_MM,
+                                                    np.asarray(o["sag_um"][1] if isinstance(o["sag_um"], tuple)
+                                                               else o["sag_um"], float),
+                                                    f"{c.coverage} {c.t0_um:g} µm / {100 * c.polish:g} %")
+            for c, (_, o) in zip(paper, res)}
+    return rows, maps
+
+
+def _write_rows(rows, path: Path) -> None:
+    from pipeline.io_common import atomic_write
+
+    buf = [["table", "coverage", "t0_um", "polish", "paper_pv_center_um", "model_pv_center_um",
+             "error_percent", "paper_direction", "model_quilt_direction_um", "direction_ok",
+             "used_in_calibration"]]
+    for r in rows:
+        buf.append([r.table, r.coverage, f"{r.t0_um:g}", f"{r.polish:g}", f"{r.paper_pv_um:.2f}",
+                    f"{r.model_pv_um:.4f}", f"{100 * r.error:+.1f}", r.paper_direction,
+                    f"{r.model_direction_um:+.4f}", str(r.direction_ok).lower(),
+                    "yes" if r.calibrated else "no"])
+    with atomic_write(path) as fh:
+        csv.writer(fh, lineterminator="\n").writerows(buf)
+
+
+def format_table(rows: list[TableRow]) -> str:
+    """The side-by-side model-vs-paper table as text."""
+    lines = [f"{'table':5} {'coverage':9} {'t0 µm':>6} {'polish':>6} {'paper':>7} {'model':>7} "
+             f"{'error':>7}  direction",
+             "-" * 66]
+    for r in rows:
+        d = "up" if r.model_direction_um > 0 else "down"
+        flag = "" if r.calibrated else "  (not calibrated: see README)"
+        lines.append(f"{r.table:5} {r.coverage:9} {r.t0_um:6g} {r.polish:6.2f} {r.paper_pv_um:7.2f} "
+                     f"{r.model_pv_um:7.3f} {100 * r.error:+6.1f}%  {d:4} "
+                     f"({'ok' if r.direction_ok else 'WRONG'}){flag}")
+    cal = [r for r in rows if r.calibrated]
+    if cal:
+        e = np.array([r.error for r in cal])
+        lines.append("-" * 66)
+        lines.append(f"calibrated rows: RMS error {100 * np.sqrt(np.mean(e**2)):.1f}%, "
+                     f"max |error| {100 * np.abs(e).max():.1f}% (stress scale {STRESS_SCALE:.4f})")
+    return "\n".join(lines)
