@@ -1,0 +1,77 @@
+"""``cryograting diagnose``: thin argparse layer over :func:`pipeline.diagnosis.diagnose`
+and :func:`pipeline.diagnosis.campaign.run_campaign` (``--validate``).
+
+Wire into the main CLI with ``register(subparsers)``; ``main(argv)`` runs it stand-alone.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+__all__ = ["register", "main"]
+
+
+def _run(args) -> int:
+    if args.validate:
+        from .campaign import CampaignConfig, run_campaign, write_campaign
+
+        cfg = CampaignConfig(n_cases=args.cases, seed=args.seed, workers=args.workers)
+        res = run_campaign(cfg, cache_dir=args.cache_dir)
+        path = write_campaign(res, args.out)
+        print(json.dumps(res["summary"], indent=1))
+        print(f"wrote {path}")
+        return 0
+    if args.manifest is None:
+        print("cryograting diagnose: MANIFEST is required unless --validate is given", file=sys.stderr)
+        return 2
+    from .engine import diagnose
+    from .report import write_report
+
+    effects = tuple(args.effects.split(",")) if args.effects else None
+    d = diagnose(args.manifest, effects=effects, cache_dir=args.cache_dir, heldout=not args.no_heldout)
+    j, h = write_report(d, args.out)
+    best = d.best
+    print(f"verdict: {d.verdict}" + (f"; best: {best.effect} {best.parameters} shrink {best.shrink_fraction:.2f}" if best else ""))
+    print(f"wrote {j} and {h}")
+    return 0
+
+
+def _add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("manifest", nargs="?", help="measurement manifest (TOML)")
+    p.add_argument("--out", required=True, help="output directory (diagnosis.json, report.html)")
+    p.add_argument("--cache-dir", default=str(Path.home() / ".cache" / "cryograting" / "diagnosis"),
+                   help="cache of nominal FEA maps (default: ~/.cache/cryograting/diagnosis)")
+    p.add_argument("--effects", default=None, help="comma-separated library effects to try (default: all)")
+    p.add_argument("--no-heldout", action="store_true", help="skip the held-out validation")
+    p.add_argument("--validate", action="store_true", help="run the injection-recovery campaign instead")
+    p.add_argument("--cases", type=int, default=200, help="campaign cases (with --validate)")
+    p.add_argument("--seed", type=int, default=1, help="campaign seed (with --validate)")
+    p.add_argument("--workers", type=int, default=2, help="campaign worker processes (with --validate)")
+
+
+def register(subparsers) -> argparse.ArgumentParser:
+    """Add the ``diagnose`` subcommand to an argparse ``subparsers`` object."""
+    p = subparsers.add_parser("diagnose", help="diagnose the sim-to-real gap of a measurement manifest",
+                              description=__doc__.splitlines()[0])
+    _add_arguments(p)
+    p.set_defaults(func=_run)
+    return p
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="cryograting")
+    sub = ap.add_subparsers(dest="command", required=True)
+    register(sub)
+    args = ap.parse_args(argv)
+    try:
+        return args.func(args)
+    except ValueError as exc:
+        print(f"cryograting diagnose: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

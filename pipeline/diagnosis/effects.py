@@ -1,0 +1,131 @@
+"""The library of candidate unmodelled effects.
+
+Each effect is a named set of parameters of the forward model (:mod:`.forward`) with a
+physical meaning, a null value (the nominal model) and a prior range (fit bounds).
+All effects act on the same parameter vector, so a pair of effects is simply the union
+of their parameters.
+
+==================  ===========================================  ============================
+effect              parameters (null; prior)                     physical meaning
+==================  ===========================================  ============================
+astigmatism         astig_0_um, astig_45_um (0; ±1 µm)           mount-induced surface Zernike
+                                                                 astigmatism Z(2,2), Z(2,-2)
+                                                                 (RMS-normalised, aperture disc)
+amplitude_scale     scale_<blank> (1; 0.3…3), one per blank      coating thickness / polish
+                                                                 differ (e.g. re-polishing)
+temperature         temperature_offset_K (0; -60…+80 K)           cold temperature differs from
+                                                                 the stated one (all data)
+registration        reg_dx_mm, reg_dy_mm (0; ±10 mm),            measured map shifted/rotated
+                    reg_rot_deg (0; ±5°)                         against the model
+pupil_shift         pupil_x_mm, pupil_y_mm (0; ±10 mm)           beam footprint offset on the
+                                                                 grating
+collimator_wfe      coll_coma_um Z(3,1), coll_defocus_um Z(2,0), extra spectrograph WFE on top
+                    coll_astig45_um Z(2,-2) (0; ±0.4 µm)         of the default collimator
+slit_width          slit_image_width_um (27; 15…45 µm)           slit image width ≠ 27 µm
+                                                                 (29 µm grating HK scaled alike)
+==================  ===========================================  ============================
+
+``floor`` is the absolute tolerance used when judging parameter recovery
+(relative error is ``|fit - true| / max(|true|, floor)``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["Parameter", "Effect", "LIBRARY", "effect_parameters", "applicable_effects", "NOMINAL_SLIT_UM"]
+
+NOMINAL_SLIT_UM = 27.0
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One fit parameter: name (with unit), null value, prior bounds, start values for a
+    coarse grid search, and the absolute recovery tolerance ``floor``."""
+
+    name: str
+    null: float
+    lo: float
+    hi: float
+    starts: tuple[float, ...] = ()
+    floor: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not self.lo <= self.null <= self.hi:
+            raise ValueError(f"Parameter {self.name!r}: null={self.null} outside [{self.lo}, {self.hi}]")
+
+    @property
+    def width(self) -> float:
+        return self.hi - self.lo
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A candidate unmodelled effect.
+
+    Parameters
+    ----------
+    name : str
+        Library key.
+    kinds : tuple of str
+        Measurement kinds it changes ("surface", "line_profile").
+    parameters : tuple of Parameter
+        Its parameters; for ``per_blank`` effects a template whose name gets ``_<blank>``.
+    per_blank : bool
+        One copy of the parameter per grating blank in the data.
+    description : str
+        Physical meaning, for reports.
+    """
+
+    name: str
+    kinds: tuple[str, ...]
+    parameters: tuple[Parameter, ...]
+    per_blank: bool = False
+    description: str = ""
+
+
+LIBRARY: dict[str, Effect] = {e.name: e for e in (
+    Effect("astigmatism", ("surface",),
+           (Parameter("astig_0_um", 0.0, -1.0, 1.0, floor=0.02), Parameter("astig_45_um", 0.0, -1.0, 1.0, floor=0.02)),
+           description="mount-induced surface astigmatism (Zernike (2,2) and (2,-2), RMS-normalised over the aperture)"),
+    Effect("amplitude_scale", ("surface", "line_profile"),
+           (Parameter("scale", 1.0, 0.3, 3.0, floor=0.05),), per_blank=True,
+           description="deformation amplitude differs (NiP thickness or polish; e.g. a re-polished blank)"),
+    Effect("temperature", ("surface", "line_profile"),
+           (Parameter("temperature_offset_K", 0.0, -60.0, 80.0, floor=5.0),),
+           description="true cold temperature = stated + offset (exact rescaling by the mismatch strain)"),
+    Effect("registration", ("surface",),
+           (Parameter("reg_dx_mm", 0.0, -10.0, 10.0, (-6.0, 0.0, 6.0), floor=0.5),
+            Parameter("reg_dy_mm", 0.0, -10.0, 10.0, (-5.0, 0.0, 5.0), floor=0.5),
+            Parameter("reg_rot_deg", 0.0, -5.0, 5.0, floor=0.3)),
+           description="measured map shifted/rotated against the model (model feature at p appears at R p + d)"),
+    Effect("pupil_shift", ("line_profile",),
+           (Parameter("pupil_x_mm", 0.0, -10.0, 10.0, (-7.0, -3.5, 0.0, 3.5, 7.0), floor=1.0),
+            Parameter("pupil_y_mm", 0.0, -10.0, 10.0, (0.0, 4.5), floor=3.0)),
+           description="beam footprint offset on the grating (x dispersion, y ruling), common to all profiles"),
+    Effect("collimator_wfe", ("line_profile",),
+           (Parameter("coll_coma_um", 0.0, -0.4, 0.4, floor=0.04), Parameter("coll_defocus_um", 0.0, -0.4, 0.4, floor=0.04),
+            Parameter("coll_astig45_um", 0.0, -0.4, 0.4, floor=0.06)),
+           description="extra low-order spectrograph WFE (RMS-normalised Zernike over the 110 mm pupil)"),
+    Effect("slit_width", ("line_profile",),
+           (Parameter("slit_image_width_um", NOMINAL_SLIT_UM, 15.0, 45.0, floor=1.0),),
+           description="geometric slit image width differs from 27 µm (29 µm for HK, scaled alike)"),
+)}
+
+
+def effect_parameters(effect: Effect, blanks: tuple[str, ...]) -> tuple[Parameter, ...]:
+    """The concrete parameters of ``effect`` for data seeing ``blanks``."""
+    if not effect.per_blank:
+        return effect.parameters
+    from dataclasses import replace
+
+    return tuple(replace(p, name=f"{p.name}_{b}") for p in effect.parameters for b in blanks)
+
+
+def applicable_effects(kinds: set[str], names: tuple[str, ...] | None = None) -> tuple[Effect, ...]:
+    """Library effects that change at least one of the measurement ``kinds`` present."""
+    unknown = set(names or ()) - set(LIBRARY)
+    if unknown:
+        raise ValueError(f"effects {sorted(unknown)} are unknown; valid: {sorted(LIBRARY)}")
+    chosen = LIBRARY if names is None else {n: LIBRARY[n] for n in names}
+    return tuple(e for e in chosen.values() if set(e.kinds) & kinds)

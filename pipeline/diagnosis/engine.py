@@ -1,0 +1,310 @@
+"""The diagnosis: where the gap lies, which effect explains it, how far it shrinks,
+and whether that holds on withheld data.
+
+Decision logic (thresholds in :class:`Criteria`, passed explicitly):
+
+1. **Gap**: if every measurement's nominal residual RMS is within ``no_gap_ratio`` of
+   its noise, the verdict is ``no_gap``.
+2. **Fit** every applicable library effect alone; then pairs among the
+   ``pair_from`` best significant singles (skipping pairs that are the same
+   rescaling, e.g. temperature + amplitude_scale of one blank).
+3. **Rank** by BIC (:mod:`.fitting`); a pair ranks as if its BIC were
+   ``pair_extra_bic`` worse — it must beat its members clearly (Occam).
+4. **Degenerate**: findings within ``degenerate_bic`` of each other whose fitted
+   predictions differ by less than ``degenerate_prediction`` of the remaining
+   residual are listed in each other's ``degenerate_with`` — the data cannot tell them apart.
+5. **Held out** (:mod:`.heldout`): the effect is refitted on part of the data and its
+   shrinkage measured on the rest; ``overfit`` if the held-out shrink is below
+   ``heldout_ratio`` times the in-sample shrink.
+6. **Verdict** ``explained`` iff the best finding has ``delta_bic <= -min_delta_bic``,
+   explains ``>= min_variance_explained`` of the residual variance, and is not overfit;
+   otherwise ``unexplained`` and the remaining residual's structure is reported.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .effects import LIBRARY, applicable_effects, effect_parameters
+from .fitting import FitOutcome, Problem, effective_samples, estimate_noise, fit
+from .forward import ProfileForward, SurfaceForward
+from .manifest import Manifest, load_data, load_manifest
+from .nominal import nominal_sag_map
+from .where import measurement_parts, profile_parts, satellite_spacing_um, surface_parts
+
+__all__ = ["Criteria", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects"]
+
+
+@dataclass(frozen=True)
+class Criteria:
+    """Thresholds of the decision logic (see module docstring)."""
+
+    min_delta_bic: float = 10.0
+    min_variance_explained: float = 0.5
+    heldout_ratio: float = 0.5
+    pair_extra_bic: float = 10.0
+    pair_from: int = 3
+    degenerate_bic: float = 2.0
+    degenerate_prediction: float = 0.2
+    no_gap_ratio: float = 1.3
+    heldout_top: int = 3
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One candidate (effect or pair) fitted to all data; RMS in the data units
+    (µm for maps, fraction of the peak for profiles), overall values weighted."""
+
+    effect: str
+    effects: tuple
+    parameters: dict
+    uncertainties: dict
+    score: float
+    delta_bic: float
+    residual_rms_before: float
+    residual_rms_after: float
+    shrink_fraction: float
+    variance_explained: float
+    heldout_shrink_fraction: float | None = None
+    heldout_note: str = ""
+    overfit: bool = False
+    degenerate_with: tuple = ()
+    per_measurement: tuple = ()
+    significant: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class Diagnosis:
+    """Result of :func:`diagnose`; ``to_dict()`` is the content of ``diagnosis.json``."""
+
+    verdict: str
+    findings: tuple
+    where: tuple
+    where_after: tuple
+    baseline: dict
+    measurements: tuple
+    criteria: Criteria
+    timings_s: dict
+    manifest: str = ""
+    curves: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def best(self) -> Finding | None:
+        return self.findings[0] if self.findings else None
+
+    def finding(self, effect: str) -> Finding | None:
+        return next((f for f in self.findings if f.effect == effect), None)
+
+    def to_dict(self) -> dict:
+        def clean(v):
+            if isinstance(v, float):
+                return v if math.isfinite(v) else None
+            if isinstance(v, dict):
+                return {k: clean(x) for k, x in v.items()}
+            if isinstance(v, (list, tuple)):
+                return [clean(x) for x in v]
+            return v
+
+        return clean({"verdict": self.verdict, "findings": [asdict(f) for f in self.findings],
+                      "where": list(self.where), "where_after_best": list(self.where_after),
+                      "baseline": self.baseline, "measurements": list(self.measurements),
+                      "criteria": asdict(self.criteria), "timings_s": self.timings_s, "manifest": self.manifest})
+
+
+def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, FitOutcome]:
+    """Forward models, the nominal (nuisance-only) fit, noise, n_eff and weights."""
+    sim = manifest.simulation
+    fws = [SurfaceForward(d, nominal, sim.cold_K, sim.warm_K) if d.measurement.kind == "surface"
+           else ProfileForward(d, nominal, sim.cold_K, sim.warm_K) for d in data]
+    prob = Problem(fws, {f.name: 1.0 for f in fws}, {f.name: float(f.n) for f in fws})
+    nom = fit(prob, ())
+    for f in fws:
+        r = f.residual({}, nom.deltas_um.get(f.name, 0.0))
+        if f.kind == "surface":
+            sigma = f.noise_known or estimate_noise(f.x, f.data, rows=f.y)
+            prob.n_eff[f.name] = effective_samples(r, f.x, f.y)
+        else:
+            sigma = f.noise_known or estimate_noise(f.x, f.data)
+            prob.n_eff[f.name] = effective_samples(r, f.x)
+        prob.noise[f.name] = float(sigma)
+        s = max(math.sqrt(nom.rss[f.name] / f.n), 1e-12)
+        prob.weights[f.name] = math.sqrt(prob.n_eff[f.name] / f.n) / s
+    return prob, fit(prob, ())
+
+
+def _predictions(prob: Problem, fo: FitOutcome) -> dict:
+    return {f.name: f.fitted(fo.parameters, fo.deltas_um.get(f.name, 0.0)) if f.kind == "line_profile"
+            else f.fitted(fo.parameters) for f in prob.forwards}
+
+
+def _stats(prob: Problem, nom: FitOutcome, fo: FitOutcome):
+    wb = sum(prob.weights[m] ** 2 * nom.rss[m] for m in nom.rss)
+    wa = sum(prob.weights[m] ** 2 * fo.rss[m] for m in fo.rss)
+    ratio = math.sqrt(wa / wb) if wb > 0 else 1.0
+    per = []
+    for f in prob.forwards:
+        m, sig = f.name, prob.noise[f.name]
+        before, after = math.sqrt(nom.rss[m] / nom.n[m]), math.sqrt(fo.rss[m] / fo.n[m])
+        per.append({"measurement": m, "unit": "um" if f.kind == "surface" else "fraction_of_peak",
+                    "rms_before": before, "rms_after": after, "noise": sig,
+                    "chi2_red_before": (before / sig) ** 2 if sig > 0 else None,
+                    "chi2_red_after": (after / sig) ** 2 if sig > 0 else None})
+    units = {p["unit"] for p in per}
+    if len(units) == 1:  # one unit: overall RMS in that unit
+        before = math.sqrt(sum(nom.rss.values()) / sum(nom.n.values()))
+        after = before * ratio
+    else:
+        before, after = 1.0, ratio
+    return before, after, ratio, tuple(per)
+
+
+def _blanks_for(effect, fws) -> tuple:
+    return tuple(dict.fromkeys(f.blank for f in fws if f.kind in effect.kinds))
+
+
+def fit_effects(prob: Problem, nom: FitOutcome, names: tuple, criteria: Criteria, start: dict | None = None):
+    """Fit one combination of library effects; returns (Finding, FitOutcome)."""
+    params = tuple(q for n in names for q in effect_parameters(LIBRARY[n], _blanks_for(LIBRARY[n], prob.forwards)))
+    fo = fit(prob, params, start=start)
+    before, after, ratio, per = _stats(prob, nom, fo)
+    dbic = fo.bic(prob.weights) - nom.bic(prob.weights)
+    ve = 1 - ratio**2
+    f = Finding("+".join(names), tuple(names), fo.parameters, fo.errors, fo.bic(prob.weights), dbic, before, after, 1 - ratio, ve,
+                per_measurement=per, significant=bool(dbic <= -criteria.min_delta_bic))
+    return f, fo
+
+
+def _same_rescaling(names, prob) -> bool:
+    """temperature + amplitude_scale is redundant: the per-blank scales absorb any common
+    temperature factor (exactly, for one cold temperature per blank)."""
+    return {"temperature", "amplitude_scale"} <= set(names)
+
+
+def _rank_key(f: Finding, c: Criteria) -> float:
+    return f.score + (c.pair_extra_bic * (len(f.effects) - 1))
+
+
+def _degeneracies(findings, fits, prob, c: Criteria):
+    preds = {f.effect: _predictions(prob, fits[f.effect]) for f in findings}
+    out = []
+    for a in findings:
+        deg = []
+        for b in findings:
+            if a is b or abs(a.score - b.score) > c.degenerate_bic:
+                continue
+            num = sum(prob.weights[m] ** 2 * np.sum((preds[a.effect][m] - preds[b.effect][m]) ** 2) for m in preds[a.effect])
+            den = sum(prob.weights[m] ** 2 * fits[a.effect].rss[m] for m in fits[a.effect].rss)
+            if den > 0 and math.sqrt(num / den) < c.degenerate_prediction:
+                deg.append(b.effect)
+        out.append(a if not deg else _replace(a, degenerate_with=tuple(deg)))
+    return out
+
+
+def _replace(f, **kw):
+    from dataclasses import replace
+
+    return replace(f, **kw)
+
+
+def _where(prob: Problem, fo: FitOutcome) -> list[dict]:
+    out = []
+    wr = {}
+    for f in prob.forwards:
+        d = fo.deltas_um.get(f.name, 0.0)
+        r = f.residual(fo.parameters, d)
+        wr[f.name] = prob.weights[f.name] ** 2 * float(np.sum(r**2))
+        if f.kind == "surface":
+            out += surface_parts(f.name, f.x, f.y, r, f.radius_mm, prob.noise[f.name])
+        else:
+            sp = satellite_spacing_um(f.m.grating, f.m.wavelength_um, f.m.order)
+            out += profile_parts(f.name, f.x, r, d, sp)
+    if len(prob.forwards) > 1:
+        out += measurement_parts(wr)
+    return out
+
+
+def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Criteria = Criteria(),
+             cache_dir=None, heldout: bool = True, nominal=None, keep_curves: bool = True) -> Diagnosis:
+    """Diagnose the sim-to-real gap of a manifest's measurements.
+
+    Parameters
+    ----------
+    manifest_path_or_obj : path, dict or Manifest
+        The measurement manifest (:mod:`.manifest`).
+    effects : tuple of str, optional
+        Library effects to try (default: all applicable).
+    criteria : Criteria
+        Decision thresholds.
+    cache_dir : path, optional
+        Disk cache for the nominal FEA map.
+    heldout : bool
+        Run the held-out validation of the ``criteria.heldout_top`` best findings.
+    nominal : SagMap, optional
+        Nominal map at the simulation's cold_K (skips the FEA; used by the campaign).
+
+    Returns
+    -------
+    Diagnosis
+    """
+    from .heldout import heldout_check
+
+    t = {"start": time.perf_counter()}
+    manifest = load_manifest(manifest_path_or_obj)
+    data = load_data(manifest)
+    if nominal is None:
+        nominal = nominal_sag_map(manifest.simulation, cache_dir)
+    t["load_s"] = time.perf_counter() - t["start"]
+    prob, nom = build_problem(manifest, data, nominal)
+    kinds = {f.kind for f in prob.forwards}
+    cands = applicable_effects(kinds, effects)
+    fits, findings = {}, []
+    for e in cands:
+        f, fo = fit_effects(prob, nom, (e.name,), criteria)
+        findings.append(f)
+        fits[f.effect] = fo
+    singles = sorted([f for f in findings if f.significant], key=lambda f: f.score)[:criteria.pair_from]
+    for a, b in itertools.combinations(singles, 2):
+        names = tuple(sorted(a.effects + b.effects, key=list(LIBRARY).index))
+        if _same_rescaling(names, prob):
+            continue
+        f, fo = fit_effects(prob, nom, names, criteria, start={**a.parameters, **b.parameters})
+        findings.append(f)
+        fits[f.effect] = fo
+    t["fit_s"] = time.perf_counter() - t["start"] - t["load_s"]
+    findings.sort(key=lambda f: _rank_key(f, criteria))
+    findings = _degeneracies(findings, fits, prob, criteria)
+    if heldout:
+        for i, f in enumerate(findings[:criteria.heldout_top]):
+            h, note = heldout_check(prob, f, criteria)
+            over = h is not None and f.shrink_fraction > 0.05 and h < criteria.heldout_ratio * f.shrink_fraction
+            findings[i] = _replace(f, heldout_shrink_fraction=h, heldout_note=note, overfit=bool(over))
+    t["heldout_s"] = time.perf_counter() - t["start"] - t["load_s"] - t["fit_s"]
+    gap = any(math.sqrt(nom.rss[m] / nom.n[m]) > criteria.no_gap_ratio * prob.noise[m] for m in nom.rss)
+    best = findings[0] if findings else None
+    if not gap:
+        verdict = "no_gap"
+    elif best and best.significant and best.variance_explained >= criteria.min_variance_explained and not best.overfit:
+        verdict = "explained"
+    else:
+        verdict = "unexplained"
+    where = _where(prob, nom)
+    where_after = tuple(_where(prob, fits[best.effect])) if best else ()
+    baseline = {"bic": nom.bic(prob.weights), "offset_shift_um": nom.deltas_um,
+                "noise": dict(prob.noise), "n": dict(nom.n), "n_eff": dict(prob.n_eff),
+                "weights": dict(prob.weights), "nominal_map": nominal.label}
+    ms = tuple({"name": m.name, "kind": m.kind, "file": str(m.file), "blank": m.blank, "grating": m.grating,
+                "wavelength_um": m.wavelength_um, "pixel_scale_mas": m.pixel_scale_mas,
+                "temperature_K": m.temperature_K} for m in manifest.measurements)
+    curves = {}
+    if keep_curves:
+        curves = {"nominal": _predictions(prob, nom), "data": {f.name: (f.x, getattr(f, "y", None), f.data) for f in prob.forwards}}
+        if best:
+            curves["best"] = _predictions(prob, fits[best.effect])
+    t["total_s"] = time.perf_counter() - t.pop("start")
+    return Diagnosis(verdict, tuple(findings), tuple(where), where_after, baseline, ms, criteria,
+                     {k: round(v, 3) for k, v in t.items()}, manifest.source, curves)

@@ -1,0 +1,202 @@
+"""Forward models of each measurement as a function of the effect parameters.
+
+Both models take a parameter dict (missing keys = null values, see :mod:`.effects`)
+and return the prediction at the measured samples *before* the nuisance parameters;
+:meth:`residual` then removes the nuisances the data need:
+
+* surface maps: piston and x/y tilt (linear, projected out by least squares);
+* line profiles: an offset shift ``delta_um`` (nonlinear, a fit parameter), a flux
+  scale and a constant background (linear, projected out).
+
+Speed: the nominal map is sampled once; amplitude and temperature are exact rescalings;
+registration re-samples the map by bilinear interpolation; line profiles are recomputed
+with coarser-than-default :class:`optics.lineprofile.LsfSettings` (≤ 0.5 % L1 from
+the defaults, ~4x faster) and memoised on the physical parameters, so varying only
+the offset shift costs an interpolation.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from dataclasses import replace
+
+import numpy as np
+from scipy.interpolate import CubicSpline, RegularGridInterpolator
+
+from optics.lineprofile import LsfSettings, line_profile
+from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
+from optics.sagmap import SagMap
+from optics.zernike import zernike_xy
+
+from .effects import NOMINAL_SLIT_UM
+from .manifest import ProfileData, SurfaceData
+from .nominal import thermal_factor
+
+__all__ = ["FIT_LSF_SETTINGS", "SurfaceForward", "ProfileForward", "profile_curve"]
+
+#: Line-profile sampling used while fitting (measured: 0.1-0.45 % L1 from the defaults).
+FIT_LSF_SETTINGS = LsfSettings(detector_step_um=1.5, n_fft=256, source_step_mm=2.5, min_source_rows=5,
+                               window_um=150.0, workers=1)
+
+
+def _lstsq_residual(A: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    c, *_ = np.linalg.lstsq(A, d, rcond=None)
+    return d - A @ c, c
+
+
+class SurfaceForward:
+    """Cold-minus-warm surface map model: ``k * S0(R^-1(p - d)) + astigmatism``.
+
+    ``k = thermal_factor(T_meas + temperature_offset_K, cold_K) * scale_<blank>``;
+    ``S0`` is the nominal map at the simulation's ``cold_K``; the astigmatism is
+    RMS-normalised Zernike (2, ±2) over the measurement aperture disc.
+    """
+
+    kind = "surface"
+
+    def __init__(self, data: SurfaceData, nominal: SagMap, cold_K: float, warm_K: float = 293.0):
+        m = data.measurement
+        self.name, self.blank, self.data = m.name, m.blank, np.asarray(data.sag_um, float)
+        self.x, self.y = np.asarray(data.x_mm, float), np.asarray(data.y_mm, float)
+        self.n = self.data.size
+        self.T_K, self.cold_K, self.warm_K = m.temperature_K, cold_K, warm_K
+        self.radius_mm = 0.5 * m.aperture_diameter_mm
+        s = np.where(np.isfinite(nominal.sag_um), nominal.sag_um, 0.0)
+        self._interp = RegularGridInterpolator((nominal.y_mm, nominal.x_mm), s, bounds_error=False, fill_value=np.nan)
+        self._valid = RegularGridInterpolator((nominal.y_mm, nominal.x_mm), np.isfinite(nominal.sag_um).astype(float),
+                                              bounds_error=False, fill_value=0.0)
+        self.base = self._sample(self.x, self.y)
+        bad = ~np.isfinite(self.base)
+        if bad.any():
+            raise ValueError(f"measurement {m.name!r}: {int(bad.sum())} samples inside aperture_diameter_mm="
+                             f"{m.aperture_diameter_mm} fall outside the nominal map")
+        self.z22 = zernike_xy(2, 2, self.x, self.y, self.radius_mm)
+        self.z2m2 = zernike_xy(2, -2, self.x, self.y, self.radius_mm)
+        self.nuisance = np.column_stack([np.ones(self.n), self.x / self.radius_mm, self.y / self.radius_mm])
+        self.noise_known = m.noise_um
+
+    def _sample(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        pts = np.column_stack([y, x])
+        v = self._interp(pts)
+        return np.where(self._valid(pts) > 0.999, v, np.nan)
+
+    def factor(self, p: dict) -> float:
+        k = thermal_factor(self.T_K + p.get("temperature_offset_K", 0.0), self.cold_K, self.warm_K)
+        return k * p.get(f"scale_{self.blank}", 1.0)
+
+    def predict(self, p: dict) -> np.ndarray:
+        """Model sag (µm) at the measured points, before piston/tilt."""
+        dx, dy, rot = p.get("reg_dx_mm", 0.0), p.get("reg_dy_mm", 0.0), p.get("reg_rot_deg", 0.0)
+        if dx or dy or rot:
+            c, s = math.cos(math.radians(rot)), math.sin(math.radians(rot))
+            xr, yr = self.x - dx, self.y - dy
+            base = self._sample(c * xr + s * yr, -s * xr + c * yr)
+            base = np.where(np.isfinite(base), base, 0.0)  # points moved off the map: no deformation there
+        else:
+            base = self.base
+        return self.factor(p) * base + p.get("astig_0_um", 0.0) * self.z22 + p.get("astig_45_um", 0.0) * self.z2m2
+
+    def residual(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
+        """Data minus model with piston and tilt fitted on ``mask`` (µm); ``delta_um`` unused."""
+        sel = slice(None) if mask is None else mask
+        r, _ = _lstsq_residual(self.nuisance[sel], self.data[sel] - self.predict(p)[sel])
+        return r
+
+    def fitted(self, p: dict, mask: np.ndarray | None = None) -> np.ndarray:
+        """Full model (with the fitted piston/tilt) at all points (µm)."""
+        sel = slice(None) if mask is None else mask
+        m = self.predict(p)
+        _, c = _lstsq_residual(self.nuisance[sel], self.data[sel] - m[sel])
+        return m + self.nuisance @ c
+
+
+def profile_curve(grating: str, wavelength_um: float, order: int, pixel_scale_mas: int, sag: SagMap | None,
+                  p: dict, slit_position: float = 0.0, settings: LsfSettings = FIT_LSF_SETTINGS):
+    """Detected line profile (offset_um, unit-area intensity) for effect parameters ``p``.
+
+    ``p`` may hold ``pupil_x_mm``, ``pupil_y_mm``, ``coll_coma_um``, ``coll_defocus_um``,
+    ``coll_astig45_um`` and ``slit_image_width_um``; the sag is passed already scaled.
+    """
+    from optics.grating import get_grating
+
+    g = get_grating(grating)
+    w = p.get("slit_image_width_um", NOMINAL_SLIT_UM)
+    if w != NOMINAL_SLIT_UM:
+        g = replace(g, slit_image_width_um=g.slit_image_width_um * w / NOMINAL_SLIT_UM)
+    coll = dict(DEFAULT_COLLIMATOR_ZERNIKE_UM)
+    for key, nm in (("coll_coma_um", (3, 1)), ("coll_defocus_um", (2, 0)), ("coll_astig45_um", (2, -2))):
+        coll[nm] = coll.get(nm, 0.0) + p.get(key, 0.0)
+    r = line_profile(g, wavelength_um, pixel_scale_mas, sag, order=order,
+                     pupil_shift_mm=(p.get("pupil_x_mm", 0.0), p.get("pupil_y_mm", 0.0)),
+                     slit_position=slit_position, collimator_zernike_um=coll, settings=settings)
+    return r.detected.offset_um, r.detected.intensity
+
+
+class ProfileForward:
+    """Line-profile model: ``flux * P(u - delta_um; params) + background``."""
+
+    kind = "line_profile"
+    _KEYS = ("pupil_x_mm", "pupil_y_mm", "coll_coma_um", "coll_defocus_um", "coll_astig45_um", "slit_image_width_um")
+
+    def __init__(self, data: ProfileData, nominal: SagMap, cold_K: float, warm_K: float = 293.0,
+                 settings: LsfSettings = FIT_LSF_SETTINGS, cache_size: int = 512):
+        m = data.measurement
+        self.m, self.name, self.blank = m, m.name, m.blank
+        self.x = np.asarray(data.offset_um, float)
+        self.data = np.asarray(data.intensity, float)
+        self.n = self.data.size
+        self.nominal, self.cold_K, self.warm_K, self.settings = nominal, cold_K, warm_K, settings
+        self._cache: OrderedDict = OrderedDict()
+        self._cache_size = cache_size
+        self.noise_known = m.noise_rel
+        self.delta0_um = self._initial_shift()
+
+    def factor(self, p: dict) -> float:
+        k = thermal_factor(self.cold_K + p.get("temperature_offset_K", 0.0), self.cold_K, self.warm_K)
+        return k * p.get(f"scale_{self.blank}", 1.0)
+
+    def curve(self, p: dict) -> CubicSpline:
+        """Memoised spline of the model profile (unit area) for the physical parameters."""
+        k = self.factor(p)
+        key = (round(k, 12),) + tuple(round(float(p.get(q, NOMINAL_SLIT_UM if q.startswith("slit") else 0.0)), 12)
+                                      for q in self._KEYS)
+        hit = self._cache.get(key)
+        if hit is not None:
+            self._cache.move_to_end(key)
+            return hit
+        sag = self.nominal.scaled(k)
+        u, y = profile_curve(self.m.grating, self.m.wavelength_um, self.m.order, self.m.pixel_scale_mas, sag, p,
+                             self.m.slit_position, self.settings)
+        spl = CubicSpline(u, y, extrapolate=False)
+        self._cache[key] = spl
+        if len(self._cache) > self._cache_size:
+            self._cache.popitem(last=False)
+        return spl
+
+    def predict(self, p: dict, delta_um: float = 0.0) -> np.ndarray:
+        """Model profile at the measured offsets shifted by ``delta_um`` (before flux/background)."""
+        v = self.curve(p)(self.x - delta_um)
+        return np.where(np.isfinite(v), v, 0.0)
+
+    def _design(self, p, delta_um):
+        return np.column_stack([self.predict(p, delta_um), np.ones(self.n)])
+
+    def residual(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
+        """Data minus model with flux and background fitted on ``mask`` (fraction of the data peak)."""
+        sel = slice(None) if mask is None else mask
+        r, _ = _lstsq_residual(self._design(p, delta_um)[sel], self.data[sel])
+        return r
+
+    def fitted(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
+        sel = slice(None) if mask is None else mask
+        A = self._design(p, delta_um)
+        _, c = _lstsq_residual(A[sel], self.data[sel])
+        return A @ c
+
+    def _initial_shift(self) -> float:
+        """Offset shift of the nominal model by a 1-µm grid search over ±40 µm (the data
+        may be shifted by more than the fit's basin)."""
+        grid = np.arange(-40.0, 40.5, 1.0)
+        cost = [float(np.sum(self.residual({}, d) ** 2)) for d in grid]
+        return float(grid[int(np.argmin(cost))])

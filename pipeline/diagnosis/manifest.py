@@ -1,0 +1,268 @@
+"""Measurement manifests (TOML) for the sim-to-real diagnosis, and loading their data.
+
+A manifest names the nominal simulation and the measurements it is compared with::
+
+    [simulation]              # the nominal model
+    coverage = "all"          # all | holes | surfaces
+    t0_um = 200
+    polish = 0.75
+    cold_K = 80
+    mesh = "coarse"           # optional: coarse | default (FEA mesh of the nominal model)
+    sag_file = "nominal.npz"  # optional: use this map (at cold_K) instead of solving the FEA
+
+    [[measurement]]
+    kind = "surface"          # cold-minus-warm sag map (CODE V .int, Zemax .dat, CSV, .nc, .npz)
+    file = "cryo_map.int"
+    temperature_K = 128
+    aperture_diameter_mm = 137
+
+    [[measurement]]
+    kind = "line_profile"     # CSV offset_um,intensity
+    file = "J_1p25_250mas.csv"
+    grating = "J"
+    order = -2
+    wavelength_um = 1.25
+    pixel_scale_mas = 250
+    slit_position = 0.0
+
+Optional per measurement: ``name`` (default: file stem), ``blank`` (which grating blank
+the data see; default the grating for profiles, ``grating`` or "spare" for surfaces),
+``noise_um`` (surface) / ``noise_rel`` (profile, fraction of the peak) when known.
+Relative paths are relative to the manifest. Every error names the measurement and
+the field.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["Simulation", "Measurement", "Manifest", "SurfaceData", "ProfileData",
+           "load_manifest", "parse_manifest", "load_data"]
+
+_COVERAGES = ("all", "holes", "surfaces")
+_MESHES = ("coarse", "default")
+_KINDS = ("surface", "line_profile")
+_PIXEL_SCALES = (25, 100, 250)
+
+
+@dataclass(frozen=True)
+class Simulation:
+    """The nominal model: FEA case (µm, fraction, K) or a given sag map at ``cold_K``."""
+
+    coverage: str = "all"
+    t0_um: float = 200.0
+    polish: float = 0.75
+    cold_K: float = 80.0
+    warm_K: float = 293.0
+    mesh: str = "coarse"
+    sag_file: Path | None = None
+
+    def __post_init__(self) -> None:
+        if self.coverage not in _COVERAGES:
+            raise ValueError(f"[simulation] coverage={self.coverage!r} is unknown; valid: {list(_COVERAGES)}")
+        if not self.t0_um > 0:
+            raise ValueError(f"[simulation] t0_um={self.t0_um!r} must be > 0 µm")
+        if not 0 < self.polish <= 1:
+            raise ValueError(f"[simulation] polish={self.polish!r} must be in (0, 1]")
+        if not 4 <= self.cold_K < self.warm_K:
+            raise ValueError(f"[simulation] cold_K={self.cold_K!r} must be in [4, warm_K={self.warm_K}) K")
+        if self.mesh not in _MESHES:
+            raise ValueError(f"[simulation] mesh={self.mesh!r} is unknown; valid: {list(_MESHES)}")
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """One measurement entry (units in the field names). ``blank`` groups measurements
+    that see the same grating blank (its deformation amplitude is one parameter)."""
+
+    name: str
+    kind: str
+    file: Path
+    blank: str
+    temperature_K: float | None = None
+    aperture_diameter_mm: float | None = None
+    grating: str | None = None
+    order: int | None = None
+    wavelength_um: float | None = None
+    pixel_scale_mas: int | None = None
+    slit_position: float = 0.0
+    noise_um: float | None = None
+    noise_rel: float | None = None
+
+
+@dataclass(frozen=True)
+class Manifest:
+    """A parsed manifest: the simulation, the measurements, the directory files are relative to."""
+
+    simulation: Simulation
+    measurements: tuple[Measurement, ...]
+    base_dir: Path = Path(".")
+    source: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class SurfaceData:
+    """Valid samples of a surface map inside its aperture (mm, µm), plus the map itself."""
+
+    measurement: Measurement
+    x_mm: np.ndarray
+    y_mm: np.ndarray
+    sag_um: np.ndarray
+    sagmap: object = field(repr=False, default=None)
+
+
+@dataclass(frozen=True, eq=False)
+class ProfileData:
+    """A measured line profile sorted by offset (µm), intensity scaled to unit peak."""
+
+    measurement: Measurement
+    offset_um: np.ndarray
+    intensity: np.ndarray
+
+
+def _err(name: str, fld: str, value, valid: str) -> ValueError:
+    return ValueError(f"measurement {name!r}: {fld}={value!r} {valid}")
+
+
+def _number(entry: dict, key: str, name: str, default=None, required: bool = False):
+    if key not in entry:
+        if required:
+            raise ValueError(f"measurement {name!r}: field {key!r} is required")
+        return default
+    v = entry[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+        raise _err(name, key, v, "must be a finite number")
+    return v
+
+
+def _measurement(entry: dict, index: int, base: Path) -> Measurement:
+    name = str(entry.get("name", Path(str(entry.get("file", f"#{index}"))).stem))
+    kind = entry.get("kind")
+    if kind not in _KINDS:
+        raise _err(name, "kind", kind, f"is unknown; valid: {list(_KINDS)}")
+    if "file" not in entry:
+        raise ValueError(f"measurement {name!r}: field 'file' is required")
+    path = Path(str(entry["file"]))
+    path = path if path.is_absolute() else base / path
+    if not path.is_file():
+        raise _err(name, "file", str(entry["file"]), f"does not exist (resolved to {path})")
+    noise_um = _number(entry, "noise_um", name)
+    noise_rel = _number(entry, "noise_rel", name)
+    for k, v in (("noise_um", noise_um), ("noise_rel", noise_rel)):
+        if v is not None and not v > 0:
+            raise _err(name, k, v, "must be > 0")
+    if kind == "surface":
+        t = _number(entry, "temperature_K", name, required=True)
+        if not 20 <= t < 293:
+            raise _err(name, "temperature_K", t, "must be in [20, 293) K (cold map temperature)")
+        ap = _number(entry, "aperture_diameter_mm", name, 137.0)
+        if not 0 < ap <= 300:
+            raise _err(name, "aperture_diameter_mm", ap, "must be in (0, 300] mm")
+        grating = entry.get("grating")
+        blank = str(entry.get("blank", grating or "spare"))
+        return Measurement(name, kind, path, blank, temperature_K=float(t), aperture_diameter_mm=float(ap),
+                           grating=grating, noise_um=noise_um)
+    from optics.grating import GRATINGS
+
+    g = entry.get("grating")
+    key = str(g).upper().replace("+", "") if g is not None else None
+    if key not in GRATINGS:
+        raise _err(name, "grating", g, f"is unknown; valid: {sorted(GRATINGS)}")
+    wl = _number(entry, "wavelength_um", name, required=True)
+    order = entry.get("order", GRATINGS[key].order)
+    if isinstance(order, bool) or not isinstance(order, int) or order == 0:
+        raise _err(name, "order", order, "must be a non-zero integer")
+    try:
+        GRATINGS[key].beta_deg(wl, order)
+    except ValueError as exc:
+        raise _err(name, "wavelength_um", wl, f"cannot be diffracted by grating {key} in order {order}: {exc}") from None
+    ps = entry.get("pixel_scale_mas")
+    if ps not in _PIXEL_SCALES:
+        raise _err(name, "pixel_scale_mas", ps, f"is unknown; valid: {list(_PIXEL_SCALES)}")
+    sp = _number(entry, "slit_position", name, 0.0)
+    if not -1 <= sp <= 1:
+        raise _err(name, "slit_position", sp, "must be in [-1, 1]")
+    return Measurement(name, kind, path, str(entry.get("blank", key)), grating=key, order=int(order),
+                       wavelength_um=float(wl), pixel_scale_mas=int(ps), slit_position=float(sp),
+                       noise_rel=noise_rel)
+
+
+def parse_manifest(data: dict, base_dir: str | Path = ".", source: str = "") -> Manifest:
+    """Validate a manifest given as a dict (the parsed TOML); paths relative to ``base_dir``."""
+    base = Path(base_dir)
+    sim = dict(data.get("simulation", {}))
+    unknown = set(sim) - {"coverage", "t0_um", "polish", "cold_K", "warm_K", "mesh", "sag_file"}
+    if unknown:
+        raise ValueError(f"[simulation] unknown fields {sorted(unknown)}")
+    if "sag_file" in sim:
+        p = Path(str(sim["sag_file"]))
+        sim["sag_file"] = p if p.is_absolute() else base / p
+        if not sim["sag_file"].is_file():
+            raise ValueError(f"[simulation] sag_file={str(p)!r} does not exist (resolved to {sim['sag_file']})")
+    simulation = Simulation(**sim)
+    entries = data.get("measurement", [])
+    if not isinstance(entries, list) or not entries:
+        raise ValueError("manifest has no [[measurement]] entries")
+    ms = tuple(_measurement(e, i, base) for i, e in enumerate(entries))
+    names = [m.name for m in ms]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ValueError(f"measurement names {dup} are used twice; give each a unique 'name'")
+    return Manifest(simulation, ms, base, source)
+
+
+def load_manifest(path_or_obj) -> Manifest:
+    """A :class:`Manifest` from a TOML path, a dict, or a Manifest (returned as is)."""
+    if isinstance(path_or_obj, Manifest):
+        return path_or_obj
+    if isinstance(path_or_obj, dict):
+        return parse_manifest(path_or_obj)
+    path = Path(path_or_obj)
+    if not path.is_file():
+        raise ValueError(f"manifest {path} does not exist")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"manifest {path}: invalid TOML: {exc}") from None
+    return parse_manifest(data, path.parent, str(path))
+
+
+def _read_surface(m: Measurement) -> SurfaceData:
+    from pipeline.interchange import read_sag_map
+
+    try:
+        sm = read_sag_map(m.file)
+    except ValueError as exc:
+        raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
+    X, Y = sm.grid()
+    inside = (X**2 + Y**2 <= (0.5 * m.aperture_diameter_mm) ** 2) & sm.mask
+    if inside.sum() < 50:
+        raise _err(m.name, "aperture_diameter_mm", m.aperture_diameter_mm,
+                   f"leaves {int(inside.sum())} valid pixels of {m.file.name} (need >= 50); "
+                   f"the map covers x {sm.x_mm[0]:.1f}..{sm.x_mm[-1]:.1f} mm, y {sm.y_mm[0]:.1f}..{sm.y_mm[-1]:.1f} mm")
+    return SurfaceData(m, X[inside], Y[inside], sm.sag_um[inside], sm)
+
+
+def _read_profile(m: Measurement) -> ProfileData:
+    from pipeline.interchange import read_line_profile
+
+    try:
+        u, y = read_line_profile(m.file, normalise=False)
+    except ValueError as exc:
+        raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
+    if (y < 0).any():
+        raise _err(m.name, "file", str(m.file), "has negative intensities")
+    if not y.max() > 0:
+        raise _err(m.name, "file", str(m.file), "has no flux (all intensities are 0)")
+    if u.size < 10:
+        raise _err(m.name, "file", str(m.file), f"has {u.size} samples; need >= 10")
+    return ProfileData(m, np.asarray(u, float), np.asarray(y, float) / y.max())
+
+
+def load_data(manifest: Manifest) -> tuple:
+    """Read every measurement's file; returns SurfaceData / ProfileData in manifest order."""
+    return tuple(_read_surface(m) if m.kind == "surface" else _read_profile(m) for m in manifest.measurements)

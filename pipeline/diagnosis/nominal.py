@@ -1,0 +1,89 @@
+"""The nominal simulation: one FEA sag map per manifest, cached, and exact thermal rescaling.
+
+Why one map is enough: the FEA sag is exactly linear in the film mismatch strain
+``eps_m(T) = NiP.strain_between(warm, T) - Al6061.strain_between(warm, T)``, so the
+map at any other cold temperature is ``eps_m(T) / eps_m(cold_K)`` times the map at
+``cold_K``. The same linearity makes a temperature change and an amplitude scale
+indistinguishable on a single surface map.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from optics.sagmap import SagMap
+
+from .manifest import Simulation
+
+__all__ = ["mismatch_strain", "thermal_factor", "nominal_sag_map", "fea_sag_map"]
+
+
+def mismatch_strain(temperature_K: float, warm_K: float = 293.0) -> float:
+    """Film-minus-substrate thermal strain from ``warm_K`` to ``temperature_K`` (dimensionless)."""
+    from fea.materials import AL6061_T6, NIP_HIGH_P
+
+    return float(NIP_HIGH_P.strain_between(warm_K, temperature_K) - AL6061_T6.strain_between(warm_K, temperature_K))
+
+
+def thermal_factor(temperature_K: float, reference_K: float, warm_K: float = 293.0) -> float:
+    """Sag at ``temperature_K`` divided by the sag at ``reference_K`` (exact for the linear FEA)."""
+    return mismatch_strain(temperature_K, warm_K) / mismatch_strain(reference_K, warm_K)
+
+
+def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh: str = "coarse",
+                spacing_mm: float = 0.5, cache_dir: str | Path | None = None, warm_K: float = 293.0) -> SagMap:
+    """Front-face sag map (µm on a ``spacing_mm`` grid) of one FEA case, cached as npz.
+
+    Parameters
+    ----------
+    t0_um, polish, coverage, cold_K, warm_K
+        The FEA case (see :func:`fea.api.solve`).
+    mesh : {"coarse", "default"}
+        :meth:`fea.mesh.MeshSpec.coarse` (~2 s) or the converged default (~20 s).
+    cache_dir : path, optional
+        Directory for ``fea-<hash>.npz``; None disables the disk cache.
+    """
+    from fea.calibration import STRESS_SCALE
+
+    key = dict(t0_um=float(t0_um), polish=float(polish), coverage=coverage, cold_K=float(cold_K),
+               warm_K=float(warm_K), mesh=mesh, spacing_mm=float(spacing_mm), stress_scale=float(STRESS_SCALE))
+    digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+    label = f"FEA {coverage} t0={t0_um:g} polish={polish:g} {cold_K:g} K ({mesh} mesh)"
+    path = Path(cache_dir) / f"fea-{digest}.npz" if cache_dir is not None else None
+    if path is not None and path.is_file():
+        with np.load(path) as d:
+            return SagMap(d["x_mm"], d["y_mm"], d["sag_um"], label, dict(key))
+    from fea.api import prepare, solve
+    from fea.mesh import MeshSpec
+
+    spec = MeshSpec.coarse() if mesh == "coarse" else MeshSpec()
+    from fea.api import mesh_spec_for
+    from fea.coating import Coating
+
+    spec = mesh_spec_for(Coating(t0_um=t0_um, polish_front=polish, polish_back=polish, coverage=coverage), spec)
+    r = solve(t0_um, polish, coverage, cold_K, warm_K, prepared=prepare(mesh=spec))
+    sm = r.sag.sag_map(spacing_mm)
+    out = SagMap(sm.x_mm, sm.y_mm, sm.sag_um, label, dict(key))
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez(tmp, x_mm=out.x_mm, y_mm=out.y_mm, sag_um=out.sag_um)
+        tmp.replace(path)  # atomic: parallel campaign workers may race on the same key
+    return out
+
+
+def nominal_sag_map(sim: Simulation, cache_dir: str | Path | None = None) -> SagMap:
+    """The nominal sag map at ``sim.cold_K``: ``sim.sag_file`` if given, else the FEA case."""
+    if sim.sag_file is not None:
+        from pipeline.interchange import read_sag_map
+
+        try:
+            return read_sag_map(sim.sag_file)
+        except ValueError as exc:
+            raise ValueError(f"[simulation] sag_file={str(sim.sag_file)!r}: {exc}") from None
+    return fea_sag_map(sim.t0_um, sim.polish, sim.coverage, sim.cold_K, sim.mesh, cache_dir=cache_dir,
+                       warm_K=sim.warm_K)

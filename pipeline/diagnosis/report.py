@@ -1,0 +1,128 @@
+"""Write a diagnosis: ``diagnosis.json`` and a self-contained HTML report with figures
+(residuals before/after, the ranking, held-out results, where the residual lies)."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["write_report"]
+
+
+def _png(fig) -> str:
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    plt.close(fig)
+    return f'<img src="data:image/png;base64,{base64.b64encode(buf.getvalue()).decode()}"/>'
+
+
+def _measurement_figure(name, data, nominal, best, best_label):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x, y, d = data
+    if y is not None:  # surface: residual maps before/after
+        fig, axs = plt.subplots(1, 2 if best is not None else 1, figsize=(9, 4), squeeze=False)
+        panels = [("data - nominal", d - nominal)] + ([(f"data - ({best_label})", d - best)] if best is not None else [])
+        lim = float(np.nanpercentile(np.abs(d - nominal), 99))
+        for ax, (t, r) in zip(axs[0], panels):
+            sc = ax.scatter(x, y, c=r - np.mean(r), s=3, cmap="RdBu_r", vmin=-lim, vmax=lim, marker="s")
+            ax.set_title(f"{name}: {t}\nRMS {np.std(r):.4f} µm", fontsize=9)
+            ax.set_aspect("equal")
+            ax.set_xlabel("x (mm, dispersion)")
+            ax.set_ylabel("y (mm)")
+        fig.colorbar(sc, ax=axs[0].tolist(), label="µm")
+        return fig
+    fig, (a0, a1) = plt.subplots(2, 1, figsize=(7, 5), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
+    a0.plot(x, d, ".", ms=3, color="k", label="data")
+    a0.plot(x, nominal, "-", color="tab:blue", label="nominal")
+    a1.plot(x, d - nominal, "-", color="tab:blue", label="nominal")
+    if best is not None:
+        a0.plot(x, best, "-", color="tab:red", label=best_label)
+        a1.plot(x, d - best, "-", color="tab:red", label=best_label)
+    a0.set_title(name, fontsize=9)
+    a0.legend(fontsize=7)
+    a1.axhline(0, color="0.5", lw=0.5)
+    a1.set_xlabel("offset (µm)")
+    a1.set_ylabel("residual (peak = 1)")
+    return fig
+
+
+def _ranking_figure(findings):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 0.35 * len(findings) + 1))
+    names = [f.effect for f in findings][::-1]
+    ax.barh(names, [f.delta_bic for f in findings][::-1], color=["tab:green" if f.significant else "0.6" for f in findings][::-1])
+    ax.axvline(-10, color="k", ls=":", lw=0.8)
+    ax.set_xlabel("ΔBIC vs nominal (lower is better; dotted: -10)")
+    return fig
+
+
+def _table(rows, cols) -> str:
+    head = "".join(f"<th>{html.escape(c)}</th>" for c in cols)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(str(r.get(c, '')))}</td>" for c in cols) + "</tr>" for r in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
+def _fmt(v):
+    return f"{v:.4g}" if isinstance(v, float) else v
+
+
+def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
+    """Write ``diagnosis.json`` and ``report.html`` into ``out_dir``; returns both paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    jpath = out / "diagnosis.json"
+    jpath.write_text(json.dumps(diagnosis.to_dict(), indent=1, default=float))
+    d = diagnosis
+    parts = [f"<h1>Sim-to-real diagnosis</h1><p>manifest: {html.escape(d.manifest)}</p>",
+             f"<h2>Verdict: {html.escape(d.verdict)}</h2>"]
+    if d.best:
+        b = d.best
+        parts.append(f"<p>Best: <b>{html.escape(b.effect)}</b> — parameters "
+                     + ", ".join(f"{k} = {v:.4g} ± {b.uncertainties.get(k, float('nan')):.2g}" for k, v in b.parameters.items())
+                     + f"; residual RMS {b.residual_rms_before:.4g} → {b.residual_rms_after:.4g} (shrink {b.shrink_fraction:.2f}, "
+                     f"held-out shrink {b.heldout_shrink_fraction if b.heldout_shrink_fraction is None else round(b.heldout_shrink_fraction, 2)})"
+                     + (f"; degenerate with {', '.join(b.degenerate_with)}" if b.degenerate_with else "") + "</p>")
+    rows = [{"effect": f.effect, "ΔBIC": _fmt(f.delta_bic), "shrink": _fmt(f.shrink_fraction),
+             "variance explained": _fmt(f.variance_explained),
+             "held-out shrink": _fmt(f.heldout_shrink_fraction) if f.heldout_shrink_fraction is not None else "—",
+             "overfit": f.overfit, "degenerate with": ", ".join(f.degenerate_with),
+             "parameters": ", ".join(f"{k}={v:.4g}±{f.uncertainties.get(k, float('nan')):.2g}" for k, v in f.parameters.items())}
+            for f in d.findings]
+    parts += ["<h2>Ranking</h2>", _png(_ranking_figure(d.findings)) if d.findings else "",
+              _table(rows, list(rows[0]) if rows else [])]
+    parts.append("<h2>Held-out validation</h2>" + _table(
+        [{"effect": f.effect, "folds": f.heldout_note} for f in d.findings if f.heldout_note], ["effect", "folds"]))
+    parts.append("<h2>Where the residual lies (nominal)</h2>" + _table(
+        [{**w, "share": f"{w['share']:.3f}"} for w in d.where], ["measurement", "decomposition", "component", "share"]))
+    if d.where_after:
+        parts.append(f"<h2>Remaining residual after {html.escape(d.best.effect)}</h2>" + _table(
+            [{**w, "share": f"{w['share']:.3f}"} for w in d.where_after], ["measurement", "decomposition", "component", "share"]))
+    if d.curves:
+        parts.append("<h2>Residuals before / after</h2>")
+        for name, data in d.curves["data"].items():
+            best = d.curves.get("best", {}).get(name)
+            parts.append(_png(_measurement_figure(name, data, d.curves["nominal"][name], best, d.best.effect if d.best else "")))
+    if d.best:
+        parts.append("<h2>Per measurement (best finding)</h2>" + _table(
+            [{k: _fmt(v) for k, v in p.items()} for p in d.best.per_measurement],
+            ["measurement", "unit", "rms_before", "rms_after", "noise", "chi2_red_before", "chi2_red_after"]))
+    parts.append(f"<p>timings (s): {html.escape(json.dumps(d.timings_s))}</p>")
+    style = "<style>body{font-family:sans-serif;max-width:1100px} table{border-collapse:collapse;font-size:12px} td,th{border:1px solid #ccc;padding:2px 6px}</style>"
+    hpath = out / "report.html"
+    hpath.write_text(f"<html><head><meta charset='utf-8'>{style}</head><body>{''.join(parts)}</body></html>")
+    return jpath, hpath

@@ -1,0 +1,87 @@
+"""Synthetic measurements (scenarios and the injection-recovery campaign).
+
+A synthetic measurement is what an instrument would deliver from a *truth* that is a
+different model from the one diagnosed: the truth map comes from another FEA mesh
+(and/or case) with a small smooth shape discrepancy; it is sampled on the
+measurement's own grid, with piston/tilt (maps) or an offset shift, flux scale and
+background (profiles), white noise, dropouts and sparse sampling.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from optics.lineprofile import LsfSettings
+from optics.sagmap import SagMap
+from optics.zernike import zernike_xy
+
+from .forward import profile_curve
+
+__all__ = ["shape_discrepancy", "synthetic_surface", "synthetic_profile", "write_profile_csv"]
+
+
+def shape_discrepancy(sag: SagMap, rng: np.random.Generator, gradient: float = 0.03, bow_um: float = 0.01) -> SagMap:
+    """``sag`` times a random linear amplitude gradient (±``gradient`` across ±70 mm:
+    plating thickness varies over the blank) plus a random low-order bow of RMS
+    ~``bow_um`` (defocus/spherical-like; not in the effect library)."""
+    X, Y = sag.grid()
+    ang = rng.uniform(0, 2 * np.pi)
+    g = gradient * rng.uniform(0.5, 1.0)
+    factor = 1.0 + g * (np.cos(ang) * X + np.sin(ang) * Y) / 70.0
+    bow = bow_um * (rng.normal() * zernike_xy(2, 0, X, Y, 80.0) + rng.normal() * zernike_xy(4, 0, X, Y, 80.0))
+    return sag.with_sag(sag.sag_um * factor + bow, label=f"{sag.label} + discrepancy")
+
+
+def synthetic_surface(truth: SagMap, rng: np.random.Generator, *, aperture_diameter_mm: float = 137.0,
+                      spacing_mm: float = 1.0, noise_um: float = 0.01, dropout: float = 0.03,
+                      extra_um: np.ndarray | None = None, label: str = "synthetic map") -> SagMap:
+    """Measured map on a ``spacing_mm`` grid over the aperture (NaN outside / dropouts).
+
+    ``truth`` is the cold-minus-warm deformation at the measurement temperature;
+    ``extra_um(X, Y)`` (callable) adds e.g. an injected astigmatism. A random piston
+    (±0.5 µm) and tilt (±2 µrad) stand for the interferometer alignment.
+    """
+    half = 0.5 * aperture_diameter_mm
+    ax = np.arange(-np.floor(half / spacing_mm), np.floor(half / spacing_mm) + 1) * spacing_mm
+    X, Y = np.meshgrid(ax, ax)
+    s = truth.sample(X, Y)
+    if extra_um is not None:
+        s = s + extra_um(X, Y)
+    s = s + rng.uniform(-0.5, 0.5) + rng.uniform(-2e-3, 2e-3) * X + rng.uniform(-2e-3, 2e-3) * Y
+    s = s + rng.normal(0.0, noise_um, s.shape)
+    s[(X**2 + Y**2 > half**2) | (rng.random(s.shape) < dropout)] = np.nan
+    return SagMap(ax, ax, s, label)
+
+
+def synthetic_profile(grating: str, wavelength_um: float, order: int, pixel_scale_mas: int, truth: SagMap,
+                      rng: np.random.Generator, *, params: dict | None = None, slit_position: float = 0.0,
+                      noise_rel: float = 0.01, n_samples: int = 160, half_range_um: float = 120.0,
+                      max_shift_um: float = 5.0, background: float = 0.03,
+                      distortion=None, settings: LsfSettings = LsfSettings()) -> tuple[np.ndarray, np.ndarray, dict]:
+    """A measured line profile: sparse random offsets, shifted, scaled, background, noise.
+
+    ``params`` are effect parameters for the truth (pupil shift, collimator WFE, slit
+    width; see :func:`~pipeline.diagnosis.forward.profile_curve`); ``truth`` is already
+    scaled. ``distortion(u, y) -> y`` (callable) applies an out-of-library change.
+    Computed with the default (converged) LSF settings — a different discretisation
+    from the one the diagnosis fits with. Returns (offset_um, intensity, truth info).
+    """
+    u, y = profile_curve(grating, wavelength_um, order, pixel_scale_mas, truth, params or {}, slit_position, settings)
+    if distortion is not None:
+        y = distortion(u, y)
+    shift = rng.uniform(-max_shift_um, max_shift_um)
+    flux = 10 ** rng.uniform(2, 4)
+    grid = np.arange(-half_range_um, half_range_um + 0.01, 0.5)
+    x = np.sort(rng.choice(grid, size=n_samples, replace=False))
+    model = np.interp(x - shift, u, y, left=0.0, right=0.0)
+    peak = float(y.max())
+    meas = flux * (model + background * peak + rng.normal(0.0, noise_rel * peak, x.size))
+    return x, np.clip(meas, 0.0, None), {"shift_um": shift, "flux": flux}
+
+
+def write_profile_csv(path, offset_um: np.ndarray, intensity: np.ndarray) -> None:
+    """CSV ``offset_um,intensity`` (header line, then one sample per line)."""
+    with open(path, "w") as fh:
+        fh.write("offset_um,intensity\n")
+        for a, b in zip(offset_um, intensity):
+            fh.write(f"{a:.3f},{b:.6g}\n")
