@@ -44,6 +44,18 @@ def _truth(polish: float, cache_dir, rng, scale: float = 1.0):
     return shape_discrepancy(m.scaled(scale), rng)
 
 
+def quilt_ratio(truth, cache_dir) -> float:
+    """Truth / diagnosed-nominal amplitude of the quilt fundamental (1/Dx, 0) over the
+    pupil: the amplitude scale a line-profile fit should find (the component that
+    diffracts along dispersion; paper §5.3), which differs from the P/V ratio when the
+    deformation's shape differs (200/50 vs 200/75)."""
+    from optics.fitting import fit_fourier
+
+    nom = fea_sag_map(200.0, 0.75, "all", 80.0, "coarse", cache_dir=cache_dir)
+    return float(fit_fourier(truth, aperture="pupil", harmonics=2).component(1, 0)[0]
+                 / fit_fourier(nom, aperture="pupil", harmonics=2).component(1, 0)[0])
+
+
 def cryo_astigmatism(out: Path, rng, cache_dir) -> dict:
     base = _truth(0.75, cache_dir, rng, thermal_factor(128.0, 80.0))
     base = base.scaled(0.60 / base.remove_piston_tilt("center").pv_um("center"))
@@ -76,14 +88,16 @@ def j_repolished(out: Path, rng, cache_dir) -> dict:
     truth = _truth(0.50, cache_dir, rng)
     specs = [("J", 1.25, -2, 250), ("J", 1.25, -2, 100), ("J", 1.25, -2, 25), ("J", 1.175, -2, 25)]
     (out / "manifest.toml").write_text(_profiles(out, rng, truth, specs, {"pupil_x_mm": 4.0}))
-    return {"truth": "FEA 200/50 default mesh + discrepancy", "pupil_x_mm": 4.0}
+    return {"truth": "FEA 200/50 default mesh + discrepancy", "pupil_x_mm": 4.0,
+            "expected_scale_J_quilt_fundamental": quilt_ratio(truth, cache_dir)}
 
 
 def hk_amplitude(out: Path, rng, cache_dir) -> dict:
     truth = _truth(0.75, cache_dir, rng, 1.2)
     specs = [(g, 1.25, o, ps) for g, o in (("H", -3), ("K", -4)) for ps in (250, 100, 25)]
     (out / "manifest.toml").write_text(_profiles(out, rng, truth, specs, {}))
-    return {"truth": "1.2 x FEA 200/75 default mesh + discrepancy", "scale": 1.2}
+    return {"truth": "1.2 x FEA 200/75 default mesh + discrepancy", "scale": 1.2,
+            "expected_scale_quilt_fundamental": quilt_ratio(truth, cache_dir)}
 
 
 SCENARIOS = {"cryo_astigmatism": cryo_astigmatism, "j_repolished": j_repolished, "hk_amplitude": hk_amplitude}

@@ -1,0 +1,173 @@
+"""Fast tests of pipeline.diagnosis: manifest errors, exact degeneracy, astigmatism and
+registration recovery, out-of-library coma -> unexplained, JSON/CLI. Nominal map: the
+analytic sum quilt (no FEA), truth: a different quilt form mixture + noise."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from optics.sagmap import quilt_sag_map
+from optics.zernike import zernike_xy
+from pipeline.diagnosis import diagnose
+from pipeline.diagnosis.cli import main
+from pipeline.diagnosis.fitting import effective_samples, estimate_noise
+from pipeline.diagnosis.nominal import thermal_factor
+from pipeline.diagnosis.synth import synthetic_surface, write_profile_csv
+from pipeline.interchange import write_sag_map
+
+
+def _nominal(tmp_path):
+    m = quilt_sag_map(0.6, "sum", spacing_mm=0.5)
+    write_sag_map(m, tmp_path / "nominal.npz")
+    return m
+
+
+def _truth(nominal):
+    # a different model: 10 % product-form admixture and a slight period error
+    other = quilt_sag_map(0.6, "product", spacing_mm=0.5, period_x_mm=21.1)
+    return nominal.with_sag(0.9 * nominal.sag_um + 0.1 * other.sag_um)
+
+
+def _manifest(tmp_path, file="map.npz", extra=""):
+    text = ('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\nkind = "surface"\n'
+            f'file = "{file}"\ntemperature_K = 128\naperture_diameter_mm = 137\n{extra}')
+    p = tmp_path / "m.toml"
+    p.write_text(text)
+    return p
+
+
+def _map(tmp_path, extra=None, seed=0, scale=1.0):
+    nom = _nominal(tmp_path)
+    t = _truth(nom).scaled(thermal_factor(128, 80) * scale)
+    m = synthetic_surface(t, np.random.default_rng(seed), extra_um=extra, noise_um=0.01)
+    write_sag_map(m, tmp_path / "map.npz")
+    return _manifest(tmp_path)
+
+
+def test_noise_estimate_white_noise():
+    rng = np.random.default_rng(3)
+    x = np.sort(rng.uniform(0, 100, 400))
+    y = np.sin(x / 7.0) + rng.normal(0, 0.02, x.size)
+    assert estimate_noise(x, y) == pytest.approx(0.02, rel=0.15)
+    assert effective_samples(rng.normal(size=400), x) > 200
+    assert effective_samples(np.sin(x / 15.0), x) < 40
+
+
+def test_astigmatism_recovered_and_explained(tmp_path):
+    c45 = 0.08
+    p = _map(tmp_path, lambda x, y: c45 * zernike_xy(2, -2, x, y, 68.5))
+    d = diagnose(p)
+    assert d.verdict == "explained"
+    assert d.best.effect == "astigmatism"
+    assert d.best.parameters["astig_45_um"] == pytest.approx(c45, rel=0.1)
+    assert abs(d.best.parameters["astig_0_um"]) < 3 * d.best.uncertainties["astig_0_um"] + 0.01
+    assert d.best.heldout_shrink_fraction > 0.5 and not d.best.overfit
+    basis = {w["component"]: w["share"] for w in d.where if w["decomposition"] == "basis"}
+    assert basis["astigmatism"] > 0.8
+
+
+def test_amplitude_and_temperature_are_degenerate_on_one_map(tmp_path):
+    # 0.7 x is reachable by a warmer map (~175 K); 1.4 x would not be (eps_m saturates when cold)
+    d = diagnose(_map(tmp_path, scale=0.7))
+    assert d.verdict == "explained"
+    assert {d.findings[0].effect, d.findings[1].effect} == {"amplitude_scale", "temperature"}
+    assert d.best.degenerate_with == ("temperature",) or d.best.degenerate_with == ("amplitude_scale",)
+    assert d.finding("amplitude_scale").parameters["scale_spare"] == pytest.approx(0.7 * 0.9, rel=0.1)
+    assert d.finding("amplitude_scale+temperature") is None  # the redundant pair is not fitted
+
+
+def test_registration_recovered(tmp_path):
+    nom = _nominal(tmp_path)
+    t = _truth(nom).scaled(thermal_factor(128, 80))
+    X, Y = t.grid()
+    t = t.with_sag(t.sample(X - 3.0, Y + 2.0))  # model feature at p appears at p + (3, -2)
+    write_sag_map(synthetic_surface(t, np.random.default_rng(1)), tmp_path / "map.npz")
+    d = diagnose(_manifest(tmp_path))
+    assert d.verdict == "explained" and d.best.effect == "registration"
+    assert d.best.parameters["reg_dx_mm"] == pytest.approx(3.0, abs=0.3)
+    assert d.best.parameters["reg_dy_mm"] == pytest.approx(-2.0, abs=0.3)
+
+
+def test_out_of_library_coma_is_unexplained(tmp_path):
+    p = _map(tmp_path, lambda x, y: 0.1 * zernike_xy(3, 1, x, y, 68.5), seed=2)
+    d = diagnose(p)
+    assert d.verdict == "unexplained"
+    after = {w["component"]: w["share"] for w in d.where_after if w["decomposition"] == "basis"}
+    assert after["coma"] > 0.5  # the structure left over is shown
+
+
+def test_no_gap_when_model_matches(tmp_path):
+    nom = _nominal(tmp_path)
+    m = synthetic_surface(nom.scaled(thermal_factor(128, 80)), np.random.default_rng(4), noise_um=0.01)
+    write_sag_map(m, tmp_path / "map.npz")
+    assert diagnose(_manifest(tmp_path)).verdict == "no_gap"
+
+
+@pytest.mark.parametrize("edit, fragment", [
+    (lambda t: t.replace('file = "map.npz"', 'file = "missing.npz"'), "file='missing.npz' does not exist"),
+    (lambda t: t.replace("temperature_K = 128", "temperature_K = 400"), "temperature_K=400"),
+    (lambda t: t.replace("aperture_diameter_mm = 137", "aperture_diameter_mm = 0.5"), "aperture_diameter_mm"),
+    (lambda t: t.replace('kind = "surface"', 'kind = "interferogram"'), "kind='interferogram'"),
+])
+def test_bad_surface_manifest(tmp_path, edit, fragment):
+    p = _map(tmp_path)
+    p.write_text(edit(p.read_text()))
+    with pytest.raises(ValueError) as e:
+        diagnose(p)
+    assert "measurement '" in str(e.value) and fragment in str(e.value)
+
+
+def _profile_manifest(tmp_path, grating="J", wl=1.25, order=-2, intensity=None):
+    _nominal(tmp_path)
+    u = np.linspace(-100, 100, 101)
+    y = np.exp(-0.5 * (u / 10) ** 2) if intensity is None else intensity(u)
+    write_profile_csv(tmp_path / "p.csv", u, y)
+    p = tmp_path / "m.toml"
+    p.write_text('[simulation]\nsag_file = "nominal.npz"\n[[measurement]]\nkind = "line_profile"\nfile = "p.csv"\n'
+                 f'grating = "{grating}"\norder = {order}\nwavelength_um = {wl}\npixel_scale_mas = 250\n')
+    return p
+
+
+@pytest.mark.parametrize("kw, fragment", [
+    ({"grating": "Z"}, "grating='Z'"),
+    ({"wl": 3.0, "order": -4}, "wavelength_um=3.0"),
+    ({"intensity": lambda u: np.zeros_like(u)}, "flux"),
+    ({"intensity": lambda u: np.exp(-0.5 * (u / 10) ** 2) - 0.1}, "negative"),
+])
+def test_bad_profile_manifest(tmp_path, kw, fragment):
+    with pytest.raises(ValueError) as e:
+        diagnose(_profile_manifest(tmp_path, **kw))
+    assert "measurement 'p'" in str(e.value) and fragment in str(e.value)
+
+
+def test_no_valid_pixels_in_aperture(tmp_path):
+    nom = _nominal(tmp_path)
+    m = synthetic_surface(nom, np.random.default_rng(0))
+    X, Y = m.grid()
+    write_sag_map(m.with_sag(np.where(X**2 + Y**2 < 60**2, np.nan, m.sag_um)), tmp_path / "map.npz")
+    p = _manifest(tmp_path)
+    p.write_text(p.read_text().replace("aperture_diameter_mm = 137", "aperture_diameter_mm = 100"))
+    with pytest.raises(ValueError, match="measurement 'map': aperture_diameter_mm=100.0 leaves 0 valid pixels"):
+        diagnose(p)
+
+
+def test_cli_writes_json_and_html(tmp_path):
+    p = _map(tmp_path, lambda x, y: 0.08 * zernike_xy(2, 2, x, y, 68.5))
+    assert main(["diagnose", str(p), "--out", str(tmp_path / "out")]) == 0
+    j = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
+    assert j["verdict"] == "explained"
+    f = j["findings"][0]
+    for key in ("effect", "parameters", "uncertainties", "score", "residual_rms_before", "residual_rms_after",
+                "shrink_fraction", "heldout_shrink_fraction", "degenerate_with"):
+        assert key in f
+    assert f["residual_rms_after"] < f["residual_rms_before"]
+    scores = [x["score"] + 10 * (len(x["effects"]) - 1) for x in j["findings"]]
+    assert scores == sorted(scores)
+    assert any(w["component"] == "astigmatism" for w in j["where"])
+    assert "<img" in (tmp_path / "out" / "report.html").read_text()
+    assert main(["diagnose", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o2")]) == 2
+    assert math.isfinite(f["uncertainties"]["astig_0_um"])
