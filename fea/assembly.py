@@ -211,7 +211,7 @@ def _normal_derivative_recovery(mesh, facets: np.ndarray, ndof: int, doflocs: np
     which is what makes the offset film energy consistent (see module docstring).
     """
     fb = FacetBasis(mesh, ElementTetP2(), facets=facets, quadrature=(_TRI6, np.ones(6) / 6))
-    n = fb.normals.value  # (3, nf, 6)
+    n = np.asarray(fb.normals)  # (3, nf, 6)
     D = np.stack([np.einsum("ifp,ifp->fp", fb.basis[a][0].grad, n) for a in range(fb.Nbfun)])  # (10, nf, 6)
     ed = fb.element_dofs  # (10, nf)
     x = fb.mapping.G(fb.X, find=fb.find)  # (3, nf, 6)
@@ -230,7 +230,7 @@ def _normal_derivative_recovery(mesh, facets: np.ndarray, ndof: int, doflocs: np
 def _nodal_normals(mesh, facets: np.ndarray, ndof: int, doflocs: np.ndarray) -> np.ndarray:
     """Unit outward normals (3, N) at the surface nodes of ``facets`` (zero elsewhere)."""
     fb = FacetBasis(mesh, ElementTetP2(), facets=facets, quadrature=(_TRI6, np.ones(6) / 6))
-    n = fb.normals.value  # (3, nf, 6)
+    n = np.asarray(fb.normals)  # (3, nf, 6)
     ed = fb.element_dofs
     x = fb.mapping.G(fb.X, find=fb.find)
     dist = ((doflocs[:, ed][:, :, :, None] - x[:, None, :, :]) ** 2).sum(axis=0)
@@ -279,7 +279,7 @@ def film_operators(mesh, facets: np.ndarray, youngs_modulus_MPa: float, poisson_
     lam_ps = E * nu / (1 - nu**2)  # plane-stress λ
     a_n = -nu / (1 - nu)  # film normal strain per unit tr(ε_s) (plane stress)
     b_n = (1 + nu) / (1 - nu)  # ... and per unit isotropic eigenstrain
-    n = fb.normals.value  # (3, nf, q), outward
+    n = np.asarray(fb.normals)  # (3, nf, q), outward
     P = np.eye(3)[None, None] - np.einsum("ifq,jfq->fqij", n, n)  # (nf, q, 3, 3)
     g = np.stack([fb.basis[a][0].grad for a in range(fb.Nbfun)])  # (10, 3, nf, q)
     T = np.einsum("fqij,ajfq->fqai", P, g, optimize=True)  # tangential gradients

@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .assembly import FilmOperators, bulk_stiffness, film_operators, scalar_basis
-from .coating import Coating
+from .coating import SURFACE_GROUPS, Coating
 from .linsolve import _rigid_modes, solve_spd, solve_spd_perturbed
 from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
 from .surface import FrontSag, front_sag
@@ -215,6 +215,8 @@ class PreparedBlank:
                 continue
             if group == "back" and "sym_z" in self.symmetry_planes:
                 continue  # the mirror image of the front film through the mid-plane
+            if group in SURFACE_GROUPS and group not in self.mesh.boundaries:
+                continue  # e.g. hole walls of a blank without lightweighting holes
             ops = self.film_ops(group, film)
             t = t_um * 1e-3
             K = K + ops.local_stiffness(t, offset)

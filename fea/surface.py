@@ -1,9 +1,15 @@
-"""Front-surface sag of a solved blank: nodal values, statistics and gridded maps.
+"""Front-surface sag of a solved blank: samples, statistics and gridded maps.
 
 Units: mm for positions, µm for sag. Sag is the displacement along +z (the outward
 normal of the front face); ``sag_normal_um`` is the displacement along the local
 undeformed outward normal of the front facets (identical for a flat face, kept so
 that a curved front surface is handled correctly).
+
+Samples: the quadratic FE field is evaluated exactly on a lattice of 15 points per
+front facet (barycentric step 1/4), which contains every P2 node (vertices and edge
+midpoints, flagged ``is_node``) plus interior points. P/V taken on nodes alone misses
+the extrema of a ~20 mm quilt by ≈ (π h / λ)² / 2, about 2 % on a 1.4 mm mesh; the
+lattice cuts that by 16x. Each sample carries an area weight for RMS values.
 """
 
 from __future__ import annotations
@@ -35,6 +41,8 @@ class FrontSag:
     y_mm: np.ndarray
     sag_um: np.ndarray
     sag_normal_um: np.ndarray
+    weight_mm2: np.ndarray
+    is_node: np.ndarray
 
     def _sel(self, region: str | Region | None) -> np.ndarray:
         m = resolve_region(region).contains(self.x_mm, self.y_mm)
@@ -45,8 +53,9 @@ class FrontSag:
     def detrended(self, region: str | Region | None = "center") -> np.ndarray:
         """Sag (µm) minus the least-squares piston and tilt over ``region`` (all nodes)."""
         m = self._sel(region)
-        A = np.column_stack([np.ones(m.sum()), self.x_mm[m], self.y_mm[m]])
-        c, *_ = np.linalg.lstsq(A, self.sag_um[m], rcond=None)
+        sw = np.sqrt(self.weight_mm2[m])
+        A = np.column_stack([np.ones(m.sum()), self.x_mm[m], self.y_mm[m]]) * sw[:, None]
+        c, *_ = np.linalg.lstsq(A, self.sag_um[m] * sw, rcond=None)
         return self.sag_um - (c[0] + c[1] * self.x_mm + c[2] * self.y_mm)
 
     def pv_um(self, region: str | Region | None = "center", remove_tilt: bool = True) -> float:
@@ -56,17 +65,20 @@ class FrontSag:
         return float(s.max() - s.min())
 
     def rms_um(self, region: str | Region | None = "center", remove_tilt: bool = True) -> float:
-        """RMS about the mean (µm) over the nodes in ``region``.
-
-        Nodes are unevenly spaced (graded mesh), so this is a node-weighted RMS; use
-        :meth:`sag_map` for an area-weighted one.
-        """
+        """Area-weighted RMS about the mean (µm) over ``region``."""
         m = self._sel(region)
         s = self.detrended(region)[m] if remove_tilt else self.sag_um[m]
-        return float(np.sqrt(np.mean((s - s.mean()) ** 2)))
+        w = self.weight_mm2[m]
+        mean = np.sum(w * s) / np.sum(w)
+        return float(np.sqrt(np.sum(w * (s - mean) ** 2) / np.sum(w)))
+
+    def nodes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Nodal values only: (x_mm, y_mm, sag_um) of the P2 nodes of the front face."""
+        m = self.is_node
+        return self.x_mm[m], self.y_mm[m], self.sag_um[m]
 
     def value_at(self, x_mm: float, y_mm: float) -> float:
-        """Sag (µm) of the node nearest to (x, y)."""
+        """Sag (µm) of the sample nearest to (x, y)."""
         i = np.argmin((self.x_mm - x_mm) ** 2 + (self.y_mm - y_mm) ** 2)
         return float(self.sag_um[i])
 
@@ -84,20 +96,38 @@ class FrontSag:
         return SagMap.from_scattered(self.x_mm, self.y_mm, s, spacing_mm, ext, label)
 
 
-def _mirror(x: np.ndarray, y: np.ndarray, vals: list[np.ndarray], planes) -> tuple:
+def _lattice(n: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Barycentric lattice of step 1/n on the reference triangle (2, k) and node flags."""
+    pts, node = [], []
+    for i in range(n + 1):
+        for j in range(n + 1 - i):
+            pts.append((i / n, j / n))
+            node.append(i % (n // 2) == 0 and j % (n // 2) == 0)
+    return np.array(pts).T, np.array(node)
+
+
+def _dedupe(x, y, vals, w, flag):
+    key = np.round(np.column_stack([x, y]), 7)
+    _, idx, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    wsum = np.bincount(inv.ravel(), weights=w, minlength=idx.size)
+    fl = np.bincount(inv.ravel(), weights=flag.astype(float), minlength=idx.size) > 0
+    return x[idx], y[idx], [v[idx] for v in vals], wsum, fl
+
+
+def _mirror(x, y, vals, w, flag, planes):
     if "sym_x" in planes:
         x, y = np.concatenate([x, -x]), np.concatenate([y, y])
         vals = [np.concatenate([v, v]) for v in vals]
+        w, flag = np.concatenate([w, w]), np.concatenate([flag, flag])
     if "sym_y" in planes:
         x, y = np.concatenate([x, x]), np.concatenate([y, -y])
         vals = [np.concatenate([v, v]) for v in vals]
-    key = np.round(np.column_stack([x, y]), 9)
-    _, idx = np.unique(key, axis=0, return_index=True)
-    return x[idx], y[idx], [v[idx] for v in vals]
+        w, flag = np.concatenate([w, w]), np.concatenate([flag, flag])
+    return _dedupe(x, y, vals, w, flag)
 
 
 def front_sag(mesh, basis, displacement_mm: np.ndarray, symmetry_planes) -> FrontSag:
-    """Extract the front-face sag from a nodal displacement field.
+    """Evaluate the front-face sag of a nodal P2 displacement field.
 
     Parameters
     ----------
@@ -107,28 +137,21 @@ def front_sag(mesh, basis, displacement_mm: np.ndarray, symmetry_planes) -> Fron
     symmetry_planes : iterable of str
         ``sym_x``/``sym_y`` present means the face is mirrored about x=0 / y=0.
     """
-    facets = mesh.boundaries["front"]
-    dofs = basis.get_dofs(facets).all()
-    xyz = basis.doflocs[:, dofs]
-    u = displacement_mm[:, dofs]
-    normals = _nodal_normals(mesh, facets, basis, dofs)
-    sag = 1e3 * u[2]
-    sag_n = 1e3 * np.einsum("in,in->n", u, normals)
-    x, y, (sag, sag_n) = _mirror(xyz[0], xyz[1], [sag, sag_n], symmetry_planes)
-    return FrontSag(x, y, sag, sag_n)
-
-
-def _nodal_normals(mesh, facets, basis, dofs) -> np.ndarray:
-    """Outward unit normals at the front-face nodes (average of adjacent facet normals)."""
     from skfem import ElementTetP2, FacetBasis
 
-    fb = FacetBasis(mesh, ElementTetP2(), facets=facets, intorder=1)
-    n_f = fb.normals.value.mean(axis=2)  # (3, nf)
-    lookup = -np.ones(basis.N, dtype=int)
-    lookup[dofs] = np.arange(dofs.size)
-    acc = np.zeros((3, dofs.size))
-    for a in range(fb.element_dofs.shape[0]):
-        d = fb.element_dofs[a]
-        ok = lookup[d] >= 0
-        np.add.at(acc, (slice(None), lookup[d[ok]]), n_f[:, ok])
-    return acc / np.linalg.norm(acc, axis=0, keepdims=True)
+    X, node = _lattice(4)
+    k = X.shape[1]
+    fb = FacetBasis(mesh, ElementTetP2(), facets=mesh.boundaries["front"], quadrature=(X, np.full(k, 0.5 / k)))
+    ed = fb.element_dofs  # (10, nf)
+    phi = np.stack([np.asarray(fb.basis[a][0]) for a in range(fb.Nbfun)])  # (10, nf, k)
+    u = np.einsum("afk,iaf->ifk", phi, displacement_mm[:, ed])  # (3, nf, k)
+    xyz = fb.mapping.G(fb.X, find=fb.find)  # (3, nf, k)
+    n = np.asarray(fb.normals)  # (3, nf, k)
+    area = fb.dx.sum(axis=1)  # (nf,) facet areas (weights sum to the area)
+    w = np.repeat(area[:, None] / k, k, axis=1)
+    sag = 1e3 * u[2]
+    sag_n = 1e3 * np.einsum("ifk,ifk->fk", u, n)
+    flag = np.broadcast_to(node[None, :], sag.shape)
+    x, y, (sag, sag_n), w, flag = _mirror(xyz[0].ravel(), xyz[1].ravel(), [sag.ravel(), sag_n.ravel()],
+                                          w.ravel(), flag.ravel(), symmetry_planes)
+    return FrontSag(x, y, sag, sag_n, w, flag)

@@ -68,7 +68,7 @@ def _cmd_calibrate(a) -> int:
 def _cmd_run(a) -> int:
     from pipeline.study import run_study
 
-    run_study(a.out, progress=not a.quiet)
+    run_study(a.out, progress=not a.quiet, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm)
     return 0
 
 
@@ -80,6 +80,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     q = sub.add_parser("run", help="the default study: paper tables, sag maps, plots and report")
     q.add_argument("--out", default="results", help="output directory (default: results)")
+    q.add_argument("--mesh-size-mm", type=float, default=None, help="element size near walls (mm)")
+    q.add_argument("--mesh-bulk-mm", type=float, default=None, help="element size in the bulk (mm)")
     q.add_argument("--quiet", action="store_true", help="no progress bars")
     q.set_defaults(func=_cmd_run)
 

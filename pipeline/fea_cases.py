@@ -69,11 +69,8 @@ def _split(params: dict):
     polish_back = p["polish"] if p["polish_back"] is None else p["polish_back"]
     coating = Coating(t0_um=float(p["t0_um"]), polish_front=float(p["polish"]),
                       polish_back=float(polish_back), coverage=str(p["coverage"]))
-    spec = MeshSpec()
-    if p["mesh_size_mm"] is not None:
-        spec = replace(spec, size_mm=float(p["mesh_size_mm"]))
-    if p["mesh_bulk_mm"] is not None:
-        spec = replace(spec, size_bulk_mm=float(p["mesh_bulk_mm"]))
+    sizes = {k: float(p[name]) for k, name in _MESH_FIELDS.items() if p[name] is not None}
+    spec = replace(MeshSpec(), **sizes)  # one replace: the pair is validated together
     if not coating.is_z_symmetric or not blank.is_z_symmetric:
         spec = replace(spec, symmetry="quarter")
     for name in ("substrate", "film"):

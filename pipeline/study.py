@@ -88,7 +88,8 @@ def _write_profiles(results, out: Path) -> None:
         ds.to_netcdf(tmp)
 
 
-def run_study(out_dir, *, progress: bool = True) -> dict:
+def run_study(out_dir, *, progress: bool = True, mesh_size_mm: float | None = None,
+              mesh_bulk_mm: float | None = None) -> dict:
     """Run the default study and write tables, profiles, figures and ``report.html``.
 
     Returns a dict with the table rows, the profile results and the figure paths.
@@ -102,7 +103,8 @@ def run_study(out_dir, *, progress: bool = True) -> dict:
         raise NotADirectoryError(f"--out {out} exists and is not a directory")
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    rows, maps = run_tables(out / "fea", progress=progress, return_maps=True)
+    rows, maps = run_tables(out / "fea", progress=progress, return_maps=True,
+                            mesh_size_mm=mesh_size_mm, mesh_bulk_mm=mesh_bulk_mm)
     table = format_table(rows)
     print(table, flush=True)
     t_fea = time.perf_counter() - t0
