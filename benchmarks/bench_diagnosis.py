@@ -1,0 +1,50 @@
+"""Benchmark of the sim-to-real diagnosis: the three paper scenarios and the
+injection-recovery campaign. Writes benchmarks/results_diagnosis_raw.json; the
+numbers in results_diagnosis.md were pasted from its output.
+
+    .venv/bin/python benchmarks/bench_diagnosis.py [--cases 208] [--workers 2] [--seed 1] [--cache-dir DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from pipeline.diagnosis import diagnose
+from pipeline.diagnosis.campaign import CampaignConfig, run_campaign
+
+HERE = Path(__file__).parent
+SCEN = HERE.parent / "pipeline" / "scenarios"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--cases", type=int, default=208)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--cache-dir", default=None)
+    a = ap.parse_args(argv)
+    out = {"scenarios": {}}
+    for name in ("cryo_astigmatism", "j_repolished", "hk_amplitude"):
+        t = time.perf_counter()
+        d = diagnose(SCEN / name / "manifest.toml", cache_dir=a.cache_dir)
+        b = d.best
+        out["scenarios"][name] = {"verdict": d.verdict, "best": b.effect, "parameters": b.parameters,
+                                  "uncertainties": b.uncertainties, "shrink": b.shrink_fraction,
+                                  "heldout_shrink": b.heldout_shrink_fraction, "delta_bic": b.delta_bic,
+                                  "ranking": [(f.effect, round(f.delta_bic, 1)) for f in d.findings],
+                                  "seconds": time.perf_counter() - t, "timings_s": d.timings_s}
+        print(name, json.dumps(out["scenarios"][name], default=float))
+    res = run_campaign(CampaignConfig(n_cases=a.cases, seed=a.seed, workers=a.workers), cache_dir=a.cache_dir)
+    out["campaign"] = res
+    s = res["summary"]
+    print(json.dumps({k: v for k, v in s.items() if k not in ("per_type", "confusion")}, indent=1, default=float))
+    for k, v in s["per_type"].items():
+        print(k, v, s["confusion"][k])
+    (HERE / "results_diagnosis_raw.json").write_text(json.dumps(out, indent=1, default=float))
+
+
+if __name__ == "__main__":
+    main()

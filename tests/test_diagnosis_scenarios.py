@@ -1,0 +1,69 @@
+"""Slow: the paper's three diagnoses on the bundled synthetic scenarios, and a reduced
+injection-recovery campaign. The truths come from the default FEA mesh + a random
+shape discrepancy; the diagnosed model is the coarse mesh (see pipeline/scenarios)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.diagnosis import diagnose
+from pipeline.diagnosis.campaign import CASE_TYPES, CampaignConfig, run_campaign
+from pipeline.interchange import read_sag_map
+from optics.zernike import zernike_xy
+
+SCEN = Path(__file__).resolve().parents[1] / "pipeline" / "scenarios"
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("fea-cache")
+
+
+def test_cryo_map_astigmatism(cache):
+    """§3.3: P/V_center 0.80 um, ~0.60 um once the oblique astigmatism is removed."""
+    d = diagnose(SCEN / "cryo_astigmatism" / "manifest.toml", cache_dir=cache)
+    assert d.verdict == "explained" and d.best.effect == "astigmatism"
+    c45, c0 = d.best.parameters["astig_45_um"], d.best.parameters["astig_0_um"]
+    assert abs(c45) > 5 * abs(c0)  # oblique (45 deg), not 0 deg
+    m = read_sag_map(SCEN / "cryo_astigmatism" / "cryo_map.int")
+    X, Y = m.grid()
+    assert m.remove_piston_tilt("center").pv_um("center") == pytest.approx(0.80, abs=0.05)
+    clean = m.with_sag(m.sag_um - c45 * zernike_xy(2, -2, X, Y, 68.5) - c0 * zernike_xy(2, 2, X, Y, 68.5))
+    assert clean.remove_piston_tilt("center").pv_um("center") == pytest.approx(0.60, abs=0.05)
+    assert d.best.heldout_shrink_fraction > 0.5 and not d.best.overfit
+
+
+def test_j_grating_larger_amplitude_and_pupil_shift(cache):
+    """§5.3: the J grating needs a larger deformation amplitude and a ~4 mm pupil shift."""
+    d = diagnose(SCEN / "j_repolished" / "manifest.toml", cache_dir=cache)
+    assert d.verdict == "explained"
+    assert set(d.best.effects) == {"amplitude_scale", "pupil_shift"}
+    p = d.best.parameters
+    assert 1.4 < p["scale_J"] < 2.3          # quilt-fundamental truth ratio 1.65 (P/V ratio 1.48)
+    assert p["pupil_x_mm"] == pytest.approx(4.0, abs=2.0)
+    assert d.best.heldout_shrink_fraction > 0.3 and not d.best.overfit
+
+
+def test_hk_gratings_amplitude_1p2(cache):
+    """§5.4: the 1.25 um line on H (order -3) and K (order -4) needs ~1.2x the amplitude."""
+    d = diagnose(SCEN / "hk_amplitude" / "manifest.toml", cache_dir=cache)
+    assert d.verdict == "explained" and d.best.effect == "amplitude_scale"
+    for g in ("H", "K"):
+        assert d.best.parameters[f"scale_{g}"] == pytest.approx(1.26, rel=0.1)  # 1.2 x (fine/coarse quilt 1.054)
+    assert abs(d.best.parameters["scale_H"] - d.best.parameters["scale_K"]) < 0.1  # H and K alike
+    assert d.finding("temperature").delta_bic > d.best.delta_bic + 50  # a common cold-temperature change cannot do it
+
+
+def test_reduced_campaign(cache):
+    """39 cases (3 per type): surface effects mostly recognised, out-of-library ones not
+    attributed. (Line-profile recognition is below target: benchmarks/results_diagnosis.md.)"""
+    res = run_campaign(CampaignConfig(n_cases=39, seed=7, workers=2), cache_dir=cache)
+    s = res["summary"]
+    surf = [r for r in res["cases"] if r["kind"] == "surface" and not r["effect"].startswith("ool")]
+    assert np.mean([r["correct"] for r in surf]) >= 0.75
+    assert s["ool_unexplained_rate"] >= 0.8
+    assert s["wall_s"] < 400
