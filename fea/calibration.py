@@ -3,8 +3,11 @@
 The NiP/Al mismatch strain on cooling is poorly known (no published cryogenic
 expansion curve of high-phosphorus NiP; RT CTE 11-14e-6/K) and the P/V is linear in
 it, so a single global multiplier ``STRESS_SCALE`` on the mismatch strain is fitted
-once, by relative least squares, to the paper's Table 1 (9 values) and Table 2
-holes-only column (3 values). The surfaces-only column is excluded: see README,
+once, by weighted relative least squares, to the paper's Table 1 (9 values) and Table 2
+holes-only column (3 values). Each row is weighted by 1/σ² with σ the agreement the
+project expects for its table (``TABLE_SIGMA``: 5 % for Table 1, the paper's main
+result; 15 % for the holes-only idealisation), so three loosely expected rows do not
+pull nine tightly expected ones. The surfaces-only column is excluded: see README,
 "Table 2, surfaces only". Refit with::
 
     .venv/bin/python -m fea.calibration
@@ -21,15 +24,22 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["STRESS_SCALE", "FIT_RECORD", "PaperCase", "paper_cases", "fit_stress_scale"]
+__all__ = ["STRESS_SCALE", "FIT_RECORD", "TABLE_SIGMA", "PaperCase", "paper_cases", "fit_stress_scale"]
 
 #: Multiplier on the nominal film mismatch strain (dimensionless). See FIT_RECORD.
-STRESS_SCALE = 1.0
+STRESS_SCALE = 0.7913
 
 #: Provenance of STRESS_SCALE (mesh, rows used, residuals in % per row).
-FIT_RECORD: dict = {"status": "not yet fitted"}
+FIT_RECORD: dict = {'date': '2026-11-22',
+    'command': 'python -m fea.calibration --mesh-size-mm 1.4 --mesh-bulk-mm 2.8',
+    'mesh': 'default MeshSpec (1.4 / 2.8 mm, eighth model, 216096 DOFs)',
+    'fea_model_version': 4, 'rows': 'Table 1 (sigma 5 %) + Table 2 holes-only (sigma 15 %)',
+    'residual_percent': {'all t0=200 p=1': -4.5, 'all t0=200 p=0.75': 0.1, 'all t0=200 p=0.5': 0.7, 'all t0=150 p=1': -3.0, 'all t0=150 p=0.75': 0.5, 'all t0=150 p=0.5': 2.9, 'all t0=100 p=1': -3.7, 'all t0=100 p=0.75': 0.5, 'all t0=100 p=0.5': 2.9, 'holes t0=200 p=1': 7.4, 'holes t0=150 p=1': 7.4, 'holes t0=100 p=1': 9.4, 'surfaces t0=200 p=1': -33.9, 'surfaces t0=150 p=1': -34.7, 'surfaces t0=100 p=1': -35.5}}
 
 _DATA = Path(__file__).with_name("data") / "paper_pv_center.csv"
+
+#: Expected relative agreement per paper table (the weights of the fit are 1/σ²).
+TABLE_SIGMA = {"1": 0.05, "2": 0.15}
 
 
 @dataclass(frozen=True)
@@ -57,14 +67,17 @@ def paper_cases() -> list[PaperCase]:
                       float(r["pv_center_um"]), r["direction"], r["calibrate"] == "yes") for r in rows]
 
 
-def fit_stress_scale(model_pv_um: np.ndarray, paper_pv_um: np.ndarray) -> tuple[float, np.ndarray]:
-    """Relative least-squares scale s minimising Σ (s·m/p − 1)².
+def fit_stress_scale(model_pv_um: np.ndarray, paper_pv_um: np.ndarray,
+                     sigma: np.ndarray | None = None) -> tuple[float, np.ndarray]:
+    """Weighted relative least-squares scale s minimising Σ ((s·m/p − 1)/σ)².
 
     P/V is linear in the mismatch strain, so ``model_pv_um`` computed at scale 1 scales
-    exactly. Returns the scale and the relative residuals s·m/p − 1.
+    exactly. ``sigma`` (relative, per row) defaults to 1. Returns the scale and the
+    relative residuals s·m/p − 1.
     """
     r = np.asarray(model_pv_um, float) / np.asarray(paper_pv_um, float)
-    s = float(np.sum(r) / np.sum(r * r))
+    w = np.ones_like(r) if sigma is None else 1.0 / np.asarray(sigma, float) ** 2
+    s = float(np.sum(w * r) / np.sum(w * r * r))
     return s, s * r - 1.0
 
 
@@ -77,8 +90,15 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = argparse.ArgumentParser(prog="python -m fea.calibration", description=main.__doc__)
     ap.add_argument("--out", default=None, help="directory for calibration.csv")
+    ap.add_argument("--mesh-size-mm", type=float, default=None, help="element size near walls (mm)")
+    ap.add_argument("--mesh-bulk-mm", type=float, default=None, help="element size in the bulk (mm)")
     a = ap.parse_args(argv)
-    model = prepare()
+    from dataclasses import replace
+
+    from fea.mesh import MeshSpec
+
+    sizes = {k: v for k, v in (("size_mm", a.mesh_size_mm), ("size_bulk_mm", a.mesh_bulk_mm)) if v is not None}
+    model = prepare(mesh=replace(MeshSpec(), **sizes))
     cases = paper_cases()
     pv = []
     for c in cases:
@@ -88,7 +108,8 @@ def main(argv: list[str] | None = None) -> int:
     pv = np.array(pv)
     use = np.array([c.calibrate for c in cases])
     paper = np.array([c.pv_center_um for c in cases])
-    s, res = fit_stress_scale(pv[use], paper[use])
+    sigma = np.array([TABLE_SIGMA[c.table] for c in cases])
+    s, res = fit_stress_scale(pv[use], paper[use], sigma[use])
     print(f"\nSTRESS_SCALE = {s:.4f}   (mesh {model.ndof} DOFs, {use.sum()} rows)")
     allres = s * pv / paper - 1
     for c, e in zip(cases, allres):

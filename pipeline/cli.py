@@ -111,15 +111,11 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--out", default=None, help="directory for the fit's CSV (optional)")
     q.set_defaults(func=_cmd_calibrate)
 
+    from pipeline.diagnosis.cli import register as register_diagnosis
     from pipeline.optics_cli import register as register_optics
 
     register_optics(sub)
-    try:
-        from pipeline.diagnosis.cli import register as register_diagnosis
-    except ImportError:  # the diagnosis stage is optional while it is being built
-        pass
-    else:
-        register_diagnosis(sub)
+    register_diagnosis(sub)
     return p
 
 

@@ -145,7 +145,9 @@ def fea_grid(**axes) -> list:
 
 def _namespace() -> str:
     # the cache must not survive a recalibration or a change of the solver's physics
-    return f"fea-v3-scale{STRESS_SCALE:.8g}"
+    from fea import MODEL_VERSION
+
+    return f"fea-v{MODEL_VERSION}-scale{STRESS_SCALE:.8g}"
 
 
 def run_fea_sweep(axes: dict, out_dir, *, scheduler: str | None = None, workers: int | None = 1,

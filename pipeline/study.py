@@ -70,7 +70,7 @@ def _write_profiles(results, out: Path) -> None:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(keys + mkeys + ["n_peaks", "peak_positions_um"])
         for j, prof, m in results:
-            peaks = m["peaks"].get("positions_um", [])
+            peaks = m["peaks"].get("offset_um", [])
             w.writerow([j["grating"], j["order"] if j["order"] is not None else "", j["wavelength_um"],
                         j["pixel_scale_mas"], j["deformation"]] +
                        [f"{m.get(k, np.nan):.5g}" for k in mkeys] +

@@ -47,10 +47,12 @@ def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh:
     cache_dir : path, optional
         Directory for ``fea-<hash>.npz``; None disables the disk cache.
     """
+    from fea import MODEL_VERSION
     from fea.calibration import STRESS_SCALE
 
     key = dict(t0_um=float(t0_um), polish=float(polish), coverage=coverage, cold_K=float(cold_K),
-               warm_K=float(warm_K), mesh=mesh, spacing_mm=float(spacing_mm), stress_scale=float(STRESS_SCALE))
+               warm_K=float(warm_K), mesh=mesh, spacing_mm=float(spacing_mm), stress_scale=float(STRESS_SCALE),
+               fea_model_version=MODEL_VERSION)
     digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
     label = f"FEA {coverage} t0={t0_um:g} polish={polish:g} {cold_K:g} K ({mesh} mesh)"
     path = Path(cache_dir) / f"fea-{digest}.npz" if cache_dir is not None else None
