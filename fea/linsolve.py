@@ -52,14 +52,14 @@ def _rigid_modes(coords_mm: np.ndarray) -> np.ndarray:
 
 def solve_spd(K: sp.spmatrix, f: np.ndarray, backend: str = "auto", rtol: float = 1e-9,
               coords_mm: np.ndarray | None = None, free: np.ndarray | None = None) -> np.ndarray:
-    """Solve K u = f for a symmetric positive-definite K.
+    """Solve K u = f for a symmetric positive-definite K (see :func:`solve_spd_perturbed`).
 
     Parameters
     ----------
     K : sparse matrix, shape (n, n)
         Condensed (constraints already removed) stiffness.
-    f : ndarray, shape (n,) or (n, k)
-        Load vector(s).
+    f : ndarray, shape (n,)
+        Load vector.
     backend : {"auto", "pardiso", "amg"}
     rtol : float
         Required relative residual ||K u − f|| / ||f||.
@@ -72,54 +72,7 @@ def solve_spd(K: sp.spmatrix, f: np.ndarray, backend: str = "auto", rtol: float 
     SolverError
         When the back-end fails or the residual exceeds ``rtol``.
     """
-    if backend not in ("auto", "pardiso", "amg"):
-        raise ValueError(f"backend={backend!r} is unknown; valid values are ['auto', 'pardiso', 'amg']")
-    if backend == "auto":
-        backend = "pardiso" if _have_pardiso() else "amg"
-    K = sp.csr_matrix(K)
-    fnorm = np.linalg.norm(f)
-    if fnorm == 0:
-        return np.zeros_like(f, dtype=float)
-    if backend == "pardiso":
-        if not _have_pardiso():
-            raise SolverError("backend='pardiso' requested but pypardiso is not installed "
-                              "(pip install 'cryograting[fast]')")
-        import pypardiso
-
-        solver = pypardiso.PyPardisoSolver(mtype=2)
-        try:
-            Ku = sp.triu(K, format="csr")
-            Ku.sort_indices()
-            u = solver.solve(Ku, np.asarray(f, dtype=float))
-        except Exception as exc:  # PARDISO reports errors as exceptions with codes
-            raise SolverError(f"PARDISO failed: {exc}") from exc
-        finally:
-            solver.free_memory(everything=True)
-    else:
-        import pyamg
-        from scipy.sparse.linalg import cg
-
-        B = None
-        if coords_mm is not None:
-            B = _rigid_modes(coords_mm)
-            if free is not None:
-                B = B[free]
-        ml = pyamg.smoothed_aggregation_solver(K, B=B, max_coarse=500)
-        M = ml.aspreconditioner(cycle="V")
-        cols = np.atleast_2d(np.asarray(f, float).T).T if np.ndim(f) == 2 else np.asarray(f, float)[:, None]
-        out = np.empty_like(cols)
-        for k in range(cols.shape[1]):
-            u_k, info = cg(K, cols[:, k], rtol=rtol * 0.1, maxiter=5000, M=M)
-            if info != 0:
-                raise SolverError(f"AMG-preconditioned CG did not converge (info={info}) "
-                                  f"on a system of {K.shape[0]} unknowns")
-            out[:, k] = u_k
-        u = out if np.ndim(f) == 2 else out[:, 0]
-    res = np.linalg.norm(K @ u - f) / fnorm
-    if not np.isfinite(res) or res > rtol:
-        raise SolverError(f"linear solve ({backend}) residual {res:.3e} exceeds rtol={rtol:.1e}; "
-                          "the stiffness may be singular (rigid-body motion not removed?)")
-    return u
+    return solve_spd_perturbed(K, None, f, backend=backend, rtol=rtol, coords_mm=coords_mm, free=free)
 
 
 class _Factor:

@@ -1,0 +1,38 @@
+"""Benchmark: the paper's 15-case table on the default mesh (wall time, peak memory).
+
+Run on demand (not a test):  .venv/bin/python benchmarks/bench_tables.py
+Writes benchmarks/results_tables.md. Target (issue 2): <= 60 s wall, <= 4 GB peak.
+"""
+from __future__ import annotations
+
+import resource
+import time
+from pathlib import Path
+
+from fea.api import prepare
+from fea.calibration import STRESS_SCALE, paper_cases
+from fea.coating import Coating
+
+
+def main(out=Path(__file__).with_name("results_tables.md")) -> None:
+    t0 = time.perf_counter()
+    model = prepare()
+    t_prep = time.perf_counter() - t0
+    lines = ["# 15-case paper table on the default mesh", "",
+             f"Prepare (mesh from cache or gmsh, bulk stiffness): {t_prep:.1f} s, {model.ndof} DOFs.", "",
+             "| case | P/V_center (µm) | assembly (s) | solve (s) | CG iterations |", "|---|---|---|---|---|"]
+    for c in paper_cases():
+        r = model.solve(Coating.symmetric(c.t0_um, c.polish, c.coverage), stress_scale=STRESS_SCALE)
+        lines.append(f"| {c.label} | {r.sag.pv_um('center'):.3f} | {r.info['assembly_s']:.1f} | "
+                     f"{r.info['solve_s']:.1f} | {r.info['solver'].get('iterations', '-')} |")
+        print(lines[-1], flush=True)
+    wall = time.perf_counter() - t0
+    peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024**2
+    lines += ["", f"Total wall time {wall:.0f} s (target 60 s); peak RSS {peak_gb:.1f} GB (target 4 GB).",
+              f"Machine load at the end: {open('/proc/loadavg').read().split()[:3]}"]
+    out.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines[-2:]))
+
+
+if __name__ == "__main__":
+    main()
