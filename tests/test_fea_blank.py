@@ -60,13 +60,15 @@ def test_symmetric_parts_agree_with_the_full_model(eighth, symmetry):
     """The eighth model (default) equals the quarter and full models up to discretisation.
 
     Different unstructured meshes of 5 mm: the P/V agrees within 3 % and the RMS of the
-    map difference over the centre is below 2 % of the P/V.
+    map difference over the centre is below 2 % of the P/V. Piston and tilt are removed
+    first: the full model's 3-2-1 point constraints leave an arbitrary rigid tilt.
     """
     ref = solve(200, 0.5, prepared=eighth)
     other = solve(200, 0.5, mesh=replace(COARSE, symmetry=symmetry))
     assert other.sag.pv_um("center") == pytest.approx(ref.sag.pv_um("center"), rel=0.03)
-    m_ref, m_o = ref.sag.sag_map(1.0), other.sag.sag_map(1.0)
-    d = (m_o.sag_um - np.nanmean(m_o.values("center"))) - (m_ref.sag_um - np.nanmean(m_ref.values("center")))
+    m_ref = ref.sag.sag_map(1.0).remove_piston_tilt("center")
+    m_o = other.sag.sag_map(1.0).remove_piston_tilt("center")
+    d = m_o.sag_um - m_ref.sag_um
     dc = d[m_ref.region_mask("center")]
     assert np.sqrt(np.nanmean(dc**2)) < 0.02 * ref.sag.pv_um("center")
 
