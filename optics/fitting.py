@@ -20,7 +20,6 @@ with ``(x0, y0) = phase_origin_mm``, amplitudes ``A_ij >= 0`` (µm) and phases
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 

@@ -37,7 +37,6 @@ Frames and sign conventions (fixed here, pinned by ``tests/test_imaging.py``)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 

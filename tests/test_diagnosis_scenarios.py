@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pipeline.diagnosis import diagnose
-from pipeline.diagnosis.campaign import CASE_TYPES, CampaignConfig, run_campaign
+from pipeline.diagnosis.campaign import CampaignConfig, run_campaign
 from pipeline.interchange import read_sag_map
 from optics.zernike import zernike_xy
 

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 import pytest
-from scipy.special import j0, j1, jv
+from scipy.special import j1, jv
 
 from optics.grating import GRATINGS, SPIFFI
 from optics.imaging import PSF, basic_lsf, partially_coherent_lsf, psf, source_points
@@ -177,7 +177,7 @@ def test_psf_matches_prysm():
     """Same pupil built with prysm's own grid/geometry/Zernike: identical PSF.
     prysm: arrays [y, x], phase in nm, exp(+i k OPD), fftshift(fft2(ifftshift)) -> same
     orientation as ours (+x tilt -> +x); its grid puts 0 at index n/2 like ours."""
-    prysm = pytest.importorskip("prysm")
+    pytest.importorskip("prysm")
     from prysm.coordinates import cart_to_polar, make_xy_grid
     from prysm.geometry import circle
     from prysm.polynomials import zernike_nm
