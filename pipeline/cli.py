@@ -47,8 +47,7 @@ def _cmd_sweep(a) -> int:
         axes[name.strip()] = _values(text)
     res = run_fea_sweep(axes, a.out, scheduler=a.scheduler, workers=a.workers,
                         progress=not a.quiet, with_maps=not a.no_maps)
-    cols = [k for k in ("coverage", "t0_um", "polish", "cold_K") if k in axes] + \
-           [k for k in axes if k not in ("coverage", "t0_um", "polish", "cold_K")]
+    cols = ["coverage", "t0_um", "polish"] + [k for k in axes if k not in ("coverage", "t0_um", "polish")]
     print(" ".join(f"{c:>12}" for c in cols + ["pv_center_um", "rms_center_um", "pv_full_um"]))
     for case, out in res:
         p = case.as_dict()

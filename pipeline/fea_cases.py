@@ -161,6 +161,9 @@ def run_fea_sweep(axes: dict, out_dir, *, scheduler: str | None = None, workers:
     """
     from pipeline.sweep import run_sweep
 
+    # the table always names the case: unswept core parameters appear as one-value axes
+    core = {k: [FEA_PARAMETERS[k][0]] for k in ("coverage", "t0_um", "polish")}
+    axes = {**core, **axes}
     cases = fea_grid(**axes)
     res = run_sweep(FEACaseRunner(with_maps), cases, out_dir, namespace=_namespace(),
                     workers=workers, scheduler=scheduler, progress=progress, description="FEA sweep")

@@ -114,7 +114,8 @@ def test_cli_sweep_writes_table_and_reuses_cases(tmp_path, capsys):
     rows = list(csv.DictReader((tmp_path / "sweep.csv").open()))
     assert len(rows) == 2
     for col in ("coverage", "t0_um", "polish", "pv_center_um", "rms_center_um", "pv_full_um"):
-        assert col in rows[0] or col == "coverage"
+        assert col in rows[0]
+    assert rows[0]["coverage"] == "all"
     assert float(rows[1]["pv_center_um"]) > float(rows[0]["pv_center_um"]) > 0
     assert main(args) == 0
     assert "0 computed, 2 reused" in capsys.readouterr().out
