@@ -27,9 +27,24 @@ def test_reference_data_is_the_packaged_copy():
 
 @pytest.fixture(scope="module")
 def rows(tmp_path_factory):
+    """Solve through the CLI, then reload through the API (every case reused from the cache)."""
+    import contextlib
+    import io
+
+    from pipeline.cli import main
     from pipeline.fea_cases import run_tables
 
-    return run_tables(tmp_path_factory.mktemp("tables"), progress=False)
+    out = tmp_path_factory.mktemp("tables")
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main(["tables", "--out", str(out), "--quiet"]) == 0
+    printed = buf.getvalue()
+    assert "surfaces" in printed and "paper" in printed and "(not calibrated: see README)" in printed
+    csv_rows = list(csv.DictReader((out / "tables.csv").open()))
+    assert len(csv_rows) == 15
+    result = run_tables(out, progress=False)
+    assert [f"{r.model_pv_um:.4f}" for r in result] == [c["model_pv_center_um"] for c in csv_rows]
+    return result
 
 
 def test_table1_within_5_percent(rows):
