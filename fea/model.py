@@ -256,20 +256,15 @@ class PreparedBlank:
         return FEAResult(self.coords_mm, disp, eps_sub, sag, info)
 
     def _offset_operator(self, couplings, free):
-        """v ↦ Σ (X R + Rᵀ X + Rᵀ Y R − Rᵀ Z − Zᵀ R) v on the free DOFs (non-local film terms)."""
+        """v ↦ Σ (non-local film coupling) v on the free DOFs, without forming the matrices."""
         if not couplings:
             return None
         n = self.ndof
-        parts = [(ops.R, *ops.coupling_parts(t)) for t, ops in couplings]
 
         def apply(v_free):
             v = np.zeros(n)
             v[free] = v_free
-            out = np.zeros(n)
-            for R, X, Y, Z in parts:
-                Rv = R @ v
-                out += X @ Rv + R.T @ (X @ v) + R.T @ (Y @ Rv) + R.T @ (Z @ v) + Z.T @ Rv
-            return out[free]
+            return sum(ops.apply_coupling(t, v) for t, ops in couplings)[free]
 
         return apply
 
