@@ -24,11 +24,13 @@ from .model import FEAResult, PreparedBlank, ThermalLoad
 __all__ = ["prepare", "solve", "mesh_spec_for"]
 
 
-def mesh_spec_for(coating: Coating, spec: MeshSpec | None = None) -> MeshSpec:
-    """The mesh spec to use for ``coating``: eighth model when the film is symmetric
-    about the mid-plane, quarter model otherwise (front and back polish differ)."""
+def mesh_spec_for(coating: Coating, spec: MeshSpec | None = None, blank: Blank | None = None) -> MeshSpec:
+    """The mesh spec to use: eighth model when the film and the blank are symmetric about
+    the mid-plane, quarter model otherwise (front and back polish differ, or the holes are
+    off the mid-plane)."""
     spec = spec or MeshSpec()
-    if not coating.is_z_symmetric and spec.symmetry == "eighth":
+    symmetric = coating.is_z_symmetric and (blank is None or blank.is_z_symmetric)
+    if not symmetric and spec.symmetry == "eighth":
         from dataclasses import replace
 
         spec = replace(spec, symmetry="quarter")
@@ -87,6 +89,6 @@ def solve(t0_um: float = 200.0, polish: float = 0.75, coverage: str = "all", col
     load = ThermalLoad(warm_K=warm_K, cold_K=cold_K)
     film = get_material(film)
     if prepared is None:
-        prepared = prepare(blank, mesh_spec_for(coating, mesh), substrate)
+        prepared = prepare(blank, mesh_spec_for(coating, mesh, blank), substrate)
     scale = STRESS_SCALE if stress_scale is None else stress_scale
     return prepared.solve(coating, film, load, stress_scale=scale, backend=backend)

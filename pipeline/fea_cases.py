@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fea.api import mesh_spec_for
 from fea.calibration import STRESS_SCALE, paper_cases
 from fea.coating import COVERAGES, Coating
 from fea.geometry import Blank
@@ -70,9 +71,7 @@ def _split(params: dict):
     coating = Coating(t0_um=float(p["t0_um"]), polish_front=float(p["polish"]),
                       polish_back=float(polish_back), coverage=str(p["coverage"]))
     sizes = {k: float(p[name]) for k, name in _MESH_FIELDS.items() if p[name] is not None}
-    spec = replace(MeshSpec(), **sizes)  # one replace: the pair is validated together
-    if not coating.is_z_symmetric or not blank.is_z_symmetric:
-        spec = replace(spec, symmetry="quarter")
+    spec = mesh_spec_for(coating, replace(MeshSpec(), **sizes), blank)  # one replace: sizes validated together
     for name in ("substrate", "film"):
         if p[name] not in MATERIALS:
             raise ValueError(f"{name}={p[name]!r} is unknown; valid values are {sorted(MATERIALS)}")

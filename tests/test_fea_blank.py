@@ -80,6 +80,12 @@ def test_asymmetric_polish_uses_a_quarter_model_and_tilts_nothing():
     assert r.sag.pv_um("center") != pytest.approx(sym.sag.pv_um("center"), rel=1e-3)
 
 
+def test_off_midplane_holes_use_a_quarter_model():
+    r = solve(200, 0.75, blank=Blank(hole_axis_z_mm=1.0), mesh=COARSE)
+    assert r.info["symmetry_planes"] == ["sym_x", "sym_y"]
+    assert r.sag.pv_um("center") > 0
+
+
 def test_eighth_model_refuses_asymmetric_coating(eighth):
     with pytest.raises(ValueError, match="polish_front=0.5 != polish_back=1.0"):
         eighth.solve(Coating(200, 0.5, 1.0))
