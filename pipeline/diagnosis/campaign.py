@@ -56,6 +56,8 @@ class CampaignConfig:
 
     n_cases: int = 200
     seed: int = 1
+    nominal_mesh: str = "default"
+    truth_mesh: str = "refined"
     workers: int = 2
     noise_um: float = 0.01
     noise_rel: float = 0.01
@@ -70,7 +72,7 @@ def _signed(rng, lo, hi):
 def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, out: Path,
               cfg: CampaignConfig) -> tuple[dict, dict]:
     """Write one synthetic case into ``out``; returns (manifest dict, injected truth)."""
-    sim = {"coverage": "all", "t0_um": 200.0, "polish": 0.75, "cold_K": 80.0, "mesh": "coarse"}
+    sim = {"coverage": "all", "t0_um": 200.0, "polish": 0.75, "cold_K": 80.0, "mesh": cfg.nominal_mesh}
     truth = {}
     if kind == "surface":
         scale, T = 1.0, SURFACE_T_K
@@ -216,11 +218,17 @@ def matched_truth_base(nominal: SagMap, fine: SagMap) -> SagMap:
     return fine.scaled(a_nom / a_fine)
 
 
+def campaign_maps(cfg: CampaignConfig, cache_dir=None) -> tuple[SagMap, SagMap]:
+    """(diagnosed nominal, truth base) FEA maps of 200 µm / 75 % at 80 K."""
+    nominal = fea_sag_map(200.0, 0.75, "all", 80.0, cfg.nominal_mesh, cache_dir=cache_dir)
+    base = fea_sag_map(200.0, 0.75, "all", 80.0, cfg.truth_mesh, cache_dir=cache_dir)
+    return nominal, base
+
+
 def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None) -> dict:
     """Run ``cfg.n_cases`` cases (types cycled) in ``cfg.workers`` processes."""
     t0 = time.perf_counter()
-    nominal = fea_sag_map(200.0, 0.75, "all", 80.0, "coarse", cache_dir=cache_dir)
-    base = matched_truth_base(nominal, fea_sag_map(200.0, 0.75, "all", 80.0, "default", cache_dir=cache_dir))
+    nominal, base = campaign_maps(cfg, cache_dir)
     tasks = [(i, cfg.case_types[i % len(cfg.case_types)], cfg, nominal, base) for i in range(cfg.n_cases)]
     t_maps = time.perf_counter() - t0
     if cfg.workers > 1:

@@ -7,7 +7,7 @@ A manifest names the nominal simulation and the measurements it is compared with
     t0_um = 200
     polish = 0.75
     cold_K = 80
-    mesh = "coarse"           # optional: coarse | default (FEA mesh of the nominal model)
+    mesh = "default"          # optional: coarse | default | refined (FEA mesh of the nominal model)
     sag_file = "nominal.npz"  # optional: use this map (at cold_K) instead of solving the FEA
 
     [[measurement]]
@@ -44,7 +44,7 @@ __all__ = ["Simulation", "Measurement", "Manifest", "SurfaceData", "ProfileData"
            "load_manifest", "parse_manifest", "load_data"]
 
 _COVERAGES = ("all", "holes", "surfaces")
-_MESHES = ("coarse", "default")
+_MESHES = ("coarse", "default", "refined")
 _KINDS = ("surface", "line_profile")
 _PIXEL_SCALES = (25, 100, 250)
 
@@ -58,7 +58,7 @@ class Simulation:
     polish: float = 0.75
     cold_K: float = 80.0
     warm_K: float = 293.0
-    mesh: str = "coarse"
+    mesh: str = "default"
     sag_file: Path | None = None
 
     def __post_init__(self) -> None:

@@ -19,7 +19,13 @@ from optics.sagmap import SagMap
 
 from .manifest import Simulation
 
-__all__ = ["mismatch_strain", "thermal_factor", "nominal_sag_map", "fea_sag_map"]
+__all__ = ["mismatch_strain", "thermal_factor", "nominal_sag_map", "fea_sag_map", "MESH_SPECS"]
+
+#: Named FEA meshes (element size near surfaces / in the bulk, mm); see
+#: ``benchmarks/results_mesh_convergence.md``: P/V_center of "default" is 1.2-1.6 %,
+#: of "refined" 0.4-1.0 % below the Richardson-extrapolated value.
+MESH_SPECS = {"coarse": dict(size_mm=5.0, size_bulk_mm=10.0), "default": dict(size_mm=1.4, size_bulk_mm=2.8),
+              "refined": dict(size_mm=1.0, size_bulk_mm=2.0)}
 
 
 def mismatch_strain(temperature_K: float, warm_K: float = 293.0) -> float:
@@ -42,8 +48,11 @@ def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh:
     ----------
     t0_um, polish, coverage, cold_K, warm_K
         The FEA case (see :func:`fea.api.solve`).
-    mesh : {"coarse", "default"}
-        :meth:`fea.mesh.MeshSpec.coarse` (~2 s) or the converged default (~20 s).
+    mesh : {"coarse", "default", "refined"}
+        :meth:`fea.mesh.MeshSpec.coarse` (~2 s), the default mesh 1.4/2.8 mm (~20-60 s), or
+        the refined 1.0/2.0 mm level of the mesh-convergence study (~2-3 min, 480 k DOFs;
+        used for the *truths* of synthetic data so that they come from a different
+        discretisation than the default-mesh nominal they are diagnosed against).
     cache_dir : path, optional
         Directory for ``fea-<hash>.npz``; None disables the disk cache.
     """
@@ -62,7 +71,9 @@ def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh:
     from fea.api import prepare, solve
     from fea.mesh import MeshSpec
 
-    spec = MeshSpec.coarse() if mesh == "coarse" else MeshSpec()
+    if mesh not in MESH_SPECS:
+        raise ValueError(f"mesh={mesh!r} is unknown; valid: {list(MESH_SPECS)}")
+    spec = MeshSpec(**MESH_SPECS[mesh])
     from fea.api import mesh_spec_for
     from fea.coating import Coating
 

@@ -99,6 +99,7 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
                      + (f"; degenerate with {', '.join(b.degenerate_with)}" if b.degenerate_with else "") + "</p>")
     rows = [{"effect": f.effect, "ΔBIC": _fmt(f.delta_bic), "shrink": _fmt(f.shrink_fraction),
              "variance explained": _fmt(f.variance_explained),
+             "excess over noise explained": _fmt(f.excess_explained),
              "held-out shrink": _fmt(f.heldout_shrink_fraction) if f.heldout_shrink_fraction is not None else "—",
              "overfit": f.overfit, "degenerate with": ", ".join(f.degenerate_with),
              "parameters": ", ".join(f"{k}={v:.4g}±{f.uncertainties.get(k, float('nan')):.2g}" for k, v in f.parameters.items())}
