@@ -64,10 +64,41 @@ def _cmd_calibrate(a) -> int:
     return calibrate(["--out", str(a.out)] if a.out else [])
 
 
+def _study_config(config: str | None, preset: str | None):
+    """The config of ``run``/``config --check``: a file, a shipped preset, or None (default)."""
+    from pipeline.config import load_study_config, preset_path
+
+    if config and preset:
+        raise ValueError(f"give either a config file ({config}) or --preset {preset}, not both")
+    if preset:
+        return load_study_config(preset_path(preset))
+    return load_study_config(config) if config else None
+
+
 def _cmd_run(a) -> int:
     from pipeline.study import run_study
 
-    run_study(a.out, progress=not a.quiet, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm)
+    config = _study_config(a.config, a.preset)  # validated before anything is written
+    run_study(a.out, config, progress=not a.quiet, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm)
+    return 0
+
+
+def _cmd_config(a) -> int:
+    from pipeline.config import example_config_text, list_presets, preset_path
+    from pipeline.study import default_study
+
+    if a.example:
+        print(example_config_text(), end="")
+    elif a.list:
+        for name in list_presets():
+            print(f"{name:28} {preset_path(name)}")
+    elif a.show:
+        print(preset_path(a.show).read_text(encoding="utf-8"), end="")
+    else:
+        config = _study_config(a.check, a.preset) or default_study()
+        print(f"valid: {config.summary()}")
+        for c in config.cases():
+            print(f"  FEA  {c.label}")
     return 0
 
 
@@ -77,12 +108,26 @@ def build_parser() -> argparse.ArgumentParser:
         "spectral line profiles (SINFONI/SPIFFI)."))
     sub = p.add_subparsers(dest="command", required=True)
 
-    q = sub.add_parser("run", help="the default study: paper tables, sag maps, plots and report")
+    q = sub.add_parser("run", help="a study (default: the paper's): FEA cases, sag maps, line profiles, "
+                       "plots and report")
+    q.add_argument("config", nargs="?", default=None, metavar="CONFIG.toml",
+                   help="study config (see 'cryograting config --example'); default: the paper's study")
+    q.add_argument("--preset", default=None, metavar="NAME",
+                   help="a shipped config instead of a file (list: 'cryograting config --list')")
     q.add_argument("--out", default="results", help="output directory (default: results)")
     q.add_argument("--mesh-size-mm", type=float, default=None, help="element size near walls (mm)")
     q.add_argument("--mesh-bulk-mm", type=float, default=None, help="element size in the bulk (mm)")
     q.add_argument("--quiet", action="store_true", help="no progress bars")
     q.set_defaults(func=_cmd_run)
+
+    q = sub.add_parser("config", help="study configs: print the commented example, list, show or check")
+    g = q.add_mutually_exclusive_group(required=True)
+    g.add_argument("--example", action="store_true", help="print a commented example config")
+    g.add_argument("--list", action="store_true", help="list the shipped configs (presets)")
+    g.add_argument("--show", metavar="NAME", help="print a shipped config")
+    g.add_argument("--check", metavar="CONFIG.toml", help="validate a config file and list its FEA cases")
+    g.add_argument("--preset", metavar="NAME", help="validate a shipped config and list its FEA cases")
+    q.set_defaults(func=_cmd_config)
 
     q = sub.add_parser("tables", help="the paper's 15 P/V cases, model vs paper")
     q.add_argument("--out", default="results/tables", help="output directory")

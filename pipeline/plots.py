@@ -92,8 +92,9 @@ def plot_psfs(psfs: list, titles: list[str], path: Path, window_um: float = 80.0
     return save(fig, path)
 
 
-def plot_multigrating(profiles: list, path: Path) -> Path:
-    """One wavelength on several gratings: [(label, Profile), ...]."""
+def plot_multigrating(profiles: list, path: Path,
+                      title: str = "1.25 µm line on the J, H and K gratings (250 mas)") -> Path:
+    """Several profiles in one panel, e.g. one wavelength on several gratings: [(label, Profile), ...]."""
     fig, ax = plt.subplots(figsize=(5.5, 3.6))
     for label, prof in profiles:
         ax.plot(prof.offset_um, prof.intensity, label=label, lw=1.4)
@@ -101,6 +102,6 @@ def plot_multigrating(profiles: list, path: Path) -> Path:
     ax.set_xlabel("detector offset [µm]")
     ax.set_ylabel("intensity [1/µm]")
     ax.legend(fontsize=8)
-    ax.set_title("1.25 µm line on the J, H and K gratings (250 mas)", fontsize=10)
+    ax.set_title(title, fontsize=10)
     fig.tight_layout()
     return save(fig, path)

@@ -1,61 +1,167 @@
-"""The default end-to-end study: the paper's FEA tables and the line profiles they cause.
+"""End-to-end studies: FEA cases → sag maps → line profiles → tables, figures, report.
 
-``run_study(out_dir)`` (CLI: ``cryograting run``) writes into ``out_dir``:
+``run_study(out_dir, config=None)`` (CLI: ``cryograting run [CONFIG.toml]``) runs a
+:class:`pipeline.config.StudyConfig`; without one it runs :func:`default_study`, the
+paper's study: the 15 FEA cases of Tables 1 and 2; detected line profiles of J, H, K at
+band centre and edges in 250/100/25 mas for a perfect grating and the 200 µm / 75 %
+deformation (J also 200 µm / 50 %); the 1.25 µm line on the J, H and K gratings in
+orders −2/−3/−4 (J with 200/50, H and K with 200/75, as the paper). It writes into
+``out_dir``:
 
-* ``fea/tables.csv``, ``fea/sweep.nc`` — the 15 paper cases, model vs paper, sag maps;
-* ``profiles.csv`` and ``profiles.nc`` — detected line profiles and their metrics for
-  J, H, K at band centre and edges in 250/100/25 mas, for a perfect grating and for the
-  200 µm / 75 % deformation (J also 200 µm / 50 %), and the 1.25 µm line on the J, H
-  and K gratings in orders −2/−3/−4 (J with 200/50, H and K with 200/75, as the paper);
-* PNG figures and ``report.html`` that puts them together.
+* ``fea/sweep.csv``, ``fea/sweep.nc`` — every FEA case: parameters, P/V, RMS, sag maps
+  (cached under ``fea/cases``: a re-run reuses every finished case);
+* ``fea/tables.csv`` — model vs paper, for the cases that are the paper's;
+* ``profiles.csv`` and ``profiles.nc`` — detected line profiles and their metrics;
+* the PNG figures of the config and ``report.html`` that puts them together.
 """
 
 from __future__ import annotations
 
 import csv
 import html
+import os
 import time
+import uuid
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["run_study", "STUDY_PROFILES"]
+from pipeline.config import (
+    CaseSelector,
+    CompareFigure,
+    FEAGroup,
+    OutputOptions,
+    ProfileFigure,
+    ProfileSpec,
+    PsfFigure,
+    SagMapFigure,
+    StudyConfig,
+    load_study_config,
+)
 
-#: (grating, wavelengths µm) of the default study: band edges and centre
-STUDY_BANDS = {"J": (1.10, 1.25, 1.40), "H": (1.45, 1.65, 1.85), "K": (1.95, 2.20, 2.45)}
-PIXEL_SCALES = (250, 100, 25)
-NOMINAL = ("all", 200.0, 0.75)
-J_STRONG = ("all", 200.0, 0.50)
-#: the 1.25 µm line on three gratings (paper §5.4): grating, order, deformation
-STUDY_PROFILES = [("J", -2, J_STRONG), ("H", -3, NOMINAL), ("K", -4, NOMINAL)]
+__all__ = ["default_study", "run_study"]
+
+_SCALES_MAS = (250, 100, 25)
 
 
-def _profiles(maps, progress: bool):
+def default_study() -> StudyConfig:
+    """The paper's study (``cryograting run`` without a config; ``paper_default.toml``)."""
+    def case(coverage, t0_um, polish):
+        return CaseSelector({"coverage": coverage, "t0_um": t0_um, "polish": polish})
+
+    nominal, strong = case("all", 200, 0.75), case("all", 200, 0.5)
+    thicknesses = [200, 150, 100]
+    fea = (FEAGroup("table1", {"coverage": "all", "t0_um": thicknesses, "polish": [1.0, 0.75, 0.5]}),
+           FEAGroup("table2_holes", {"coverage": "holes", "t0_um": thicknesses, "polish": 1.0}),
+           FEAGroup("table2_surfaces", {"coverage": "surfaces", "t0_um": thicknesses, "polish": 1.0}))
+    bands = tuple(ProfileSpec("bands", g, "blaze", "band", _SCALES_MAS, deformation=d)
+                  for g, d in (("J", ("perfect", nominal, strong)), ("H", ("perfect", nominal)),
+                               ("K", ("perfect", nominal))))
+    multi = tuple(ProfileSpec("multigrating", g, order, 1.25, _SCALES_MAS, deformation=(d,))
+                  for g, order, d in (("J", -2, strong), ("H", -3, nominal), ("K", -4, nominal)))
+    figures = (
+        SagMapFigure("sag_table1.png", (case("all", 200, 1.0), nominal, strong),
+                     ("200 µm, 100 %", "200 µm, 75 %", "200 µm, 50 %"), "Sag maps"),
+        SagMapFigure("sag_table2.png", (case("holes", 200, 1.0), case("surfaces", 200, 1.0)),
+                     ("NiP only in holes, 200 µm", "NiP only on surfaces, 200 µm"), "Sag maps"),
+        PsfFigure("psf_J_K.png", nominal, (("J", 1.25), ("K", 2.20)), ("J 1.25 µm, 200/75", "K 2.20 µm, 200/75"),
+                  "Point-spread functions (200 µm / 75 %)"),
+        *(ProfileFigure(f"profiles_{g}.png", "bands", g, "Detected line profiles") for g in "JHK"),
+        CompareFigure("multigrating_1p25um.png", "multigrating", 250,
+                      "1.25 µm line on the J, H and K gratings (250 mas)", "1.25 µm on the J, H and K gratings"),
+    )
+    return StudyConfig(
+        "Cryogenic deformation of the SPIFFI gratings — default study",
+        "FEA of the NiP-plated Al 6061 blank cooled 293 K → 80 K (scikit-fem, curved quadratic tets, "
+        "bonded thin-film NiP with offset), one global film-stress calibration (see README); "
+        "Fourier-optics line profiles (partially coherent slit illumination, collimator WFE, 18 µm pixel).",
+        fea, bands + multi, figures, OutputOptions())
+
+
+def _prepare_out(out: Path) -> None:
+    """Create ``out`` and prove it writable before anything is computed or written."""
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"output directory {str(out)!r} exists and is not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / f".write-probe.{os.getpid()}.{uuid.uuid4().hex[:8]}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise PermissionError(f"output directory {str(out)!r} is not a writable directory: "
+                              f"{exc.strerror or exc}") from None
+
+
+def _run_fea(config: StudyConfig, out: Path, progress: bool):
+    """Solve (or reuse) every FEA case; write the case and paper tables; return maps by label."""
+    from fea.calibration import paper_cases
+    from optics.sagmap import SagMap
+    from pipeline.fea_cases import (
+        SAG_GRID_X_MM,
+        SAG_GRID_Y_MM,
+        FEACaseRunner,
+        TableRow,
+        _namespace,
+        _write_rows,
+    )
+    from pipeline.sweep import Case, run_sweep
+
+    cases = config.cases()
+    res = run_sweep(FEACaseRunner(), [Case(c.params) for c in cases], out, namespace=_namespace(), workers=1,
+                    progress=progress, description="FEA cases")
+    res.write_csv(out / "sweep.csv")
+    res.write_netcdf(out / "sweep.nc")
+    outputs = {c.label: o for c, (_, o) in zip(cases, res)}
+    maps = {c.label: SagMap(SAG_GRID_X_MM, SAG_GRID_Y_MM,
+                            np.asarray(o["sag_um"][1] if isinstance(o["sag_um"], tuple) else o["sag_um"], float),
+                            c.label)
+            for c, o in ((c, outputs[c.label]) for c in cases)}
+    plain = [c for c in cases if c.is_paper_setup]
+    rows, in_paper = [], set()
+    for pc in paper_cases():
+        match = next((c for c in plain if (c.full["coverage"], c.full["t0_um"], c.full["polish"]) ==
+                      (pc.coverage, pc.t0_um, pc.polish)), None)
+        if match is not None:
+            o = outputs[match.label]
+            in_paper.add(match.label)
+            rows.append(TableRow(pc.table, pc.coverage, pc.t0_um, pc.polish, pc.pv_center_um,
+                                 float(o["pv_center_um"]), pc.direction, float(o["quilt_direction_um"]),
+                                 pc.calibrate))
+    if rows:
+        _write_rows(rows, out / "tables.csv")
+    return cases, outputs, maps, rows, in_paper
+
+
+def format_cases(cases, outputs) -> str:
+    """The FEA cases of a study as a text table (P/V and RMS in µm)."""
+    w = max(12, *(len(c.label) for c in cases))
+    lines = [f"{'case':{w}} {'P/V ctr':>8} {'RMS ctr':>8} {'P/V full':>8} {'quilt':>8}", "-" * (w + 36)]
+    for c in cases:
+        o = outputs[c.label]
+        lines.append(f"{c.label:{w}} {o['pv_center_um']:8.3f} {o['rms_center_um']:8.3f} {o['pv_full_um']:8.3f} "
+                     f"{o['quilt_direction_um']:+8.3f}")
+    return "\n".join(lines) + "\n(µm; quilt = sag over the central hole crossing − over the rib crossing)"
+
+
+def _profiles(config: StudyConfig, maps: dict, progress: bool) -> list:
     from optics.lineprofile import line_profile
     from optics.metrics import profile_metrics
 
-    jobs = []
-    for g, wls in STUDY_BANDS.items():
-        defs = [("perfect", None), ("200/75", NOMINAL)] + ([("200/50", J_STRONG)] if g == "J" else [])
-        for wl in wls:
-            for mas in PIXEL_SCALES:
-                for label, case in defs:
-                    jobs.append(dict(grating=g, order=None, wavelength_um=wl, pixel_scale_mas=mas,
-                                     deformation=label, case=case))
-    for g, order, case in STUDY_PROFILES:
-        for mas in PIXEL_SCALES:
-            jobs.append(dict(grating=g, order=order, wavelength_um=1.25, pixel_scale_mas=mas,
-                             deformation=f"{case[1]:g}/{100 * case[2]:g}", case=case, multigrating=True))
     out = []
     t0 = time.perf_counter()
-    for j in jobs:
-        sag = None if j["case"] is None else maps[j["case"]]
-        r = line_profile(j["grating"], j["wavelength_um"], j["pixel_scale_mas"], sag, order=j["order"])
-        m = profile_metrics(r.detected)
-        out.append((j, r.detected, m))
+    for job in config.profile_jobs():
+        sag = None if job.case is None else maps[job.case.label]
+        r = line_profile(job.grating, job.wavelength_um, job.pixel_scale_mas, sag, order=job.order,
+                         pupil_shift_mm=job.pupil_shift_mm)
+        out.append((job, r.detected, profile_metrics(r.detected)))
     if progress:
         print(f"line profiles: {len(out)} in {time.perf_counter() - t0:.1f} s")
     return out
+
+
+_KEYS = ["grating", "order", "wavelength_um", "pixel_scale_mas", "deformation"]
+_MKEYS = ["fwhm_um", "fwhm_nm", "resolving_power", "resolving_power_2px", "centroid_um",
+          "asymmetry", "outside_slit_fraction", "shoulder_asymmetry"]
 
 
 def _write_profiles(results, out: Path) -> None:
@@ -63,105 +169,174 @@ def _write_profiles(results, out: Path) -> None:
 
     from pipeline.io_common import atomic_path, atomic_write
 
-    keys = ["grating", "order", "wavelength_um", "pixel_scale_mas", "deformation"]
-    mkeys = ["fwhm_um", "fwhm_nm", "resolving_power", "resolving_power_2px", "centroid_um",
-             "asymmetry", "outside_slit_fraction", "shoulder_asymmetry"]
+    if not results:
+        return
     with atomic_write(out / "profiles.csv") as fh:
         w = csv.writer(fh, lineterminator="\n")
-        w.writerow(keys + mkeys + ["n_peaks", "peak_positions_um"])
+        w.writerow(_KEYS + _MKEYS + ["n_peaks", "peak_positions_um", "set", "pupil_shift_x_mm", "pupil_shift_y_mm"])
         for j, prof, m in results:
             peaks = m["peaks"].get("offset_um", [])
-            w.writerow([j["grating"], j["order"] if j["order"] is not None else "", j["wavelength_um"],
-                        j["pixel_scale_mas"], j["deformation"]] +
-                       [f"{m.get(k, np.nan):.5g}" for k in mkeys] +
-                       [len(peaks), " ".join(f"{p:.1f}" for p in peaks)])
+            w.writerow([j.grating, j.order if j.order is not None else "", j.wavelength_um,
+                        j.pixel_scale_mas, j.deformation] +
+                       [f"{m.get(k, np.nan):.5g}" for k in _MKEYS] +
+                       [len(peaks), " ".join(f"{p:.1f}" for p in peaks), j.set, *j.pupil_shift_mm])
     grid = np.arange(-150.0, 150.0 + 1e-9, 0.5)
     I = np.stack([np.interp(grid, p.offset_um, p.intensity, left=0.0, right=0.0) for _, p, _ in results])
+    col = {"grating": lambda j: j.grating, "order": lambda j: str(j.order),
+           "wavelength_um": lambda j: j.wavelength_um, "pixel_scale_mas": lambda j: j.pixel_scale_mas,
+           "deformation": lambda j: j.deformation, "set": lambda j: j.set,
+           "pupil_shift_x_mm": lambda j: j.pupil_shift_mm[0], "pupil_shift_y_mm": lambda j: j.pupil_shift_mm[1]}
     ds = xr.Dataset(
         {"intensity": (("profile", "offset_um"), I, {"units": "1/µm", "long_name": "detected line profile"})},
         coords={"offset_um": ("offset_um", grid, {"units": "µm"}),
-                **{k: ("profile", [str(j[k]) if k in ("order", "deformation", "grating") else j[k]
-                                   for j, _, _ in results]) for k in keys},
-                **{k: ("profile", [float(m.get(k, np.nan)) for _, _, m in results]) for k in mkeys}},
-        attrs={"title": "cryograting default study: detected line profiles (unit area)"})
+                **{k: ("profile", [f(j) for j, _, _ in results]) for k, f in col.items()},
+                **{k: ("profile", [float(m.get(k, np.nan)) for _, _, m in results]) for k in _MKEYS}},
+        attrs={"title": "cryograting study: detected line profiles (unit area)"})
     with atomic_path(out / "profiles.nc") as tmp:
         ds.to_netcdf(tmp)
 
 
-def run_study(out_dir, *, progress: bool = True, mesh_size_mm: float | None = None,
-              mesh_bulk_mm: float | None = None) -> dict:
-    """Run the default study and write tables, profiles, figures and ``report.html``.
+def _curve_label(job) -> str:
+    label = job.deformation
+    if job.order is not None:
+        label += f", order {job.order}"
+    if any(job.pupil_shift_mm):
+        label += f", shift ({job.pupil_shift_mm[0]:g}, {job.pupil_shift_mm[1]:g}) mm"
+    return label
 
-    Returns a dict with the table rows, the profile results and the figure paths.
-    """
+
+def _figures(config: StudyConfig, maps: dict, results: list, out: Path) -> dict:
+    """Draw the config's figures; returns {file: (heading, path)} in config order."""
+    from optics.grating import get_grating
     from optics.lineprofile import point_psf
-    from pipeline.fea_cases import format_table, run_tables
-    from pipeline.plots import plot_line_profiles, plot_multigrating, plot_psfs, plot_sag_maps
+    from pipeline.plots import (
+        plot_line_profiles,
+        plot_multigrating,
+        plot_psfs,
+        plot_sag_maps,
+    )
 
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise NotADirectoryError(f"--out {out} exists and is not a directory")
-    out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    rows, maps = run_tables(out / "fea", progress=progress, return_maps=True,
-                            mesh_size_mm=mesh_size_mm, mesh_bulk_mm=mesh_bulk_mm)
-    table = format_table(rows)
-    print(table, flush=True)
-    t_fea = time.perf_counter() - t0
-    results = _profiles(maps, progress)
-    _write_profiles(results, out)
     figs = {}
-    figs["sag_table1"] = plot_sag_maps([maps[("all", 200.0, p)] for p in (1.0, 0.75, 0.5)],
-                                       ["200 µm, 100 %", "200 µm, 75 %", "200 µm, 50 %"], out / "sag_table1.png")
-    figs["sag_table2"] = plot_sag_maps([maps[("holes", 200.0, 1.0)], maps[("surfaces", 200.0, 1.0)]],
-                                       ["NiP only in holes, 200 µm", "NiP only on surfaces, 200 µm"],
-                                       out / "sag_table2.png")
-    psfs = [point_psf(g, wl, maps[NOMINAL]) for g, wl in (("J", 1.25), ("K", 2.20))]
-    figs["psf"] = plot_psfs(psfs, ["J 1.25 µm, 200/75", "K 2.20 µm, 200/75"], out / "psf_J_K.png")
-    for g in STUDY_BANDS:
-        panels = {}
-        for j, prof, _ in results:
-            if j["grating"] == g and not j.get("multigrating"):
-                panels.setdefault((f"{j['wavelength_um']:.2f} µm", f"{j['pixel_scale_mas']} mas"), []).append(
-                    (j["deformation"], prof))
-        figs[f"profiles_{g}"] = plot_line_profiles(panels, out / f"profiles_{g}.png")
-    multi = [(f"{j['grating']} order {j['order']} ({j['deformation']})", prof)
-             for j, prof, _ in results if j.get("multigrating") and j["pixel_scale_mas"] == 250]
-    figs["multigrating"] = plot_multigrating(multi, out / "multigrating_1p25um.png")
-    _report(out, table, results, figs, t_fea, time.perf_counter() - t0)
-    print(f"\nwritten: {out}/report.html (+ fea/tables.csv, profiles.csv, profiles.nc, PNG figures)")
-    return {"rows": rows, "profiles": results, "figures": figs}
+    for fig in config.figures:
+        path = out / fig.file
+        if isinstance(fig, SagMapFigure):
+            cases = [c for sel in fig.cases for c in config.select(sel)]
+            plot_sag_maps([maps[c.label] for c in cases], list(fig.titles) or [c.label for c in cases], path)
+        elif isinstance(fig, PsfFigure):
+            (c,) = config.select(fig.case)
+            psfs = [point_psf(g, wl, maps[c.label]) for g, wl in fig.lines]
+            plot_psfs(psfs, list(fig.titles) or [f"{g} {wl:.2f} µm, {c.label}" for g, wl in fig.lines], path)
+        elif isinstance(fig, ProfileFigure):
+            panels = {}
+            for j, prof, _ in results:
+                if j.set == fig.set and (not fig.grating or j.grating == fig.grating):
+                    row = f"{j.wavelength_um:.2f} µm" + ("" if fig.grating else f" ({j.grating})")
+                    panels.setdefault((row, f"{j.pixel_scale_mas} mas"), []).append((_curve_label(j), prof))
+            plot_line_profiles(panels, path)
+        elif isinstance(fig, CompareFigure):
+            sel = [(j, prof) for j, prof, _ in results if j.set == fig.set and j.pixel_scale_mas == fig.pixel_scale_mas]
+            several_wl = len({j.wavelength_um for j, _ in sel}) > 1
+            curves = [(f"{j.grating}{f' {j.wavelength_um:.2f} µm' if several_wl else ''} order "
+                       f"{j.order if j.order is not None else get_grating(j.grating).order} ({j.deformation})"
+                       + (f", shift ({j.pupil_shift_mm[0]:g}, {j.pupil_shift_mm[1]:g}) mm"
+                          if any(j.pupil_shift_mm) else ""), prof) for j, prof in sel]
+            plot_multigrating(curves, path, title=fig.title or f"set {fig.set} ({fig.pixel_scale_mas} mas)")
+        figs[fig.file] = (fig.heading, path)
+    return figs
 
 
-def _report(out: Path, table: str, results, figs: dict, t_fea: float, t_all: float) -> None:
+def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progress: bool = True,
+              mesh_size_mm: float | None = None, mesh_bulk_mm: float | None = None) -> dict:
+    """Run a study and write tables, profiles, figures and ``report.html`` into ``out_dir``.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Output directory (created; finished FEA cases under ``fea/cases`` are reused).
+    config : StudyConfig, str or Path, optional
+        The study, or a TOML file to load; :func:`default_study` when omitted.
+    mesh_size_mm, mesh_bulk_mm : float, optional
+        Element sizes (mm) that replace the config's for every FEA case.
+
+    Returns
+    -------
+    dict
+        ``config``, ``cases``, ``outputs`` (per case label: P/V, RMS, ...), ``rows``
+        (model vs paper), ``profiles`` (job, profile, metrics) and ``figures``.
+
+    Raises
+    ------
+    ConfigError, FileNotFoundError
+        An invalid or missing config (checked before anything is written).
+    NotADirectoryError, PermissionError
+        ``out_dir`` is a file or cannot be written.
+    """
+    from pipeline.fea_cases import format_table
+
+    if config is None:
+        config = default_study()
+    elif not isinstance(config, StudyConfig):
+        config = load_study_config(config)
+    config = config.with_mesh(mesh_size_mm, mesh_bulk_mm)
+    out = Path(out_dir)
+    _prepare_out(out)
+    t0 = time.perf_counter()
+    cases, outputs, maps, rows, in_paper = _run_fea(config, out / "fea", progress)
+    table = format_table(rows) if rows else ""
+    others = [c for c in cases if c.label not in in_paper]
+    text = "\n\n".join(t for t in (table, format_cases(others, outputs) if others else "") if t)
+    print(text, flush=True)
+    t_fea = time.perf_counter() - t0
+    results = _profiles(config, maps, progress)
+    _write_profiles(results, out)
+    figs = _figures(config, maps, results, out) if config.output.figures else {}
+    if config.output.report:
+        _report(out, config, table, format_cases(cases, outputs), results, figs, t_fea, time.perf_counter() - t0)
+    written = [p for p in ("report.html", "fea/tables.csv", "fea/sweep.csv", "profiles.csv") if (out / p).exists()]
+    print(f"\nwritten in {out}/: {', '.join(written)}, fea/sweep.nc"
+          f"{', profiles.nc' if results else ''}{f', {len(figs)} PNG figures' if figs else ''}")
+    return {"config": config, "cases": cases, "outputs": outputs, "rows": rows, "profiles": results,
+            "figures": {k: p for k, (_, p) in figs.items()}}
+
+
+def _report(out: Path, config: StudyConfig, table: str, cases_table: str, results, figs: dict,
+            t_fea: float, t_all: float) -> None:
     import base64
 
+    from optics.grating import get_grating
     from pipeline.io_common import atomic_write
 
     def img(p):
         return f'<img src="data:image/png;base64,{base64.b64encode(Path(p).read_bytes()).decode()}" style="max-width:100%">'
 
+    # metrics at each grating's band centre in its blaze order (all profiles if there are none)
+    shown = [r for r in results if r[0].order is None and r[0].wavelength_um == get_grating(r[0].grating).centre_um]
     rrows = "".join(
-        f"<tr><td>{j['grating']}</td><td>{j['wavelength_um']:.2f}</td><td>{j['pixel_scale_mas']}</td>"
-        f"<td>{html.escape(j['deformation'])}</td><td>{m['fwhm_um']:.1f}</td>"
+        f"<tr><td>{j.grating}</td><td>{j.wavelength_um:.2f}</td><td>{j.pixel_scale_mas}</td>"
+        f"<td>{html.escape(j.deformation)}</td><td>{m['fwhm_um']:.1f}</td>"
         f"<td>{m.get('resolving_power', float('nan')):.0f}</td><td>{m['asymmetry']:+.3f}</td>"
         f"<td>{m['outside_slit_fraction']:.3f}</td></tr>"
-        for j, _, m in results if j["wavelength_um"] in (1.25, 1.65, 2.20) and not j.get("multigrating"))
-    body = f"""<!doctype html><html><head><meta charset="utf-8"><title>cryograting study</title>
+        for j, _, m in (shown or results))
+    sections, last = [], None
+    for heading, path in figs.values():
+        if heading != last:
+            sections.append(f"<h2>{html.escape(heading)}</h2>")
+            last = heading
+        sections.append(img(path))
+    paper = (f"<h2>P/V<sub>center</sub>: model vs paper (Tables 1 and 2)</h2><pre>{html.escape(table)}</pre>"
+             if table else "")
+    metrics = ("<h2>Line-profile metrics" + (" (band centres)" if shown else "") + "</h2><table><tr><th>grating</th>"
+               "<th>λ µm</th><th>mas</th><th>deformation</th><th>FWHM µm</th><th>R (FWHM)</th><th>asymmetry</th>"
+               f"<th>outside slit</th></tr>{rrows}</table>" if results else "")
+    body = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(config.title)}</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:auto}} td,th{{padding:2px 8px;text-align:right}}
 pre{{background:#f4f4f4;padding:8px}}</style></head><body>
-<h1>Cryogenic deformation of the SPIFFI gratings — default study</h1>
-<p>FEA of the NiP-plated Al 6061 blank cooled 293 K → 80 K (scikit-fem, curved quadratic tets, bonded
-thin-film NiP with offset), one global film-stress calibration (see README); Fourier-optics line
-profiles (partially coherent slit illumination, collimator WFE, 18 µm pixel). FEA {t_fea:.0f} s,
-total {t_all:.0f} s.</p>
-<h2>P/V<sub>center</sub>: model vs paper (Tables 1 and 2)</h2><pre>{html.escape(table)}</pre>
-<h2>Sag maps</h2>{img(figs['sag_table1'])}{img(figs['sag_table2'])}
-<h2>Point-spread functions (200 µm / 75 %)</h2>{img(figs['psf'])}
-<h2>Detected line profiles</h2>{img(figs['profiles_J'])}{img(figs['profiles_H'])}{img(figs['profiles_K'])}
-<h2>1.25 µm on the J, H and K gratings</h2>{img(figs['multigrating'])}
-<h2>Line-profile metrics (band centres)</h2><table><tr><th>grating</th><th>λ µm</th><th>mas</th>
-<th>deformation</th><th>FWHM µm</th><th>R (FWHM)</th><th>asymmetry</th><th>outside slit</th></tr>{rrows}</table>
+<h1>{html.escape(config.title)}</h1>
+<p>{html.escape(config.description)} FEA {t_fea:.0f} s, total {t_all:.0f} s.</p>
+{paper}<h2>FEA cases: P/V and RMS over the central 82 × 72 mm and the whole face</h2>
+<pre>{html.escape(cases_table)}</pre>
+{''.join(sections)}
+{metrics}
 </body></html>"""
     with atomic_write(out / "report.html") as fh:
         fh.write(body)
