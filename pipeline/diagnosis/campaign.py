@@ -2,14 +2,16 @@
 
 Each case draws one effect (library or out-of-library) at a random magnitude, makes
 synthetic measurements from a truth that is a different model from the one diagnosed
-(default-mesh FEA map + random shape discrepancy, converged LSF sampling, noise,
+(refined-mesh FEA map + random shape discrepancy, converged LSF sampling, noise,
 piston/tilt or shift/flux/background, dropouts, sparse sampling), withholds the effect
-from the model (coarse-mesh nominal) and runs :func:`~pipeline.diagnosis.diagnose`.
+from the model (default-mesh nominal) and runs :func:`~pipeline.diagnosis.diagnose`.
 
 Scoring: a library case is *correct* when the verdict is ``explained`` and the top
-finding is the injected effect alone or lists it in ``degenerate_with``; its
-parameters are *recovered* when every parameter of the injected effect's own fit is
-within 20 % (``|fit - true| / max(|true|, floor)``, floors in :mod:`.effects`).
+finding is the injected effect alone or lists it in ``degenerate_with`` (the engine
+says the data cannot tell the two apart, as the issue asks it to); its parameters
+are *recovered* when every parameter of the injected effect's own fit is within 20 %
+(``|fit - true| / max(|true|, floor)``, floors in :mod:`.effects`), comparing
+magnitudes for parameters the engine reports as ``sign_degenerate``.
 Out-of-library cases should end ``unexplained`` (or ``no_gap``).
 
 Cases are independent and seeded by ``(seed, index)``; they run in worker processes.
@@ -151,6 +153,8 @@ def _recovery(d, effect: str, truth: dict) -> float | None:
     for k, v in truth.items():
         fit = f.parameters.get(k)
         floor = floors.get(k, floors.get(k.rsplit("_", 1)[0], 0.0))
+        if fit is not None and k in f.sign_degenerate:  # the engine reports |value|, sign undetermined
+            fit, v = abs(fit), abs(v)
         errs.append(abs(fit - v) / max(abs(v), floor) if fit is not None else math.inf)
     return float(max(errs)) if errs else None
 
@@ -175,6 +179,7 @@ def run_case(args) -> dict:
             "top_heldout_shrink": best.heldout_shrink_fraction if best else None,
             "correct": correct, "recovery_error": _recovery(d, effect, truth),
             "fitted": d.finding(effect).parameters if in_lib and d.finding(effect) else None,
+            "sign_degenerate": list(d.finding(effect).sign_degenerate) if in_lib and d.finding(effect) else [],
             "seconds": time.perf_counter() - t0}
 
 
