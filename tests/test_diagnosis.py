@@ -66,6 +66,9 @@ def test_astigmatism_recovered_and_explained(tmp_path):
     assert d.best.parameters["astig_45_um"] == pytest.approx(c45, rel=0.1)
     assert abs(d.best.parameters["astig_0_um"]) < 3 * d.best.uncertainties["astig_0_um"] + 0.01
     assert d.best.heldout_shrink_fraction > 0.5 and not d.best.overfit
+    # the verdict's measure: share of the gap beyond noise, never below the plain variance share
+    assert d.best.variance_explained <= d.best.excess_explained <= 1.0
+    assert "astig_45_um" not in d.best.sign_degenerate  # a map fixes the sign of an astigmatism
     basis = {w["component"]: w["share"] for w in d.where if w["decomposition"] == "basis"}
     assert basis["astigmatism"] > 0.8
 

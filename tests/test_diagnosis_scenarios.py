@@ -1,6 +1,9 @@
 """Slow: the paper's three diagnoses on the bundled synthetic scenarios, and a reduced
-injection-recovery campaign. The truths come from the default FEA mesh + a random
-shape discrepancy; the diagnosed model is the coarse mesh (see pipeline/scenarios)."""
+injection-recovery campaign. The scenario truths come from the refined FEA mesh
+(1.0/2.0 mm) + a random shape discrepancy; the diagnosed model is the default mesh (see
+pipeline/scenarios). The reduced campaign draws its truths from the default-mesh map +
+the random discrepancy (a refined-mesh solve takes minutes; the full campaign in
+benchmarks/bench_diagnosis.py uses it)."""
 
 from __future__ import annotations
 
@@ -43,7 +46,7 @@ def test_j_grating_larger_amplitude_and_pupil_shift(cache):
     assert d.verdict == "explained"
     assert set(d.best.effects) == {"amplitude_scale", "pupil_shift"}
     p = d.best.parameters
-    assert 1.4 < p["scale_J"] < 2.3          # quilt-fundamental truth ratio 1.65 (P/V ratio 1.48)
+    assert 1.4 < p["scale_J"] < 2.3          # quilt-fundamental truth ratio 1.57 (P/V ratio 1.5)
     assert p["pupil_x_mm"] == pytest.approx(4.0, abs=2.0)
     assert d.best.heldout_shrink_fraction > 0.3 and not d.best.overfit
 
@@ -53,17 +56,19 @@ def test_hk_gratings_amplitude_1p2(cache):
     d = diagnose(SCEN / "hk_amplitude" / "manifest.toml", cache_dir=cache)
     assert d.verdict == "explained" and d.best.effect == "amplitude_scale"
     for g in ("H", "K"):
-        assert d.best.parameters[f"scale_{g}"] == pytest.approx(1.26, rel=0.1)  # 1.2 x (fine/coarse quilt 1.054)
+        assert d.best.parameters[f"scale_{g}"] == pytest.approx(1.20, rel=0.1)  # 1.2 x (refined/default quilt 1.000)
     assert abs(d.best.parameters["scale_H"] - d.best.parameters["scale_K"]) < 0.1  # H and K alike
     assert d.finding("temperature").delta_bic > d.best.delta_bic + 50  # a common cold-temperature change cannot do it
 
 
 def test_reduced_campaign(cache):
-    """39 cases (3 per type): surface effects mostly recognised, out-of-library ones not
-    attributed. (Line-profile recognition is below target: benchmarks/results_diagnosis.md.)"""
-    res = run_campaign(CampaignConfig(n_cases=39, seed=7, workers=2), cache_dir=cache)
+    """26 cases (2 per type): library effects mostly recognised and recovered, out-of-library
+    ones not attributed (full campaign: benchmarks/results_diagnosis.md)."""
+    res = run_campaign(CampaignConfig(n_cases=26, seed=7, workers=2, truth_mesh="default"), cache_dir=cache)
     s = res["summary"]
+    assert s["correct_top_rate"] >= 0.75
+    assert s["recovered_20pct_rate"] >= 0.7
+    assert s["ool_unexplained_rate"] >= 0.8
     surf = [r for r in res["cases"] if r["kind"] == "surface" and not r["effect"].startswith("ool")]
     assert np.mean([r["correct"] for r in surf]) >= 0.75
-    assert s["ool_unexplained_rate"] >= 0.8
     assert s["wall_s"] < 400

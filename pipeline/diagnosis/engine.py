@@ -255,8 +255,8 @@ def _degeneracies(findings, fits, prob, c: Criteria):
 
 
 def _sign_degeneracies(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria) -> tuple:
-    """Signed parameters (null 0) whose sign the data cannot tell: the model with that
-    parameter negated (others held, nuisances refitted) scores within ``degenerate_bic``.
+    """Signed parameters (null 0, fitted > 2 sigma from 0) whose sign the data cannot tell:
+    the model with that parameter negated (others held, nuisances refitted) scores within ``degenerate_bic``.
 
     Physical case: line profiles are integrals along the slit, and the blank and the
     pupil are mirror-symmetric in y, so a footprint shift +y and -y give (nearly) the same
@@ -269,8 +269,10 @@ def _sign_degeneracies(prob: Problem, finding: Finding, fo: FitOutcome, c: Crite
     for name, v in finding.parameters.items():
         q = next((q for e in finding.effects for q in effect_parameters(LIBRARY[e], _blanks_for(LIBRARY[e], prob.forwards))
                   if q.name == name), None)
-        if q is None or q.null != 0.0 or v == 0.0 or not q.lo <= -v <= q.hi:
+        if q is None or q.null != 0.0 or not q.lo <= -v <= q.hi:
             continue
+        if not abs(v) > 2.0 * finding.uncertainties.get(name, math.inf):
+            continue  # consistent with zero: its sign is trivially unknown, nothing to report
         flip = fit(prob, (), fixed={**finding.parameters, name: -v})
         cflip = sum(prob.weights[m] ** 2 * flip.rss[m] for m in flip.rss)
         if cost > 0 and neff * math.log(max(cflip, 1e-300) / cost) < c.degenerate_bic:
