@@ -17,7 +17,7 @@ back to OSMesa; both render in software with Mesa's llvmpipe. The Mesa libraries
 from the system (Debian: ``libegl1 libgl1-mesa-dri``, or ``libosmesa6``; installed by
 ``scripts/bootstrap`` when missing). Left to its default, VTK 9.7 tries X11 first and
 segfaults when no X11 library is installed, and any back-end segfaults when none of
-them can be loaded, so :func:`render_study_figures` renders in a child process: a
+them can be loaded, so :func:`start_study_render` renders in a child process: a
 machine without OpenGL gets a warning and no figure, never a crashed run.
 
 Functions
@@ -25,7 +25,7 @@ Functions
 blank_surface        symmetric-part mesh + displacement → whole-body triangle surface
 render_deformed_blank one case: oblique view of the whole blank and a cut-away view
 render_comparison    several cases side by side, one exaggeration and one colour scale
-render_study_figures the default study's figures, solved and rendered in a child process
+start_study_render   the study's figures, solved and rendered in a guarded child process
 """
 
 from __future__ import annotations
@@ -44,7 +44,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["BlankSurface", "blank_surface", "auto_exaggeration", "render_deformed_blank",
-           "render_comparison", "render_study_figures", "configure_offscreen", "RenderUnavailable"]
+           "render_comparison", "start_study_render", "render_study_figures", "study_renders",
+           "configure_offscreen", "RenderUnavailable"]
 
 log = logging.getLogger(__name__)
 
@@ -297,16 +298,17 @@ def _camera(plotter, s: BlankSurface, elevation_deg: float = 30.0, azimuth_deg: 
 def _view(plotter, pv, s: BlankSurface, exaggeration: float, clim, title: str, *,
           bar_title: str | None, box_mm=CENTER_BOX_MM):
     P, tris = _parts(s, exaggeration)
-    bar = dict(title=bar_title or "", vertical=False, position_x=0.2, position_y=0.035, width=0.6,
-               height=0.1, fmt="%.2f", title_font_size=19, label_font_size=16, n_labels=6,
+    bar = dict(title="", vertical=False, position_x=0.2, position_y=0.03, width=0.6,
+               height=0.1, fmt="%.2f", label_font_size=16, n_labels=6,
                color="black", font_family="arial")
     if len(tris["front"]):
         plotter.add_mesh(_polydata(pv, P, tris["front"], 1e3 * s.displacement_mm[:, 2]), scalars="u_z_um",
                          cmap=_CMAP, clim=clim, smooth_shading=True, show_scalar_bar=bar_title is not None,
                          scalar_bar_args=bar, specular=0.3, specular_power=25.0, ambient=0.2, diffuse=0.8)
-        if bar_title is not None:
-            for sb in plotter.scalar_bars.values():
-                sb.SetTextPositionToSucceedScalarBar()  # labels under the bar, title above
+        if bar_title:  # the bar's own title collides with its labels: a centred text above them
+            t = plotter.add_text(bar_title, position=(0.5, 0.12), viewport=True, font_size=12,
+                                 color="black", font="arial")
+            t.GetTextProperty().SetJustificationToCentered()
     if len(tris["body"]):
         plotter.add_mesh(_polydata(pv, P, tris["body"]), color="#b8bcc2", smooth_shading=True,
                          specular=0.2, specular_power=15.0, ambient=0.25, diffuse=0.75)
@@ -335,6 +337,9 @@ def _screenshot(plotter, path: Path) -> Path:
     os.close(fd)
     try:
         plotter.screenshot(tmp)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o644 & ~umask)  # mkstemp makes it private
         os.replace(tmp, path)
     finally:
         plotter.close()
@@ -391,7 +396,7 @@ def render_deformed_blank(mesh, result, path, *, exaggeration: float | None = No
     ------
     RenderUnavailable
         pyvista/VTK cannot be imported. (A machine without any OpenGL back-end may
-        crash VTK itself: use :func:`render_study_figures` for a guarded render.)
+        crash VTK itself: use :func:`start_study_render` for a guarded render.)
     """
     t0 = time.perf_counter()
     pv = _pyvista()
@@ -468,131 +473,234 @@ def probe(path=None, size: int = 64) -> bool:
     return img.shape[:2] == (size, size) and float(img.std()) > 1.0
 
 
-#: the default study's renders: file stem -> (cases, labels); one case = one view
+#: the study's renders: PNG file -> (heading, cases, view labels); a case is
+#: (coverage, t0_um, polish) of a paper-setup case; a figure is drawn when the study has
+#: all its cases (their full parameters, mesh included, are used)
 STUDY_RENDERS = {
-    "blank_3d": ([{"coverage": "all", "t0_um": 200.0, "polish": 0.75}], None),
-    "blank_3d_holes_vs_surfaces": (
-        [{"coverage": "holes", "t0_um": 200.0, "polish": 1.0},
-         {"coverage": "surfaces", "t0_um": 200.0, "polish": 1.0}],
+    "blank_3d.png": ("3-D render of the deformed blank", [("all", 200.0, 0.75)], None),
+    "blank_3d_holes_vs_surfaces.png": (
+        "3-D render of the deformed blank",
+        [("holes", 200.0, 1.0), ("surfaces", 200.0, 1.0)],
         ["NiP 200 µm only in the holes", "NiP 200 µm only on the outer surfaces"]),
 }
 _RENDER_VERSION = 1
+_HEADING = "3-D render of the deformed blank"
 
 
-def _study_key(stem: str, cases: list, extra: dict) -> dict:
+def study_renders(cases) -> dict:
+    """The :data:`STUDY_RENDERS` a study can draw: ``{file: (heading, [params], labels)}``.
+
+    ``cases`` are the study's FEA cases (``.full`` and ``.params`` dicts, ``.is_paper_setup``).
+    """
+    found = {}
+    for c in cases:
+        full = getattr(c, "full", None) or {}
+        if not getattr(c, "is_paper_setup", False):
+            continue
+        try:
+            key = (str(full["coverage"]), float(full["t0_um"]), float(full["polish"]))
+        except (KeyError, TypeError, ValueError):
+            continue
+        found.setdefault(key, dict(c.params))
+    return {f: (h, [found[k] for k in keys], labels) for f, (h, keys, labels) in STUDY_RENDERS.items()
+            if all(k in found for k in keys)}
+
+
+def _key(file: str, params: list) -> dict:
     from pipeline.fea_cases import _namespace
 
-    return {"render_version": _RENDER_VERSION, "namespace": _namespace(), "stem": stem,
-            "cases": [{**c, **extra} for c in cases]}
+    return {"render_version": _RENDER_VERSION, "namespace": _namespace(), "file": file,
+            "cases": [{k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v))
+                       for k, v in sorted(p.items())} for p in params]}
 
 
-def _render_study_child(out_dir: Path, extra: dict) -> dict:
-    """Solve and render :data:`STUDY_RENDERS` (runs inside the child process)."""
+def _meta_path(out: Path, file: str) -> Path:
+    return out / "fea" / "render3d" / (Path(file).stem + ".json")
+
+
+def _is_current(out: Path, file: str, params: list) -> bool:
+    png, meta = out / file, _meta_path(out, file)
+    try:
+        return png.exists() and json.loads(meta.read_text()).get("key") == _key(file, params)
+    except (OSError, ValueError):
+        return False
+
+
+def _render_child(out: Path, renders: dict) -> dict:
+    """Solve and render (runs inside the child process); returns {file: path}."""
     from fea.mesh import blank_mesh
     from fea.model import PreparedBlank
     from pipeline.fea_cases import _split
 
     done, models = {}, {}
-    for stem, (cases, labels) in STUDY_RENDERS.items():
-        png, meta = out_dir / f"{stem}.png", out_dir / f"{stem}.json"
-        key = _study_key(stem, cases, extra)
-        if png.exists() and meta.exists():
-            try:
-                if json.loads(meta.read_text()).get("key") == key:
-                    done[stem] = str(png)
-                    continue
-            except (OSError, ValueError):
-                pass
+    for file, (_, params, labels) in renders.items():
+        png = out / file
+        if _is_current(out, file, params):
+            done[file] = str(png)
+            continue
         t0 = time.perf_counter()
         results = []
-        for c in cases:
-            blank, spec, substrate, coating, film, load, scale = _split({**c, **extra})
+        for c in params:
+            blank, spec, substrate, coating, film, load, scale = _split(c)
             mk = (blank, spec, substrate)
             if mk not in models:
                 models = {mk: PreparedBlank(blank_mesh(blank, spec), substrate)}  # keep one: memory
-            model = models[mk]
-            results.append((model, model.solve(coating, film, load, stress_scale=scale)))
+            results.append((models[mk], models[mk].solve(coating, film, load, stress_scale=scale)))
         t_solve = time.perf_counter() - t0
         if len(results) == 1:
             info = render_deformed_blank(results[0][0].mesh, results[0][1], png)
         else:
             info = render_comparison(results[0][0].mesh, [r for _, r in results], labels, png)
-        meta.write_text(json.dumps({"key": key, "exaggeration": info["exaggeration"],
+        meta = _meta_path(out, file)
+        meta.parent.mkdir(parents=True, exist_ok=True)
+        meta.write_text(json.dumps({"key": _key(file, params), "exaggeration": info["exaggeration"],
                                     "clim_um": list(info["clim_um"]), "solve_s": round(t_solve, 1),
                                     "render_s": round(info["seconds"], 1)}, indent=1))
-        done[stem] = str(png)
+        done[file] = str(png)
     return done
 
 
-def render_study_figures(out_dir, *, mesh_size_mm: float | None = None, mesh_bulk_mm: float | None = None,
-                         timeout_s: float = 1200.0, wait: bool = True):
-    """The default study's 3-D renders (:data:`STUDY_RENDERS`), guarded.
+def start_study_render(cases, out_dir, *, timeout_s: float = 1800.0, progress: bool = True):
+    """Start the study's 3-D renders (:func:`study_renders`) in a child process.
 
-    Solves the cases (same mesh and calibration as the study's tables) and renders them
-    in a child process, so that a machine without OpenGL, where VTK can crash, only
-    loses these figures. Finished renders are reused on re-run (``<stem>.json`` holds
-    the key). Returns ``{stem: Path or None, "error": message or None}``; with
-    ``wait=False`` a :class:`StudyRender` handle whose ``.result()`` returns that dict.
+    Returns a :class:`StudyRender` (``.figures()`` waits and returns ``{file: (heading,
+    path)}``, a notice figure in place of the renders when they failed) or None when the
+    study has none of the cases. The child solves its cases again (the sweep cache keeps
+    sag maps, not displacement fields) with the study's parameters and mesh; finished
+    renders are reused on re-run (key in ``fea/render3d/*.json``). A machine without
+    OpenGL, where VTK can crash, loses only these figures, with a warning.
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    extra = {k: float(v) for k, v in (("mesh_size_mm", mesh_size_mm), ("mesh_bulk_mm", mesh_bulk_mm))
-             if v is not None}
-    h = StudyRender(out, extra, timeout_s)
-    return h.result() if wait else h
+    renders = study_renders(cases)
+    if not renders:
+        return None
+    return StudyRender(Path(out_dir), renders, timeout_s, progress)
+
+
+def render_study_figures(out_dir, cases=None, *, mesh_size_mm: float | None = None,
+                         mesh_bulk_mm: float | None = None, timeout_s: float = 1800.0) -> dict:
+    """:func:`start_study_render` and wait: ``{file: Path or None, ..., "error": str or None}``.
+
+    ``cases`` default to the paper's (coverage, t0, polish) of :data:`STUDY_RENDERS` with
+    the given element sizes.
+    """
+    if cases is None:
+        from types import SimpleNamespace
+
+        extra = {k: float(v) for k, v in (("mesh_size_mm", mesh_size_mm), ("mesh_bulk_mm", mesh_bulk_mm))
+                 if v is not None}
+        keys = dict.fromkeys(k for _, ks, _ in STUDY_RENDERS.values() for k in ks)
+        cases = [SimpleNamespace(full={"coverage": c, "t0_um": t, "polish": p}, is_paper_setup=True,
+                                 params={"coverage": c, "t0_um": t, "polish": p, **extra}) for c, t, p in keys]
+    h = start_study_render(cases, out_dir, timeout_s=timeout_s, progress=False)
+    return h.result() if h is not None else {"error": "no cases to render"}
 
 
 class StudyRender:
-    """A running child process that renders the study's figures (see :func:`render_study_figures`)."""
+    """A child process rendering the study's figures (see :func:`start_study_render`)."""
 
-    def __init__(self, out: Path, extra: dict, timeout_s: float):
-        self.out, self.timeout_s = out, timeout_s
+    def __init__(self, out: Path, renders: dict, timeout_s: float, progress: bool = True):
+        self.out, self.renders, self.timeout_s, self.progress = out, renders, timeout_s, progress
+        self.t0 = time.perf_counter()
+        self._result = None
+        out.mkdir(parents=True, exist_ok=True)
         env = dict(os.environ)
         configure_offscreen_env(env)
         root = str(Path(__file__).resolve().parents[1])
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         self._err = tempfile.TemporaryFile()
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "pipeline.render3d", "--study", str(out), "--extra", json.dumps(extra)],
-            stdout=subprocess.PIPE, stderr=self._err, env=env, cwd=root)
+        spec = {f: [h, params, labels] for f, (h, params, labels) in renders.items()}
+        self._spec = tempfile.NamedTemporaryFile("w", suffix=".json", delete=False)
+        json.dump(spec, self._spec, default=str)
+        self._spec.close()
+        try:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "pipeline.render3d", "--study", str(out), "--spec", self._spec.name],
+                stdout=subprocess.PIPE, stderr=self._err, env=env, cwd=root)
+        except OSError as exc:
+            self.proc = None
+            self._result = self._fail(f"the render process could not start: {exc}")
+        else:
+            import atexit
+
+            atexit.register(self._kill)  # a run that dies early does not leave the child behind
+
+    def _kill(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
 
     def result(self) -> dict:
-        stems = {k: None for k in STUDY_RENDERS}
+        """Wait; ``{file: Path or None, ..., "error": message or None}``."""
+        if self._result is None:
+            self._result = self._wait()
+            try:
+                os.unlink(self._spec.name)
+            except OSError:
+                pass
+            if self.progress and self._result["error"] is None:
+                print(f"3-D renders: {len(self.renders)} in {time.perf_counter() - self.t0:.0f} s", flush=True)
+        return self._result
+
+    def figures(self) -> dict:
+        """Wait; ``{file: (heading, path)}`` for the study's report (a notice when rendering failed)."""
+        res = self.result()
+        if res["error"] is None:
+            return {f: (h, res[f]) for f, (h, _, _) in self.renders.items()}
+        path = _notice_png(self.out / next(iter(self.renders)), res["error"])
+        return {path.name: (_HEADING, path)} if path is not None else {}
+
+    def _wait(self) -> dict:
         try:
             stdout, _ = self.proc.communicate(timeout=self.timeout_s)
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.proc.communicate()
-            return self._fail(stems, f"timed out after {self.timeout_s:g} s")
+            return self._fail(f"timed out after {self.timeout_s:g} s")
         self._err.seek(0)
         err = self._err.read().decode(errors="replace")
         self._err.close()
         if self.proc.returncode != 0:
             rc = self.proc.returncode
-            why = f"signal {-rc} (VTK found no usable OpenGL back-end?)" if rc < 0 else f"exit code {rc}"
-            tail = " | ".join(line.strip() for line in err.strip().splitlines()[-4:])
-            return self._fail(stems, f"the render process failed with {why}: {tail}")
+            why = (f"signal {-rc} (VTK found no usable OpenGL back-end?)" if rc < 0 else f"exit code {rc}")
+            tail = " | ".join(line.strip()[:200] for line in err.strip().splitlines()[-3:])
+            return self._fail(f"the render process failed with {why}: {tail}")
         try:
             done = json.loads(stdout.decode().strip().splitlines()[-1])
         except (ValueError, IndexError):
-            return self._fail(stems, f"the render process gave no result: {err[-300:]}")
-        stems.update({k: Path(v) for k, v in done.items()})
-        stems["error"] = None
-        return stems
+            return self._fail(f"the render process gave no result: {err[-300:]}")
+        res = {f: (Path(done[f]) if f in done else None) for f in self.renders}
+        res["error"] = None
+        return res
 
-    @staticmethod
-    def _fail(stems: dict, why: str) -> dict:
+    def _fail(self, why: str) -> dict:
         msg = (f"3-D render of the deformed blank unavailable: {why}. The rest of the run is "
-               "unaffected; off-screen rendering needs Mesa's EGL or OSMesa (Debian: apt-get install "
-               "libegl1 libgl1-mesa-dri), see pipeline/render3d.py.")
+               "unaffected. Off-screen rendering needs Mesa's EGL or OSMesa (Debian: apt-get install "
+               "libegl1 libgl1-mesa-dri; scripts/offscreen-gl), see pipeline/render3d.py.")
         log.warning(msg)
         print(f"warning: {msg}", file=sys.stderr, flush=True)
-        stems["error"] = msg
-        return stems
+        res = {f: None for f in self.renders}
+        res["error"] = msg
+        return res
 
 
-def configure_offscreen_env(env: dict) -> None:
-    """:func:`configure_offscreen` for a child process's environment ``env``."""
+def _notice_png(path: Path, message: str):
+    """A figure that says the render is unavailable (matplotlib, no OpenGL needed)."""
+    import textwrap
+
+    try:
+        from pipeline.plots import plt, save
+
+        fig, ax = plt.subplots(figsize=(9.0, 1.8))
+        ax.axis("off")
+        ax.text(0.0, 0.5, "\n".join(textwrap.wrap(message, 110)), va="center", ha="left", fontsize=9,
+                color="#8a1c1c", transform=ax.transAxes)
+        return save(fig, path)
+    except Exception as exc:  # the notice is a courtesy; never fail the run over it
+        log.warning("could not write the render notice %s: %s", path, exc)
+        return None
+
+
+def configure_offscreen_env(env) -> None:
+    """Without a display, ask VTK for EGL (it falls back to OSMesa) in environment ``env``."""
     if not (env.get("DISPLAY") or env.get("WAYLAND_DISPLAY")):
         env.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
@@ -603,15 +711,16 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m pipeline.render3d",
                                  description="off-screen renders of the deformed blank")
     ap.add_argument("--probe", action="store_true", help="render a test cube; exit 0 when it works")
-    ap.add_argument("--study", metavar="DIR", help="render the default study's figures into DIR")
-    ap.add_argument("--extra", default="{}", help="JSON dict of extra case parameters (mesh sizes)")
+    ap.add_argument("--study", metavar="DIR", help="render figures into DIR (with --spec)")
+    ap.add_argument("--spec", help="JSON file {png file: [heading, [case params], labels or null]}")
     a = ap.parse_args(argv)
     if a.probe:
         ok = probe()
         print("off-screen rendering works" if ok else "off-screen rendering gave a blank image")
         return 0 if ok else 1
-    if a.study:
-        done = _render_study_child(Path(a.study), json.loads(a.extra))
+    if a.study and a.spec:
+        spec = json.loads(Path(a.spec).read_text())
+        done = _render_child(Path(a.study), {f: tuple(v) for f, v in spec.items()})
         print(json.dumps(done), flush=True)
         return 0
     ap.print_help()

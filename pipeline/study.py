@@ -287,9 +287,14 @@ def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progre
     text = "\n\n".join(t for t in (table, format_cases(others, outputs) if others else "") if t)
     print(text, flush=True)
     t_fea = time.perf_counter() - t0
+    from pipeline.render3d import start_study_render  # 3-D render: guarded child process, beside the profiles
+
+    render = start_study_render(cases, out, progress=progress) if config.output.figures else None
     results = _profiles(config, maps, progress)
     _write_profiles(results, out)
     figs = _figures(config, maps, results, out) if config.output.figures else {}
+    if render is not None:
+        figs.update(render.figures())
     if config.output.report:
         _report(out, config, table, format_cases(cases, outputs), results, figs, t_fea, time.perf_counter() - t0)
     written = [p for p in ("report.html", "fea/tables.csv", "fea/sweep.csv", "profiles.csv") if (out / p).exists()]

@@ -86,21 +86,31 @@ def test_render_png_offscreen(coarse_case, tmp_path):
     assert (np.ptp(rgb, axis=1) < 0.05).mean() > 0.05
 
 
-def test_failed_render_is_a_warning_not_an_error(tmp_path):
+def test_failed_render_is_a_warning_not_an_error(tmp_path, capsys):
     # a child that fails (here: an invalid mesh size) must not raise in the caller
-    h = render3d.render_study_figures(tmp_path, mesh_size_mm=-1.0, wait=False)
+    from types import SimpleNamespace
+
+    cases = [SimpleNamespace(full={"coverage": "all", "t0_um": 200.0, "polish": 0.75}, is_paper_setup=True,
+                             params={"coverage": "all", "t0_um": 200.0, "polish": 0.75, "mesh_size_mm": -1.0})]
+    h = render3d.start_study_render(cases, tmp_path)
     res = h.result()
-    assert res["error"] and "unavailable" in res["error"]
-    assert all(res[k] is None for k in render3d.STUDY_RENDERS)
+    assert res["error"] and "unavailable" in res["error"] and res["blank_3d.png"] is None
+    assert "unavailable" in capsys.readouterr().err
+    figs = h.figures()  # the report gets a notice instead of the render
+    (heading, path), = figs.values()
+    assert "3-D" in heading and path.exists()
+    # a study without the cases renders nothing
+    assert render3d.start_study_render([], tmp_path) is None
 
 
 @pytest.mark.slow
 def test_study_figures_render_and_are_reused(tmp_path):
     res = render3d.render_study_figures(tmp_path, mesh_size_mm=COARSE.size_mm, mesh_bulk_mm=COARSE.size_bulk_mm)
     assert res["error"] is None
-    for stem in render3d.STUDY_RENDERS:
-        assert res[stem].exists() and res[stem].stat().st_size > 20_000
-        assert json.loads((tmp_path / f"{stem}.json").read_text())["exaggeration"] > 0
-    mtime = res["blank_3d"].stat().st_mtime_ns
+    for file in render3d.STUDY_RENDERS:
+        assert res[file].exists() and res[file].stat().st_size > 20_000
+        meta = tmp_path / "fea" / "render3d" / (res[file].stem + ".json")
+        assert json.loads(meta.read_text())["exaggeration"] > 0
+    mtime = res["blank_3d.png"].stat().st_mtime_ns
     again = render3d.render_study_figures(tmp_path, mesh_size_mm=COARSE.size_mm, mesh_bulk_mm=COARSE.size_bulk_mm)
-    assert again["blank_3d"].stat().st_mtime_ns == mtime  # reused, not re-solved
+    assert again["blank_3d.png"].stat().st_mtime_ns == mtime  # reused, not re-solved
