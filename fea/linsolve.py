@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["SolverError", "solve_spd", "solve_spd_perturbed", "available_backends"]
+__all__ = ["SPDFactor", "SolverError", "available_backends", "solve_spd", "solve_spd_perturbed"]
 
 
 class SolverError(RuntimeError):
@@ -75,11 +75,29 @@ def solve_spd(K: sp.spmatrix, f: np.ndarray, backend: str = "auto", rtol: float 
     return solve_spd_perturbed(K, None, f, backend=backend, rtol=rtol, coords_mm=coords_mm, free=free)
 
 
-class _Factor:
-    """A reusable preconditioner/solver for one sparse SPD matrix."""
+def _resolve_backend(backend: str) -> str:
+    if backend not in ("auto", "pardiso", "amg"):
+        raise ValueError(f"backend={backend!r} is unknown; valid values are ['auto', 'pardiso', 'amg']")
+    if backend == "auto":
+        backend = "pardiso" if _have_pardiso() else "amg"
+    if backend == "pardiso" and not _have_pardiso():
+        raise SolverError("backend='pardiso' requested but pypardiso is not installed "
+                          "(pip install 'cryograting[fast]')")
+    return backend
 
-    def __init__(self, K: sp.csr_matrix, backend: str, coords_mm=None, free=None):
+
+class SPDFactor:
+    """A reusable preconditioner/solver for one sparse SPD matrix.
+
+    PARDISO: sparse Cholesky of the upper triangle. AMG: a smoothed-aggregation
+    V-cycle (an approximate inverse, only useful as a preconditioner).
+    Call :meth:`free` to release the factor's memory (~0.7 GB at 216 k P2 DOFs).
+    """
+
+    def __init__(self, K: sp.csr_matrix, backend: str = "auto", coords_mm=None, free=None):
+        backend = _resolve_backend(backend)
         self.backend = backend
+        self.shape = K.shape
         if backend == "pardiso":
             import pypardiso
 
@@ -102,18 +120,21 @@ class _Factor:
             self._M = self._ml.aspreconditioner(cycle="V")
 
     def solve(self, b: np.ndarray) -> np.ndarray:
+        b = np.asarray(b, dtype=float)
         if self.backend == "pardiso":
             return self._solver.solve(self._K, b)
         return self._M @ b
 
     def free(self) -> None:
-        if self.backend == "pardiso":
+        if self.backend == "pardiso" and self._solver is not None:
             self._solver.free_memory(everything=True)
+            self._solver = None
 
 
 def solve_spd_perturbed(K: sp.spmatrix, apply_extra, f: np.ndarray, backend: str = "auto",
                         rtol: float = 1e-9, maxiter: int = 200, coords_mm=None, free=None,
-                        info: dict | None = None) -> np.ndarray:
+                        info: dict | None = None, factor: SPDFactor | None = None,
+                        x0: np.ndarray | None = None) -> np.ndarray:
     """Solve (K + E) u = f where K is sparse SPD and E (SPSD) is only available as a product.
 
     Conjugate gradients on the full operator, preconditioned by a factorisation of K
@@ -130,6 +151,12 @@ def solve_spd_perturbed(K: sp.spmatrix, apply_extra, f: np.ndarray, backend: str
         Required relative residual of the full system.
     info : dict, optional
         Filled with ``iterations`` and ``residual``.
+    factor : SPDFactor, optional
+        Preconditioner to use instead of factorising ``K`` (e.g. the factor of a
+        neighbouring case, shared across a sweep); the caller keeps and frees it.
+    x0 : ndarray, optional
+        Initial guess (e.g. a reduced-basis solution); default: the preconditioner
+        applied to ``f``.
 
     Raises
     ------
@@ -138,13 +165,7 @@ def solve_spd_perturbed(K: sp.spmatrix, apply_extra, f: np.ndarray, backend: str
     """
     from scipy.sparse.linalg import LinearOperator, cg
 
-    if backend not in ("auto", "pardiso", "amg"):
-        raise ValueError(f"backend={backend!r} is unknown; valid values are ['auto', 'pardiso', 'amg']")
-    if backend == "auto":
-        backend = "pardiso" if _have_pardiso() else "amg"
-    if backend == "pardiso" and not _have_pardiso():
-        raise SolverError("backend='pardiso' requested but pypardiso is not installed "
-                          "(pip install 'cryograting[fast]')")
+    backend = factor.backend if factor is not None else _resolve_backend(backend)
     K = sp.csr_matrix(K)
     fnorm = np.linalg.norm(f)
     if fnorm == 0:
@@ -159,18 +180,24 @@ def solve_spd_perturbed(K: sp.spmatrix, apply_extra, f: np.ndarray, backend: str
         return out
 
     A = LinearOperator((n, n), matvec=matvec, dtype=float)
-    fac = _Factor(K, backend, coords_mm, free)
+    own = factor is None
+    fac = SPDFactor(K, backend, coords_mm, free) if own else factor
+    if fac.shape != K.shape:
+        raise ValueError(f"factor of shape {fac.shape} does not match the system {K.shape}")
     try:
         M = LinearOperator((n, n), matvec=lambda b: fac.solve(np.ravel(b)), dtype=float)
         it = [0]
-        x0 = fac.solve(f) if backend == "pardiso" else None
+        if x0 is None and backend == "pardiso":
+            x0 = fac.solve(f)
+        res0 = 1.0 if x0 is None else float(np.linalg.norm(matvec(x0) - f) / fnorm)
         u, code = cg(A, f, x0=x0, rtol=0.1 * rtol, maxiter=maxiter, M=M,
                      callback=lambda xk: it.__setitem__(0, it[0] + 1))
     finally:
-        fac.free()
+        if own:
+            fac.free()
     res = np.linalg.norm(matvec(u) - f) / fnorm
     if info is not None:
-        info.update(iterations=it[0], residual=float(res), backend=backend)
+        info.update(iterations=it[0], residual=float(res), initial_residual=res0, backend=backend)
     if code != 0 or not np.isfinite(res) or res > rtol:
         raise SolverError(f"preconditioned CG ({backend}) did not converge: residual {res:.3e} "
                           f"after {it[0]} iterations (rtol={rtol:.1e}, {n} unknowns)")

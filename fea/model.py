@@ -25,11 +25,12 @@ import scipy.sparse as sp
 
 from .assembly import FilmOperators, bulk_stiffness, film_operators, scalar_basis
 from .coating import SURFACE_GROUPS, Coating
-from .linsolve import _rigid_modes, solve_spd, solve_spd_perturbed
+from .linsolve import SPDFactor, _rigid_modes, solve_spd, solve_spd_perturbed
 from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
+from .reduced import FilmPolynomial, ReducedBasis
 from .surface import FrontSag, front_sag
 
-__all__ = ["PreparedBlank", "FEAResult", "ThermalLoad"]
+__all__ = ["FEAResult", "PreparedBlank", "ThermalLoad"]
 
 _SYM_COMPONENT = {"sym_x": 0, "sym_y": 1, "sym_z": 2}
 
@@ -117,10 +118,16 @@ class PreparedBlank:
         self._film_ops: dict[tuple, FilmOperators] = {}
         #: systems up to this size get the offset coupling assembled explicitly
         self.explicit_offset_max_dof = 70_000
+        #: larger systems: one factorisation is shared by the following cases as CG
+        #: preconditioner, and refreshed when a case needs more iterations than this
+        self.refactor_after_iterations = 14
+        self._shared: tuple[SPDFactor, str] | None = None
+        self._reduced: dict[tuple, ReducedBasis] = {}
         self.assembly_s = time.perf_counter() - t0
 
-    def film_ops(self, group: str, film: Material) -> FilmOperators:
+    def film_ops(self, group: str, film: Material | str = NIP_HIGH_P) -> FilmOperators:
         """Thickness-independent film operators of one surface group (assembled once)."""
+        film = get_material(film)
         key = (group, film.youngs_modulus_Pa, film.poisson_ratio)
         if key not in self._film_ops:
             if group not in self.mesh.boundaries:
@@ -136,6 +143,26 @@ class PreparedBlank:
             ops = replace(ops, R=(sp.diags(keep) @ ops.R).tocsr())
             self._film_ops[key] = ops
         return self._film_ops[key]
+
+    def coatable_groups(self) -> tuple[str, ...]:
+        """Surface groups a film can be put on in this (symmetry part of the) mesh."""
+        return tuple(g for g in SURFACE_GROUPS if g in self.mesh.boundaries
+                     and not (g == "back" and "sym_z" in self.symmetry_planes))
+
+    def reduced_basis(self, film: Material | str = NIP_HIGH_P, offset: bool = True) -> ReducedBasis:
+        """The Galerkin reduced model of this mesh for ``film`` (grows with every solve)."""
+        film = get_material(film)
+        key = (film.youngs_modulus_Pa, film.poisson_ratio, offset)
+        if key not in self._reduced:
+            films = {g: FilmPolynomial(self.film_ops(g, film), offset) for g in self.coatable_groups()}
+            self._reduced[key] = ReducedBasis(self.K_bulk, films, self.free)
+        return self._reduced[key]
+
+    def release_preconditioner(self) -> None:
+        """Free the shared factorisation (~0.7 GB at the default mesh)."""
+        if self._shared is not None:
+            self._shared[0].free()
+            self._shared = None
 
     # ------------------------------------------------------------------ constraints
     def _plane_constrained_dofs(self) -> np.ndarray:
@@ -173,7 +200,8 @@ class PreparedBlank:
     def solve(self, coating: Coating, film: Material | str = NIP_HIGH_P,
               load: ThermalLoad = ThermalLoad(), stress_scale: float = 1.0,
               backend: str = "auto", offset: bool = True,
-              thickness_override_um: dict[str, float] | None = None) -> FEAResult:
+              thickness_override_um: dict[str, float] | None = None,
+              rtol: float = 1e-6) -> FEAResult:
         """Solve one coating case.
 
         Parameters
@@ -194,6 +222,18 @@ class PreparedBlank:
         thickness_override_um : dict, optional
             Explicit film thickness per surface group, replacing ``coating.thickness_um()``
             (for investigations such as uncoated side faces).
+        rtol : float
+            Relative residual the iterative solve must reach (large meshes). At 1e-6 the
+            P/V differs from the fully converged one by < 1e-6 relative (measured,
+            ``benchmarks/results_tables.md``), far below the discretisation error.
+
+        Notes
+        -----
+        Large systems are solved by conjugate gradients preconditioned by a sparse
+        Cholesky factor that is kept and shared by the following cases (they differ only
+        in film thickness), starting from the Galerkin solution on the span of the
+        previous cases' solutions (:class:`fea.reduced.ReducedBasis`). The answer is the
+        full solve's to ``rtol`` whatever the order of the cases.
         """
         film = get_material(film)
         self.substrate.check_temperature(load.warm_K, "warm_K")
@@ -204,26 +244,18 @@ class PreparedBlank:
         self._check_symmetry(coating)
         t0 = time.perf_counter()
         eps_sub = self.substrate.strain_between(load.warm_K, load.cold_K)
-        eps_mis = stress_scale * (film.strain_between(load.warm_K, load.cold_K) - eps_sub)
-        thick = coating.thickness_um() if thickness_override_um is None else dict(thickness_override_um)
+        eps_mis = self.mismatch_strain(film, load, stress_scale)
+        used = self.film_thickness_um(coating, thickness_override_um)
         K = self.K_bulk
         f = np.zeros(self.ndof)
         couplings = []  # (t, FilmOperators) of each film, for the non-local offset terms
-        used = {}
-        for group, t_um in thick.items():
-            if t_um <= 0:
-                continue
-            if group == "back" and "sym_z" in self.symmetry_planes:
-                continue  # the mirror image of the front film through the mid-plane
-            if group in SURFACE_GROUPS and group not in self.mesh.boundaries:
-                continue  # e.g. hole walls of a blank without lightweighting holes
+        for group, t_um in used.items():
             ops = self.film_ops(group, film)
             t = t_um * 1e-3
             K = K + ops.local_stiffness(t, offset)
             f = f + ops.load(t, eps_mis, offset)
             if offset:
                 couplings.append((t, ops))
-            used[group] = t_um
         t_asm = time.perf_counter() - t0
         u = np.zeros(self.ndof)
         solve_info: dict = {}
@@ -237,9 +269,8 @@ class PreparedBlank:
                 u[fr] = solve_spd(K[fr][:, fr], f[fr], backend=backend, coords_mm=self.coords_mm, free=fr)
                 solve_info = {"method": "direct (explicit offset coupling)"}
             else:
-                u[fr] = solve_spd_perturbed(K[fr][:, fr], self._offset_operator(couplings, fr), f[fr],
-                                            backend=backend, coords_mm=self.coords_mm, free=fr,
-                                            info=solve_info)
+                u[fr] = self._solve_iterative(K[fr][:, fr], couplings, f, film, offset, used,
+                                              eps_mis, backend, rtol, solve_info)
         t_solve = time.perf_counter() - t0 - t_asm
         disp = u.reshape(-1, 3).T
         sag = front_sag(self.mesh, self.basis, disp, self.symmetry_planes)
@@ -254,6 +285,50 @@ class PreparedBlank:
             "solver": solve_info,
         }
         return FEAResult(self.coords_mm, disp, eps_sub, sag, info)
+
+    def mismatch_strain(self, film: Material | str = NIP_HIGH_P, load: ThermalLoad = ThermalLoad(),
+                        stress_scale: float = 1.0) -> float:
+        """Film/substrate mismatch strain warm → cold, times the calibration scale."""
+        film = get_material(film)
+        return stress_scale * (film.strain_between(load.warm_K, load.cold_K)
+                               - self.substrate.strain_between(load.warm_K, load.cold_K))
+
+    def film_thickness_um(self, coating: Coating,
+                          thickness_override_um: dict[str, float] | None = None) -> dict[str, float]:
+        """Film thickness (µm) per surface group of this mesh that carries a film."""
+        thick = coating.thickness_um() if thickness_override_um is None else dict(thickness_override_um)
+        used = {}
+        for group, t_um in thick.items():
+            if t_um <= 0:
+                continue
+            if group == "back" and "sym_z" in self.symmetry_planes:
+                continue  # the mirror image of the front film through the mid-plane
+            if group in SURFACE_GROUPS and group not in self.mesh.boundaries:
+                continue  # e.g. hole walls of a blank without lightweighting holes
+            used[group] = float(t_um)
+        return used
+
+    def _solve_iterative(self, Kff, couplings, f, film, offset, used_um, eps_mis, backend, rtol,
+                         solve_info) -> np.ndarray:
+        fr = self.free
+        rb = self.reduced_basis(film, offset)
+        t_mm = {g: t * 1e-3 for g, t in used_um.items()}
+        x0 = rb.expand(rb.solve(t_mm, eps_mis))[fr] if rb.size else None
+        if self._shared is not None and self._shared[1] != backend:
+            self.release_preconditioner()
+        fresh = self._shared is None
+        if fresh:
+            self._shared = (SPDFactor(Kff, backend, self.coords_mm, fr), backend)
+        u = solve_spd_perturbed(Kff, self._offset_operator(couplings, fr), f[fr], backend=backend,
+                                coords_mm=self.coords_mm, free=fr, info=solve_info, rtol=rtol,
+                                factor=self._shared[0], x0=x0)
+        solve_info.update(preconditioner="own" if fresh else "shared", reduced_basis_size=rb.size)
+        if not fresh and solve_info.get("iterations", 0) > self.refactor_after_iterations:
+            self.release_preconditioner()  # this case is far from the factored one: next one refactors
+        full = np.zeros(self.ndof)
+        full[fr] = u
+        rb.add(full)
+        return u
 
     def _offset_operator(self, couplings, free):
         """v ↦ Σ (non-local film coupling) v on the free DOFs, without forming the matrices."""

@@ -1,0 +1,250 @@
+"""Millisecond surrogate of the plated blank over film thickness, polish, coverage and cold temperature.
+
+Units: µm for film thickness and sag, K for temperatures.
+
+Built on :class:`fea.reduced.ReducedBasis`: with the mesh fixed the system is an exact
+polynomial in each surface group's film thickness, so the Galerkin projection onto a
+few full solutions is exact in form and only the basis is approximate. The basis is
+chosen greedily: among random candidate points of the domain, the one with the largest
+(sketched) residual gets a full solve, until every candidate's residual estimate is
+below ``tol``. The cold temperature and the calibration scale only scale the load, so
+they are free at evaluation time.
+
+Accuracy is reported, not assumed: :meth:`FEASurrogate.validate` compares P/V with full
+solves at random points of the domain (``benchmarks/bench_surrogate.py``).
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .coating import COVERAGES, Coating
+from .materials import NIP_HIGH_P, Material, get_material
+from .model import PreparedBlank, ThermalLoad
+from .reduced import ReducedBasis
+from .surface import FrontSag, front_sag
+
+__all__ = ["FEASurrogate", "SurrogateDomain", "build_surrogate"]
+
+
+@dataclass(frozen=True)
+class SurrogateDomain:
+    """Box of coating parameters the surrogate is trained on.
+
+    Parameters
+    ----------
+    t0_um : (float, float)
+        Range of the original film thickness (µm).
+    polish : (float, float)
+        Range of the polish fraction of the faces (front = back).
+    coverages : tuple of str
+        Coverage presets included.
+    """
+
+    t0_um: tuple[float, float] = (50.0, 300.0)
+    polish: tuple[float, float] = (0.25, 1.0)
+    coverages: tuple[str, ...] = ("all", "holes", "surfaces")
+
+    def __post_init__(self):
+        lo, hi = self.t0_um
+        if not (0 < lo <= hi <= 2000):
+            raise ValueError(f"t0_um={self.t0_um}: need 0 < low <= high <= 2000 µm")
+        lo, hi = self.polish
+        if not (0 < lo <= hi <= 1):
+            raise ValueError(f"polish={self.polish}: need 0 < low <= high <= 1")
+        bad = [c for c in self.coverages if c not in COVERAGES or c == "none"]
+        if not self.coverages or bad:
+            raise ValueError(f"coverages={self.coverages}: valid values are "
+                             f"{[c for c in COVERAGES if c != 'none']}")
+
+    def contains(self, coating: Coating, rel_tol: float = 1e-9) -> bool:
+        lo, hi = self.t0_um
+        plo, phi = self.polish
+        return (coating.coverage in self.coverages
+                and lo * (1 - rel_tol) <= coating.t0_um <= hi * (1 + rel_tol)
+                and all(plo - rel_tol <= p <= phi + rel_tol
+                        for p in (coating.polish_front, coating.polish_back)))
+
+    def sample(self, n: int, rng: np.random.Generator) -> list[Coating]:
+        """``n`` random symmetric coatings, uniform in t0, polish and coverage."""
+        cov = rng.choice(list(self.coverages), n)
+        t0 = rng.uniform(*self.t0_um, n)
+        p = rng.uniform(*self.polish, n)
+        return [Coating.symmetric(float(a), float(b), str(c)) for a, b, c in zip(t0, p, cov)]
+
+    def corners(self) -> list[Coating]:
+        return [Coating.symmetric(t, p, c) for c in self.coverages for t in self.t0_um for p in self.polish]
+
+
+@dataclass
+class SurrogateResult:
+    """One surrogate evaluation: the sag and the sketched relative residual."""
+
+    sag: FrontSag
+    residual_estimate: float
+    coating: Coating
+    load: ThermalLoad
+
+
+@dataclass
+class FEASurrogate:
+    """Reduced model of one prepared mesh, film material and calibration scale.
+
+    Use :func:`build_surrogate`; evaluate with :meth:`evaluate` or :meth:`pv_center_um`.
+    """
+
+    model: PreparedBlank
+    film: Material
+    stress_scale: float
+    domain: SurrogateDomain
+    rb: ReducedBasis
+    sag_template: FrontSag
+    sag_basis_um: np.ndarray  # (n_samples, m): sag of each basis vector
+    sag_normal_basis_um: np.ndarray
+    build_info: dict = field(default_factory=dict)
+
+    @property
+    def size(self) -> int:
+        return self.rb.size
+
+    def coefficients(self, coating: Coating, load: ThermalLoad | None = None):
+        """Reduced coefficients and residual estimate of one case."""
+        load = ThermalLoad() if load is None else load
+        eps = self.model.mismatch_strain(self.film, load, self.stress_scale)
+        t_mm = {g: t * 1e-3 for g, t in self.model.film_thickness_um(coating).items()}
+        a = self.rb.solve(t_mm, eps)
+        return a, self.rb.residual_estimate(a, t_mm, eps)
+
+    def evaluate(self, coating: Coating, load: ThermalLoad | None = None,
+                 check_domain: bool = True) -> SurrogateResult:
+        """Front sag of one case (milliseconds).
+
+        Raises
+        ------
+        ValueError
+            When ``coating`` lies outside the training domain (extrapolation is not
+            checked by the greedy construction) and ``check_domain`` is true.
+        """
+        if check_domain and not self.domain.contains(coating):
+            raise ValueError(f"coating {coating.coverage} t0_um={coating.t0_um} polish="
+                             f"{coating.polish_front}/{coating.polish_back} is outside the surrogate's "
+                             f"domain (t0_um {self.domain.t0_um}, polish {self.domain.polish}, "
+                             f"coverages {self.domain.coverages}); use a full solve")
+        load = ThermalLoad() if load is None else load
+        self.model.substrate.check_temperature(load.cold_K, "cold_K")
+        self.film.check_temperature(load.cold_K, "cold_K")
+        a, res = self.coefficients(coating, load)
+        sag = replace(self.sag_template, sag_um=self.sag_basis_um @ a,
+                      sag_normal_um=self.sag_normal_basis_um @ a)
+        return SurrogateResult(sag, res, coating, load)
+
+    def pv_center_um(self, coating: Coating, load: ThermalLoad | None = None) -> float:
+        return self.evaluate(coating, load).sag.pv_um("center")
+
+    def validate(self, n_points: int = 8, seed: int = 1, progress=None) -> list[dict]:
+        """Compare with full solves at ``n_points`` random points of the domain.
+
+        Returns one dict per point: parameters, full and surrogate P/V_center (µm),
+        relative error, residual estimate, full-solve time (s).
+        """
+        rng = np.random.default_rng(seed)
+        rows = []
+        for c in self.domain.sample(n_points, rng):
+            t = time.perf_counter()
+            full = self.model.solve(c, self.film, stress_scale=self.stress_scale).sag.pv_um("center")
+            t_full = time.perf_counter() - t
+            t = time.perf_counter()
+            r = self.evaluate(c)
+            t_sur = time.perf_counter() - t
+            pv = r.sag.pv_um("center")
+            rows.append({"coverage": c.coverage, "t0_um": c.t0_um, "polish": c.polish_front,
+                         "pv_center_full_um": full, "pv_center_surrogate_um": pv,
+                         "rel_error": pv / full - 1 if full else float("nan"),
+                         "residual_estimate": r.residual_estimate,
+                         "full_solve_s": t_full, "surrogate_s": t_sur})
+            if progress is not None:
+                progress(rows[-1])
+        return rows
+
+
+def _freeze(rb: ReducedBasis) -> dict:
+    return {k: copy.deepcopy(v) for k, v in vars(rb).items() if k not in ("K_bulk", "films", "sketch")}
+
+
+def _restore(rb: ReducedBasis, state: dict) -> None:
+    for k, v in state.items():
+        setattr(rb, k, v)
+
+
+def build_surrogate(model: PreparedBlank, domain: SurrogateDomain = SurrogateDomain(),
+                    film: Material | str = NIP_HIGH_P, stress_scale: float = 1.0, tol: float = 2e-3,
+                    max_solves: int = 24, n_candidates: int = 300, seed: int = 0,
+                    progress=None) -> FEASurrogate:
+    """Greedy reduced-basis construction on ``model`` over ``domain``.
+
+    Parameters
+    ----------
+    model : PreparedBlank
+        The meshed blank (its reduced basis grows with the training solves).
+    domain : SurrogateDomain
+        Training box.
+    film : Material or str
+    stress_scale : float
+        Calibration scale (``fea.calibration.STRESS_SCALE`` for calibrated results).
+    tol : float
+        Stop when every candidate's sketched relative residual is below this. At
+        2e-3 the P/V error is ~1e-3 (measured in ``benchmarks/results_surrogate.md``).
+    max_solves : int
+        Full solves allowed; if ``tol`` is not reached the surrogate is still returned
+        and ``build_info["converged"]`` is False.
+    n_candidates : int
+        Random candidate points (plus the domain's corners).
+    progress : callable, optional
+        Called with a dict after each full solve.
+    """
+    film = get_material(film)
+    rng = np.random.default_rng(seed)
+    cands = domain.corners() + domain.sample(n_candidates, rng)
+    rb = model.reduced_basis(film)
+    eps = model.mismatch_strain(film, ThermalLoad(), stress_scale)
+    if eps == 0:
+        raise ValueError("the mismatch strain is zero (stress_scale=0 or matched CTE): nothing to reduce")
+    thick = [{g: t * 1e-3 for g, t in model.film_thickness_um(c).items()} for c in cands]
+    t_start = time.perf_counter()
+    solves, worst = 0, np.inf
+    history = []
+    mid = Coating.symmetric(float(np.mean(domain.t0_um)), float(np.mean(domain.polish)), domain.coverages[0])
+    next_case = mid if rb.size == 0 else None
+    while True:
+        if next_case is None:
+            est = np.array([rb.residual_estimate(rb.solve(t, eps), t, eps) for t in thick])
+            i = int(np.argmax(est))
+            worst = float(est[i])
+            history.append(worst)
+            if worst < tol or solves >= max_solves:
+                break
+            next_case = cands[i]
+        model.solve(next_case, film, stress_scale=stress_scale)
+        solves += 1
+        if progress is not None:
+            progress({"solves": solves, "basis": rb.size, "worst_residual": worst,
+                      "case": f"{next_case.coverage} {next_case.t0_um:.0f}/{next_case.polish_front:.2f}"})
+        next_case = None
+    # sag of each basis vector (the sag is linear in the displacement)
+    cols, ncols, template = [], [], None
+    for q in rb.Q.T:
+        s = front_sag(model.mesh, model.basis, q.reshape(-1, 3).T, model.symmetry_planes)
+        template = s if template is None else template
+        cols.append(s.sag_um)
+        ncols.append(s.sag_normal_um)
+    frozen = copy.copy(rb)
+    _restore(frozen, _freeze(rb))
+    info = {"full_solves": solves, "basis_size": rb.size, "worst_residual_estimate": worst,
+            "converged": worst < tol, "tol": tol, "build_s": time.perf_counter() - t_start,
+            "residual_history": history, "n_candidates": len(cands)}
+    return FEASurrogate(model, film, stress_scale, domain, frozen, template,
+                        np.column_stack(cols), np.column_stack(ncols), info)

@@ -1,0 +1,95 @@
+"""Reduced basis and surrogate: exact thickness polynomials, Galerkin reproduction,
+the shared-preconditioner iterative solve against the direct one, and the surrogate
+against full solves (coarse mesh)."""
+import numpy as np
+import pytest
+
+from fea.api import prepare
+from fea.calibration import STRESS_SCALE
+from fea.coating import Coating
+from fea.materials import NIP_HIGH_P as NIP
+from fea.mesh import MeshSpec
+from fea.model import ThermalLoad
+from fea.reduced import FilmPolynomial, powers
+from fea.surrogate import SurrogateDomain, build_surrogate
+
+COARSE = MeshSpec(size_mm=5.0, size_bulk_mm=10.0)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return prepare(mesh=COARSE)
+
+
+def test_thickness_polynomial_is_exact(model):
+    """The interpolated coefficients reproduce the film operators at any thickness."""
+    ops = model.film_ops("holes_x", NIP)
+    poly = FilmPolynomial(ops)
+    rng = np.random.default_rng(0)
+    V = rng.standard_normal((model.ndof, 2))
+    for t_mm in (0.013, 0.2, 0.47):
+        direct = ops.local_stiffness(t_mm) @ V + ops.apply_coupling(t_mm, V)
+        interp = np.tensordot(powers(t_mm), poly.stiffness_coeffs_apply(V), axes=1)
+        assert np.abs(interp - direct).max() <= 1e-9 * np.abs(direct).max()
+        load = ops.load(t_mm, 1e-3)
+        assert np.abs(1e-3 * powers(t_mm) @ poly.load_coeffs - load).max() <= 1e-9 * np.abs(load).max()
+
+
+def test_iterative_shared_solve_equals_direct(model):
+    """CG with a shared factor and reduced-basis start gives the direct solve's answer."""
+    cases = [Coating.symmetric(200, 0.75, "all"), Coating.symmetric(100, 1.0, "holes"),
+             Coating.symmetric(150, 0.5, "all"), Coating.symmetric(200, 1.0, "surfaces")]
+    ref = [model.solve(c).sag.pv_um("center") for c in cases]
+    saved = model.explicit_offset_max_dof
+    model.explicit_offset_max_dof = 0
+    try:
+        got = [model.solve(c) for c in cases]
+    finally:
+        model.explicit_offset_max_dof = saved
+        model.release_preconditioner()
+    assert [g.info["solver"]["preconditioner"] for g in got][:2] == ["own", "shared"]
+    for g, r in zip(got, ref):
+        assert g.sag.pv_um("center") == pytest.approx(r, rel=1e-5)
+        assert g.info["solver"]["residual"] <= 1e-6
+
+
+def test_galerkin_reproduces_a_snapshot(model):
+    """A field in the basis is recovered exactly, at any mismatch strain (linearity)."""
+    rb = model.reduced_basis(NIP)
+    c = Coating.symmetric(180, 0.6, "all")
+    saved = model.explicit_offset_max_dof
+    model.explicit_offset_max_dof = 0
+    try:
+        u = model.solve(c).displacement_mm.T.ravel()
+    finally:
+        model.explicit_offset_max_dof = saved
+        model.release_preconditioner()
+    eps = model.mismatch_strain(NIP, ThermalLoad(), 1.0)
+    t_mm = {g: t * 1e-3 for g, t in model.film_thickness_um(c).items()}
+    for scale in (1.0, 0.37):
+        a = rb.solve(t_mm, scale * eps)
+        assert np.linalg.norm(rb.expand(a) - scale * u) <= 1e-5 * np.linalg.norm(u)
+        assert rb.residual_norm(a, t_mm, scale * eps) <= 1e-5
+
+
+def test_surrogate_matches_full_solves(model):
+    """Greedy surrogate over a t0/polish box: P/V within 0.5 % of full solves at random points."""
+    dom = SurrogateDomain(t0_um=(100, 200), polish=(0.5, 1.0), coverages=("all", "holes"))
+    model.explicit_offset_max_dof = 0
+    try:
+        s = build_surrogate(model, dom, stress_scale=STRESS_SCALE, tol=2e-3, max_solves=16)
+        assert s.build_info["converged"]
+        rows = s.validate(3, seed=3)
+    finally:
+        model.explicit_offset_max_dof = 70_000
+        model.release_preconditioner()
+    for r in rows:
+        assert abs(r["rel_error"]) < 5e-3, r
+    # temperature enters only through the load: P/V scales with the mismatch strain
+    c = Coating.symmetric(150, 0.75, "all")
+    cold = ThermalLoad(cold_K=150.0)
+    ratio = (model.mismatch_strain(NIP, cold, STRESS_SCALE)
+             / model.mismatch_strain(NIP, ThermalLoad(), STRESS_SCALE))
+    assert s.pv_center_um(c, cold) == pytest.approx(ratio * s.pv_center_um(c), rel=1e-9)
+    with pytest.raises(ValueError, match="outside the surrogate's domain"):
+        s.evaluate(Coating.symmetric(300, 0.75, "all"))
