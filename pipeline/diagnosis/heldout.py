@@ -60,8 +60,8 @@ def _prediction_spread(prob: Problem, params, tr, test: dict) -> tuple[float, fl
     profiles, the third profile's predicted change was uncertain by more than its size
     and the 'held-out shrink' (measured: -1.5) judged the noise of the extrapolation,
     not the effect. Uncertainty: parameters moved by their 1-sigma errors one at a time,
-    added in quadrature (correlations ignored); an unconstrained parameter makes the
-    fold untestable."""
+    added in quadrature (correlations ignored), kept inside the prior range; a parameter
+    with an error as large as its prior range makes the fold untestable."""
     p = dict(tr.parameters)
     null = {}
     sig2 = spread2 = 0.0
@@ -78,9 +78,10 @@ def _prediction_spread(prob: Problem, params, tr, test: dict) -> tuple[float, fl
         sig2 += float(np.sum((base - pred(null)) ** 2))
         for q in params:
             e = tr.errors.get(q.name, math.inf)
-            if not math.isfinite(e):
+            if not e < q.width:  # not constrained within its prior range
                 return math.sqrt(sig2), math.inf
-            spread2 += float(np.sum((pred({**p, q.name: p[q.name] + e}) - base) ** 2))
+            v = p[q.name] + e if p[q.name] + e <= q.hi else p[q.name] - e  # stay inside the prior
+            spread2 += float(np.sum((pred({**p, q.name: float(np.clip(v, q.lo, q.hi))}) - base) ** 2))
     return math.sqrt(sig2), math.sqrt(spread2)
 
 
