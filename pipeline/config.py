@@ -779,6 +779,8 @@ def load_study_config(path) -> StudyConfig:
         key, the value and what is allowed).
     """
     p = Path(path)
+    if p.is_dir():
+        raise ConfigError("", ..., "is a directory, not a config file", str(p))
     if not p.is_file():
         hint = f"; did you mean --preset {p.stem}?" if p.stem in list_presets() and not p.exists() else ""
         raise FileNotFoundError(f"config file {str(p)!r} not found{hint}")

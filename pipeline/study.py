@@ -8,8 +8,9 @@ deformation (J also 200 µm / 50 %); the 1.25 µm line on the J, H and K grating
 orders −2/−3/−4 (J with 200/50, H and K with 200/75, as the paper). It writes into
 ``out_dir``:
 
-* ``fea/sweep.csv``, ``fea/sweep.nc`` — every FEA case: parameters, P/V, RMS, sag maps
-  (cached under ``fea/cases``: a re-run reuses every finished case);
+* ``fea/cases.csv`` — every FEA case: label, P/V, RMS and the value of every parameter;
+* ``fea/sweep.nc`` — the same with the sag maps (cases cached under ``fea/cases``: a
+  re-run reuses every finished case);
 * ``fea/tables.csv`` — model vs paper, for the cases that are the paper's;
 * ``profiles.csv`` and ``profiles.nc`` — detected line profiles and their metrics;
 * the PNG figures of the config and ``report.html`` that puts them together.
@@ -109,9 +110,9 @@ def _run_fea(config: StudyConfig, out: Path, progress: bool):
     cases = config.cases()
     res = run_sweep(FEACaseRunner(), [Case(c.params) for c in cases], out, namespace=_namespace(), workers=1,
                     progress=progress, description="FEA cases")
-    res.write_csv(out / "sweep.csv")
     res.write_netcdf(out / "sweep.nc")
     outputs = {c.label: o for c, (_, o) in zip(cases, res)}
+    _write_cases(cases, outputs, out / "cases.csv")
     maps = {c.label: SagMap(SAG_GRID_X_MM, SAG_GRID_Y_MM,
                             np.asarray(o["sag_um"][1] if isinstance(o["sag_um"], tuple) else o["sag_um"], float),
                             c.label)
@@ -130,6 +131,18 @@ def _run_fea(config: StudyConfig, out: Path, progress: bool):
     if rows:
         _write_rows(rows, out / "tables.csv")
     return cases, outputs, maps, rows, in_paper
+
+
+def _write_cases(cases, outputs, path: Path) -> None:
+    """One row per FEA case: label, group, P/V and RMS (µm), then every parameter's value."""
+    from pipeline.io_common import atomic_write
+
+    keys = ["pv_center_um", "rms_center_um", "pv_full_um", "rms_full_um", "quilt_direction_um"]
+    with atomic_write(path) as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(["label", "group", *keys, *cases[0].full])
+        for c in cases:
+            w.writerow([c.label, c.group, *(f"{outputs[c.label][k]:.6g}" for k in keys), *c.full.values()])
 
 
 def format_cases(cases, outputs) -> str:
@@ -297,7 +310,7 @@ def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progre
         figs.update(render.figures())
     if config.output.report:
         _report(out, config, table, format_cases(cases, outputs), results, figs, t_fea, time.perf_counter() - t0)
-    written = [p for p in ("report.html", "fea/tables.csv", "fea/sweep.csv", "profiles.csv") if (out / p).exists()]
+    written = [p for p in ("report.html", "fea/tables.csv", "fea/cases.csv", "profiles.csv") if (out / p).exists()]
     print(f"\nwritten in {out}/: {', '.join(written)}, fea/sweep.nc"
           f"{', profiles.nc' if results else ''}{f', {len(figs)} PNG figures' if figs else ''}")
     return {"config": config, "cases": cases, "outputs": outputs, "rows": rows, "profiles": results,
