@@ -210,19 +210,6 @@ def _summary(rows: list[dict], wall_s: float, cfg: CampaignConfig) -> dict:
             "wall_s": wall_s, "workers": cfg.workers, "seed": cfg.seed}
 
 
-def matched_truth_base(nominal: SagMap, fine: SagMap) -> SagMap:
-    """The finer-mesh map rescaled so its quilt fundamental (1/Dx, 0) over the pupil
-    matches the nominal's. Unscaled, the coarse mesh under-predicts that component by
-    5.4 % and a null case (nothing injected) is diagnosed as amplitude_scale ≈ 1.06-1.10
-    — correct, but then every profile case carries that in-library bias. Matched, the
-    remaining discrepancy is the mesh's shape difference (plus the random one)."""
-    from optics.fitting import fit_fourier
-
-    a_nom = fit_fourier(nominal, aperture="pupil", harmonics=2).component(1, 0)[0]
-    a_fine = fit_fourier(fine, aperture="pupil", harmonics=2).component(1, 0)[0]
-    return fine.scaled(a_nom / a_fine)
-
-
 def campaign_maps(cfg: CampaignConfig, cache_dir=None) -> tuple[SagMap, SagMap]:
     """(diagnosed nominal, truth base) FEA maps of 200 µm / 75 % at 80 K."""
     nominal = fea_sag_map(200.0, 0.75, "all", 80.0, cfg.nominal_mesh, cache_dir=cache_dir)
