@@ -184,9 +184,13 @@ def blank_surface(mesh, coords_mm, displacement_mm, symmetry_planes=None, *,
             cuts.append(np.full(len(t), plane is not None))
             offset += len(used)
     P, U, T = np.concatenate(pts), np.concatenate(us), np.concatenate(tris)
-    # merge the copies' shared nodes on the symmetry planes (smooth shading across seams)
-    key = np.round(P, 6)
-    _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    # merge the copies' shared nodes on the symmetry planes (smooth shading across seams):
+    # positions quantised to 21 bits per axis (< 0.1 µm for the default blank) in one int64
+    lo = P.min(axis=0)
+    res = max(float(np.ptp(P, axis=0).max()), 1e-12) / (2 ** 21 - 2)
+    q = np.rint((P - lo) / res).astype(np.int64)
+    key = (q[:, 0] << 42) | (q[:, 1] << 21) | q[:, 2]
+    _, first, inv = np.unique(key, return_index=True, return_inverse=True)
     inv = inv.ravel()
     return BlankSurface(P[first], inv[T], U[first], np.concatenate(cuts))
 
@@ -245,27 +249,34 @@ def _parts(s: BlankSurface, exaggeration: float):
 
 def _front_box(s: BlankSurface, exaggeration: float, box_mm, n: int = 400):
     """The central box's outline on the warped front face (lifted 0.05 % of the size)."""
-    from scipy.interpolate import LinearNDInterpolator
+    from scipy.spatial import cKDTree
 
     hx, hy = box_mm[0] / 2, box_mm[1] / 2
-    x, y = s.points_mm[:, 0], s.points_mm[:, 1]
-    # front nodes in a band around the outline: a small triangulation, the same interpolant there
-    band = 6.0
-    d = np.maximum(np.abs(x) - hx, np.abs(y) - hy)
-    d = np.where(d < 0, np.minimum(hx - np.abs(x), hy - np.abs(y)), d)
-    m = s.front_mask() & (np.abs(d) < band)
-    if m.sum() < 3:
+    m = s.front_mask()
+    xy = s.points_mm[m, :2]
+    if len(xy) < 3 or hx > np.abs(xy[:, 0]).max() or hy > np.abs(xy[:, 1]).max():
         return None
-    interp = LinearNDInterpolator(s.points_mm[m, :2], s.displacement_mm[m])
     t = np.linspace(0.0, 1.0, n)
     corners = np.array([(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy), (-hx, -hy)])
     pts = np.concatenate([a + t[:, None] * (b - a) for a, b in zip(corners[:-1], corners[1:])])
-    u = interp(pts)
-    if not np.isfinite(u).all():
-        return None
+    # inverse-distance weights of the 4 nearest front nodes: plenty for a drawn line
+    d, i = cKDTree(xy).query(pts, k=4)
+    w = 1.0 / np.maximum(d, 1e-9) ** 2
+    u = np.einsum("pk,pkc->pc", w / w.sum(axis=1, keepdims=True), s.displacement_mm[m][i])
     z = s.points_mm[m, 2].max()
     lift = 5e-4 * float(np.ptp(s.points_mm, axis=0).max())
-    return np.column_stack([pts, np.full(len(pts), z + lift)]) + exaggeration * u
+    line = np.column_stack([pts, np.full(len(pts), z + lift)]) + exaggeration * u
+    # no line over a cut-away: split where the face is missing (no node near the point)
+    on = d[:, 0] < 3.0 * float(np.median(d[:, 0])) + 1e-9
+    runs, start = [], None
+    for k, ok in enumerate(np.append(on, False)):
+        if ok and start is None:
+            start = k
+        elif not ok and start is not None:
+            if k - start > 1:
+                runs.append(line[start:k])
+            start = None
+    return runs or None
 
 
 def _clim(surfaces) -> tuple[float, float]:
@@ -293,6 +304,14 @@ def _camera(plotter, s: BlankSurface, elevation_deg: float = 30.0, azimuth_deg: 
     plotter.camera.view_angle = 25.0
     plotter.reset_camera()
     plotter.camera.zoom(zoom)
+    # the title sits at the top and the colour bar at the bottom: move the blank up a little
+    cam = plotter.camera
+    fp, pos, up = (np.array(v, float) for v in (cam.focal_point, cam.position, cam.up))
+    view = fp - pos
+    up = up - view * (up @ view) / (view @ view)
+    up /= np.linalg.norm(up)
+    shift = -0.06 * float(np.linalg.norm(hi - lo)) * up
+    cam.focal_point, cam.position = tuple(fp + shift), tuple(pos + shift)
 
 
 def _view(plotter, pv, s: BlankSurface, exaggeration: float, clim, title: str, *,
@@ -315,15 +334,14 @@ def _view(plotter, pv, s: BlankSurface, exaggeration: float, clim, title: str, *
     if len(tris["cut"]):
         plotter.add_mesh(_polydata(pv, P, tris["cut"]), color="#d9c6a0", smooth_shading=False,
                          ambient=0.35, diffuse=0.65)
-    allp = _polydata(pv, P, s.triangles)
+    allp = pv.PolyData(P, np.column_stack([np.full(len(s.triangles), 3), s.triangles]).ravel())
     edges = allp.extract_feature_edges(feature_angle=35.0, boundary_edges=False, manifold_edges=False,
                                        non_manifold_edges=False)
     if edges.n_points:
         plotter.add_mesh(edges, color="#30343a", line_width=1.0, opacity=0.7)
     if box_mm is not None:
-        line = _front_box(s, exaggeration, box_mm)
-        if line is not None:
-            plotter.add_mesh(pv.lines_from_points(line), color="white", line_width=2.5)
+        for line in _front_box(s, exaggeration, box_mm) or []:
+            plotter.add_mesh(pv.lines_from_points(line), color="white", line_width=4.0)
     plotter.add_text(title, position="upper_left", font_size=13, color="black", font="arial")
     plotter.add_axes(xlabel="x", ylabel="y", zlabel="z", line_width=4, color="black",
                      viewport=(0.0, 0.0, 0.13, 0.22))
@@ -413,6 +431,7 @@ def render_deformed_blank(mesh, result, path, *, exaggeration: float | None = No
     p = pv.Plotter(off_screen=True, shape=(1, len(views)), window_size=(w if len(views) > 1 else w // 2, h),
                    border=False)
     p.set_background("white")
+    p.enable_anti_aliasing("ssaa")
     pvt = _pv_text(result)
     for i, (sv, sub) in enumerate(views):
         p.subplot(0, i)
@@ -447,6 +466,7 @@ def render_comparison(mesh, results: list, labels: list[str], path, *,
     m = max(abs(lo), abs(hi))
     p = pv.Plotter(off_screen=True, shape=(1, len(surfs)), window_size=window_size, border=False)
     p.set_background("white")
+    p.enable_anti_aliasing("ssaa")
     for i, (s, lab) in enumerate(zip(surfs, labels)):
         p.subplot(0, i)
         head = f"{title}\n{lab}" if (title and i == 0) else lab
@@ -661,8 +681,9 @@ class StudyRender:
         if self.proc.returncode != 0:
             rc = self.proc.returncode
             why = (f"signal {-rc} (VTK found no usable OpenGL back-end?)" if rc < 0 else f"exit code {rc}")
-            tail = " | ".join(line.strip()[:200] for line in err.strip().splitlines()[-3:])
-            return self._fail(f"the render process failed with {why}: {tail}")
+            msgs = _last_messages(err)
+            gl = rc < 0 or any(k in msgs for k in ("OpenGL", "EGL", "OSMesa", "X11", "RenderUnavailable"))
+            return self._fail(f"the render process failed with {why}: {msgs}", gl)
         try:
             done = json.loads(stdout.decode().strip().splitlines()[-1])
         except (ValueError, IndexError):
@@ -671,15 +692,32 @@ class StudyRender:
         res["error"] = None
         return res
 
-    def _fail(self, why: str) -> dict:
-        msg = (f"3-D render of the deformed blank unavailable: {why}. The rest of the run is "
-               "unaffected. Off-screen rendering needs Mesa's EGL or OSMesa (Debian: apt-get install "
-               "libegl1 libgl1-mesa-dri; scripts/offscreen-gl), see pipeline/render3d.py.")
-        log.warning(msg)
-        print(f"warning: {msg}", file=sys.stderr, flush=True)
+    def _fail(self, why: str, opengl: bool = True) -> dict:
+        msg = f"3-D render of the deformed blank unavailable: {why}. The rest of the run is unaffected."
+        if opengl:
+            msg += (" Off-screen rendering needs Mesa's EGL or OSMesa (Debian: apt-get install "
+                    "libegl1 libgl1-mesa-dri; scripts/offscreen-gl), see pipeline/render3d.py.")
+        if log.hasHandlers():
+            log.warning(msg)
+        else:
+            print(f"warning: {msg}", file=sys.stderr, flush=True)
         res = {f: None for f in self.renders}
         res["error"] = msg
         return res
+
+
+def _last_messages(err: str, n: int = 2) -> str:
+    """The last distinct messages of a child's stderr, without VTK's log prefixes and colours."""
+    import re
+
+    out = []
+    for line in err.splitlines():
+        line = re.sub(r"\x1b\[[0-9;]*m", "", line).strip()
+        if "WARN|" in line or "ERR|" in line:
+            line = line.split("|", 1)[1].strip()
+        if line and line not in out:
+            out.append(line[:200])
+    return " | ".join(out[-n:]) or "no message"
 
 
 def _notice_png(path: Path, message: str):

@@ -86,7 +86,7 @@ def test_render_png_offscreen(coarse_case, tmp_path):
     assert (np.ptp(rgb, axis=1) < 0.05).mean() > 0.05
 
 
-def test_failed_render_is_a_warning_not_an_error(tmp_path, capsys):
+def test_failed_render_is_a_warning_not_an_error(tmp_path, capsys, caplog):
     # a child that fails (here: an invalid mesh size) must not raise in the caller
     from types import SimpleNamespace
 
@@ -95,7 +95,7 @@ def test_failed_render_is_a_warning_not_an_error(tmp_path, capsys):
     h = render3d.start_study_render(cases, tmp_path)
     res = h.result()
     assert res["error"] and "unavailable" in res["error"] and res["blank_3d.png"] is None
-    assert "unavailable" in capsys.readouterr().err
+    assert "unavailable" in capsys.readouterr().err + caplog.text  # warned (log or stderr)
     figs = h.figures()  # the report gets a notice instead of the render
     (heading, path), = figs.values()
     assert "3-D" in heading and path.exists()
