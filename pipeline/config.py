@@ -333,7 +333,7 @@ class ProfileSpec:
                         raise ConfigError(key, mas, f"unknown pixel scale (allowed: {p.allowed})")
             object.__setattr__(self, key, axis)
         defs = self.deformation
-        defs = [defs] if isinstance(defs, (str, Mapping, CaseSelector)) or defs is None else list(defs)
+        defs = list(defs) if isinstance(defs, (list, tuple)) else [defs]
         if not defs:
             raise ConfigError("deformation", [], 'empty list; give "perfect" and/or FEA case selectors')
         out = []
@@ -396,8 +396,13 @@ def _file_name(path: str, value) -> str:
     return value
 
 
+def _set_name(value) -> None:
+    if not isinstance(value, str) or not value:
+        raise ConfigError("set", value, "must be the (non-empty) set name of [[profiles]] tables")
+
+
 def _strings(path: str, value) -> tuple:
-    value = [value] if isinstance(value, str) else list(value)
+    value = list(value) if isinstance(value, (list, tuple)) else [value]
     for i, v in enumerate(value):
         if not isinstance(v, str):
             raise ConfigError(f"{path}[{i}]", v, "must be a string")
@@ -405,7 +410,7 @@ def _strings(path: str, value) -> tuple:
 
 
 def _selectors(path: str, value) -> tuple:
-    value = [value] if isinstance(value, (Mapping, CaseSelector)) else list(value)
+    value = list(value) if isinstance(value, (list, tuple)) else [value]
     if not value:
         raise ConfigError(path, [], "empty list; give at least one FEA case selector")
     out = []
@@ -451,10 +456,12 @@ class PsfFigure:
         _file_name("file", self.file)
         object.__setattr__(self, "case", _selectors("case", self.case)[0])
         lines = []
-        for i, line in enumerate(self.lines):
+        for i, line in enumerate(self.lines if isinstance(self.lines, (list, tuple)) else [self.lines]):
             if isinstance(line, Mapping):
                 check_keys(line, ("grating", "wavelength_um"), f"lines[{i}]")
                 line = (line.get("grating"), line.get("wavelength_um"))
+            if not (isinstance(line, (list, tuple)) and len(line) == 2):
+                raise ConfigError(f"lines[{i}]", line, "must be a table {grating = ..., wavelength_um = ...}")
             try:
                 g = parse_axis(f"lines[{i}].grating", line[0], "grating", PROFILE_KEYS["grating"])[0]
                 wl = float(parse_axis(f"lines[{i}].wavelength_um", line[1], "", PROFILE_KEYS["wavelength_um"])[0])
@@ -482,6 +489,7 @@ class ProfileFigure:
 
     def __post_init__(self):
         _file_name("file", self.file)
+        _set_name(self.set)
         if self.grating:
             object.__setattr__(self, "grating", parse_axis("grating", self.grating, "grating",
                                                            PROFILE_KEYS["grating"])[0])
@@ -500,6 +508,7 @@ class CompareFigure:
 
     def __post_init__(self):
         _file_name("file", self.file)
+        _set_name(self.set)
         parse_axis("pixel_scale_mas", self.pixel_scale_mas, "pixel_scale_mas", PROFILE_KEYS["pixel_scale_mas"])
 
 
@@ -680,7 +689,7 @@ def _groups(fea: dict) -> tuple:
             groups.append(FEAGroup(t.get("name", ""), axes))
         except ConfigError as exc:
             root = re.split(r"[.\[]", exc.path)[0]
-            if root and root not in own and "cases" in fea:
+            if root and root not in t and "cases" in fea:
                 raise ConfigError(f"fea.{exc.path}", exc.value, f"{exc.problem} (with {path})") from None
             raise exc.within(path) from None
     return tuple(groups)
@@ -689,9 +698,9 @@ def _groups(fea: dict) -> tuple:
 def _figure(i: int, t: dict):
     path = f"figures[{i}]"
     kind = t.get("kind")
-    if kind not in FIGURE_KINDS:
+    if not isinstance(kind, str) or kind not in FIGURE_KINDS:
         raise ConfigError(f"{path}.kind", kind if "kind" in t else ..., f"{'unknown' if 'kind' in t else 'missing'} "
-                          f"figure kind{closest(kind, FIGURE_KINDS) if kind else ''} "
+                          f"figure kind{closest(kind, FIGURE_KINDS) if isinstance(kind, str) else ''} "
                           f"(allowed: {', '.join(FIGURE_KINDS)})")
     check_keys(t, _FIG_KEYS[kind], path)
     if "file" not in t:

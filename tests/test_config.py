@@ -198,3 +198,38 @@ def test_every_shipped_toml_is_valid_toml():
     for name in [*list_presets(), "example"]:
         path = preset_path(name) if name != "example" else preset_path("paper_default").with_name("example.toml")
         tomllib.loads(path.read_text())
+
+
+def _leaf_paths(node, path=()):
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _leaf_paths(v, (*path, k))
+    elif isinstance(node, list) and node and all(isinstance(x, dict) for x in node):
+        for i, v in enumerate(node):
+            yield from _leaf_paths(v, (*path, i))
+    else:
+        yield path
+
+
+def test_any_wrong_value_anywhere_gives_a_one_line_config_error():
+    """Every key of the example replaced by wrong types/shapes or removed: a ConfigError or a
+    valid config, never another exception."""
+    import copy
+
+    from pipeline.config import study_config_from_dict
+
+    base = tomllib.loads(example_config_text())
+    for path in _leaf_paths(base):
+        for value in (3, "x", [], {}, [[1]], [{"a": 1}], ...):
+            data = copy.deepcopy(base)
+            node = data
+            for k in path[:-1]:
+                node = node[k]
+            if value is ...:
+                del node[path[-1]]
+            else:
+                node[path[-1]] = value
+            try:
+                study_config_from_dict(data, "x.toml")
+            except ConfigError as exc:
+                assert "\n" not in str(exc) and str(exc).startswith("x.toml: "), (path, value, str(exc))
