@@ -683,7 +683,7 @@ class StudyRender:
             why = (f"signal {-rc} (VTK found no usable OpenGL back-end?)" if rc < 0 else f"exit code {rc}")
             msgs = _last_messages(err)
             gl = rc < 0 or any(k in msgs for k in ("OpenGL", "EGL", "OSMesa", "X11", "RenderUnavailable"))
-            return self._fail(f"the render process failed with {why}: {msgs}", gl)
+            return self._fail(f"the render process failed with {why}: {msgs.rstrip('.')}", gl)
         try:
             done = json.loads(stdout.decode().strip().splitlines()[-1])
         except (ValueError, IndexError):
