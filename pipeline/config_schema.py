@@ -230,6 +230,10 @@ def parse_axis(path: str, raw: object, name: str, p: Param) -> tuple:
     ConfigError
         Empty list or range, wrong type, unknown choice, repeated value.
     """
+    if hasattr(raw, "tolist") and not isinstance(raw, str):  # NumPy arrays and scalars from Python callers
+        raw = raw.tolist()
+    if isinstance(raw, tuple):
+        raw = list(raw)
     if isinstance(raw, dict):
         values = _range(path, raw, name, p)
     elif isinstance(raw, list):
