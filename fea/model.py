@@ -335,11 +335,12 @@ class PreparedBlank:
         if not couplings:
             return None
         n = self.ndof
+        parts = [ops.coupling_operator(t) for t, ops in couplings]
 
         def apply(v_free):
             v = np.zeros(n)
             v[free] = v_free
-            return sum(ops.apply_coupling(t, v) for t, ops in couplings)[free]
+            return sum(op(v) for op in parts)[free]
 
         return apply
 

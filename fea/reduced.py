@@ -57,6 +57,7 @@ class FilmPolynomial:
 
     def __post_init__(self):
         self._local = [self.ops.local_stiffness(s * T_REF_MM, self.offset) for s in _NODES]
+        self._coupling = [self.ops.coupling_operator(s * T_REF_MM) for s in _NODES] if self.offset else []
         # load per unit mismatch strain, coefficients of (t/T_REF)^k, k = 1..4
         samples = np.array([self.ops.load(s * T_REF_MM, 1.0, self.offset) for s in _NODES])
         self.load_coeffs = _VINV @ samples
@@ -64,7 +65,7 @@ class FilmPolynomial:
     def _apply_at(self, i: int, V: np.ndarray) -> np.ndarray:
         out = self._local[i] @ V
         if self.offset:
-            out = out + self.ops.apply_coupling(_NODES[i] * T_REF_MM, V)
+            out = out + self._coupling[i](V)
         return out
 
     def stiffness_coeffs_apply(self, V: np.ndarray) -> np.ndarray:

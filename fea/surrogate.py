@@ -111,16 +111,21 @@ class FEASurrogate:
     def size(self) -> int:
         return self.rb.size
 
-    def coefficients(self, coating: Coating, load: ThermalLoad | None = None):
-        """Reduced coefficients and residual estimate of one case."""
+    def coefficients(self, coating: Coating, load: ThermalLoad | None = None,
+                     stress_scale: float | None = None):
+        """Reduced coefficients and residual estimate of one case.
+
+        ``stress_scale`` defaults to the one the surrogate was trained with; any other
+        value only rescales the load, which the reduced model represents exactly."""
         load = ThermalLoad() if load is None else load
-        eps = self.model.mismatch_strain(self.film, load, self.stress_scale)
+        scale = self.stress_scale if stress_scale is None else stress_scale
+        eps = self.model.mismatch_strain(self.film, load, scale)
         t_mm = {g: t * 1e-3 for g, t in self.model.film_thickness_um(coating).items()}
         a = self.rb.solve(t_mm, eps)
         return a, self.rb.residual_estimate(a, t_mm, eps)
 
     def evaluate(self, coating: Coating, load: ThermalLoad | None = None,
-                 check_domain: bool = True) -> SurrogateResult:
+                 check_domain: bool = True, stress_scale: float | None = None) -> SurrogateResult:
         """Front sag of one case (milliseconds).
 
         Raises
@@ -137,7 +142,7 @@ class FEASurrogate:
         load = ThermalLoad() if load is None else load
         self.model.substrate.check_temperature(load.cold_K, "cold_K")
         self.film.check_temperature(load.cold_K, "cold_K")
-        a, res = self.coefficients(coating, load)
+        a, res = self.coefficients(coating, load, stress_scale)
         sag = replace(self.sag_template, sag_um=self.sag_basis_um @ a,
                       sag_normal_um=self.sag_normal_basis_um @ a)
         return SurrogateResult(sag, res, coating, load)

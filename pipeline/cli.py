@@ -45,8 +45,17 @@ def _cmd_sweep(a) -> int:
             raise SystemExit(f"--param {item!r}: expected NAME=VALUES, e.g. hole_diameter_mm=14,15,16")
         name, text = item.split("=", 1)
         axes[name.strip()] = _values(text)
-    res = run_fea_sweep(axes, a.out, scheduler=a.scheduler, workers=a.workers,
-                        progress=not a.quiet, with_maps=not a.no_maps)
+    if a.surrogate:
+        from pipeline.surrogate_sweep import run_surrogate_sweep
+
+        if a.scheduler is not None or a.workers != 1:
+            raise SystemExit("--surrogate runs in this process (milliseconds per case); "
+                             "drop --scheduler/--workers")
+        res, rows, info = run_surrogate_sweep(axes, a.out, validate=a.validate, tol=a.tol,
+                                              progress=not a.quiet, with_maps=not a.no_maps)
+    else:
+        res = run_fea_sweep(axes, a.out, scheduler=a.scheduler, workers=a.workers,
+                            progress=not a.quiet, with_maps=not a.no_maps)
     cols = ["coverage", "t0_um", "polish"] + [k for k in axes if k not in ("coverage", "t0_um", "polish")]
     print(" ".join(f"{c:>12}" for c in cols + ["pv_center_um", "rms_center_um", "pv_full_um"]))
     for case, out in res:
@@ -55,6 +64,15 @@ def _cmd_sweep(a) -> int:
               " ".join(f"{out[k]:12.4f}" for k in ("pv_center_um", "rms_center_um", "pv_full_um")))
     print(f"\n{res.n_computed} computed, {res.n_reused} reused; written: "
           f"{Path(a.out) / 'sweep.csv'}, {Path(a.out) / 'sweep.nc'}")
+    if a.surrogate:
+        if info:
+            print(f"surrogate: {info['full_solves']} full solves, basis {info['basis_size']}, worst "
+                  f"residual estimate {info['worst_residual_estimate']:.1e} (tol {info['tol']:.0e}), "
+                  f"built in {info['build_s']:.0f} s")
+        if rows:
+            err = max(abs(r["rel_error"]) for r in rows)
+            print(f"validation against {len(rows)} full solves at random points: max |P/V error| "
+                  f"{100 * err:.3f} % ({Path(a.out) / 'surrogate_validation.csv'})")
     return 0
 
 
@@ -148,6 +166,11 @@ def build_parser() -> argparse.ArgumentParser:
                    "already uses both cores)")
     q.add_argument("--scheduler", default=None, help="Dask scheduler address tcp://host:port")
     q.add_argument("--no-maps", action="store_true", help="do not store sag maps")
+    q.add_argument("--surrogate", action="store_true", help="evaluate a reduced-basis surrogate trained "
+                   "on the sweep's t0/polish/coverage box (ms per case; for hundreds of cases)")
+    q.add_argument("--validate", type=int, default=3, help="with --surrogate: random points solved in "
+                   "full to measure its error (default 3)")
+    q.add_argument("--tol", type=float, default=2e-3, help="with --surrogate: greedy residual tolerance")
     q.add_argument("--quiet", action="store_true")
     q.set_defaults(func=_cmd_sweep)
 
