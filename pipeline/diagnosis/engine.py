@@ -256,24 +256,30 @@ def _degeneracies(findings, fits, prob, c: Criteria):
 
 def _sign_degeneracies(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria) -> tuple:
     """Signed parameters (null 0, fitted > 2 sigma from 0) whose sign the data cannot tell:
-    the model with that parameter negated (others held, nuisances refitted) scores within ``degenerate_bic``.
+    with that parameter held at its mirror value ``-v`` and the *other* parameters of the
+    finding refitted from the mirrored start (nuisances too), the score is within
+    ``degenerate_bic`` — a profile-likelihood test of the sign.
 
     Physical case: line profiles are integrals along the slit, and the blank and the
     pupil are mirror-symmetric in y, so a footprint shift +y and -y give (nearly) the same
-    profiles; the residual asymmetry comes only from the collimator's oblique terms.
-    Such a parameter is reported with its sign undetermined (``sign_degenerate``)
-    rather than with an arbitrary sign."""
+    profiles; the residual asymmetry comes only from the collimator's oblique terms and
+    the truth's own departures from symmetry. Holding the other parameters at their
+    fitted values (the previous test) scored the mirror with the other parameters still
+    tuned to the original sign: three pupil_y sign flips of the campaign went unflagged
+    (fit -1.6 mm vs truth +1.5 mm). Such a parameter is reported with its sign
+    undetermined (``sign_degenerate``) rather than with an arbitrary sign."""
     out = []
     neff = max(sum(fo.n_eff.values()), 2.0)
     cost = sum(prob.weights[m] ** 2 * fo.rss[m] for m in fo.rss)
+    params = tuple(q for e in finding.effects for q in effect_parameters(LIBRARY[e], _blanks_for(LIBRARY[e], prob.forwards)))
     for name, v in finding.parameters.items():
-        q = next((q for e in finding.effects for q in effect_parameters(LIBRARY[e], _blanks_for(LIBRARY[e], prob.forwards))
-                  if q.name == name), None)
+        q = next((q for q in params if q.name == name), None)
         if q is None or q.null != 0.0 or not q.lo <= -v <= q.hi:
             continue
         if not abs(v) > 2.0 * finding.uncertainties.get(name, math.inf):
             continue  # consistent with zero: its sign is trivially unknown, nothing to report
-        flip = fit(prob, (), fixed={**finding.parameters, name: -v})
+        others = tuple(o for o in params if o.name != name)
+        flip = fit(prob, others, fixed={name: -v}, start={o.name: finding.parameters[o.name] for o in others})
         cflip = sum(prob.weights[m] ** 2 * flip.rss[m] for m in flip.rss)
         if cost > 0 and neff * math.log(max(cflip, 1e-300) / cost) < c.degenerate_bic:
             out.append(name)
