@@ -3,6 +3,10 @@ injection-recovery campaign. Writes benchmarks/results_diagnosis_raw.json; the
 numbers in results_diagnosis.md were pasted from its output.
 
     .venv/bin/python benchmarks/bench_diagnosis.py [--cases 208] [--workers 2] [--seed 1] [--cache-dir DIR]
+        [--profiles extended|minimal] [--no-scenarios] [--out FILE]
+
+``--profiles``: the campaign's line-profile measurement set
+(:data:`pipeline.diagnosis.campaign.PROFILE_SETS`).
 """
 
 from __future__ import annotations
@@ -13,7 +17,7 @@ import time
 from pathlib import Path
 
 from pipeline.diagnosis import diagnose
-from pipeline.diagnosis.campaign import CampaignConfig, run_campaign
+from pipeline.diagnosis.campaign import PROFILE_SETS, CampaignConfig, run_campaign
 
 HERE = Path(__file__).parent
 SCEN = HERE.parent / "pipeline" / "scenarios"
@@ -25,9 +29,12 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--cache-dir", default=None)
+    ap.add_argument("--profiles", default="extended", choices=sorted(PROFILE_SETS))
+    ap.add_argument("--no-scenarios", action="store_true")
+    ap.add_argument("--out", default=str(HERE / "results_diagnosis_raw.json"))
     a = ap.parse_args(argv)
     out = {"scenarios": {}}
-    for name in ("cryo_astigmatism", "j_repolished", "hk_amplitude"):
+    for name in () if a.no_scenarios else ("cryo_astigmatism", "j_repolished", "hk_amplitude"):
         t = time.perf_counter()
         d = diagnose(SCEN / name / "manifest.toml", cache_dir=a.cache_dir)
         b = d.best
@@ -37,13 +44,15 @@ def main(argv=None):
                                   "ranking": [(f.effect, round(f.delta_bic, 1)) for f in d.findings],
                                   "seconds": time.perf_counter() - t, "timings_s": d.timings_s}
         print(name, json.dumps(out["scenarios"][name], default=float))
-    res = run_campaign(CampaignConfig(n_cases=a.cases, seed=a.seed, workers=a.workers), cache_dir=a.cache_dir)
+    cfg = CampaignConfig(n_cases=a.cases, seed=a.seed, workers=a.workers, profile_specs=PROFILE_SETS[a.profiles])
+    res = run_campaign(cfg, cache_dir=a.cache_dir)
+    res["profile_set"] = a.profiles
     out["campaign"] = res
     s = res["summary"]
     print(json.dumps({k: v for k, v in s.items() if k not in ("per_type", "confusion")}, indent=1, default=float))
     for k, v in s["per_type"].items():
         print(k, v, s["confusion"][k])
-    (HERE / "results_diagnosis_raw.json").write_text(json.dumps(out, indent=1, default=float))
+    Path(a.out).write_text(json.dumps(out, indent=1, default=float))
 
 
 if __name__ == "__main__":

@@ -174,3 +174,45 @@ def test_cli_writes_json_and_html(tmp_path):
     assert "<img" in (tmp_path / "out" / "report.html").read_text()
     assert main(["diagnose", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o2")]) == 2
     assert math.isfinite(f["uncertainties"]["astig_0_um"])
+
+
+class _FakeFinding:
+    def __init__(self, parameters, uncertainties, sign_degenerate=()):
+        self.parameters, self.uncertainties, self.sign_degenerate = parameters, uncertainties, tuple(sign_degenerate)
+
+
+class _FakeDiagnosis:
+    def __init__(self, effect, finding):
+        self._f = {effect: finding}
+
+    def finding(self, effect):
+        return self._f.get(effect)
+
+
+def test_campaign_recovery_rules():
+    """Per-parameter rule (floors), vector rule (norm of the coefficient error over the
+    injected norm = RMS of the WFE error over the injected WFE RMS), sign-degenerate
+    parameters compared by magnitude, error-bar honesty (2 sigma)."""
+    from pipeline.diagnosis.campaign import recovery_errors
+
+    truth = {"coll_coma_um": 0.10, "coll_defocus_um": 0.01, "coll_astig45_um": 0.20}
+    fit = {"coll_coma_um": 0.11, "coll_defocus_um": 0.035, "coll_astig45_um": 0.19}
+    r = recovery_errors(_FakeDiagnosis("collimator_wfe", _FakeFinding(fit, dict.fromkeys(fit, 0.01))),
+                        "collimator_wfe", truth)
+    assert r["per_parameter"] == pytest.approx(0.025 / 0.04)  # defocus: 0.025 off, floor 0.04
+    assert r["vector"] == pytest.approx(math.sqrt(0.01**2 + 0.025**2 + 0.01**2) / math.sqrt(0.1**2 + 0.01**2 + 0.2**2))
+    assert r["vector"] < 0.2 < r["per_parameter"]
+    assert r["within_2sigma"] is False  # defocus 2.5 sigma off
+    # a pupil_y sign flip: counts only if the engine said the sign is undetermined
+    truth = {"pupil_x_mm": 5.0, "pupil_y_mm": 2.0}
+    fit = {"pupil_x_mm": 5.2, "pupil_y_mm": -2.1}
+    flagged = recovery_errors(_FakeDiagnosis("pupil_shift", _FakeFinding(fit, dict.fromkeys(fit, 0.2), ["pupil_y_mm"])),
+                              "pupil_shift", truth)
+    silent = recovery_errors(_FakeDiagnosis("pupil_shift", _FakeFinding(fit, dict.fromkeys(fit, 0.2))), "pupil_shift", truth)
+    assert flagged["vector"] == pytest.approx(math.hypot(0.2, 0.1) / math.hypot(5.0, 2.0)) and flagged["within_2sigma"]
+    assert silent["vector"] > 0.5 and not silent["within_2sigma"]
+    # registration mixes mm and degrees: no vector rule
+    truth = {"reg_dx_mm": 3.0, "reg_dy_mm": 0.0, "reg_rot_deg": 1.0}
+    fit = {"reg_dx_mm": 3.1, "reg_dy_mm": 0.2, "reg_rot_deg": 1.0}
+    r = recovery_errors(_FakeDiagnosis("registration", _FakeFinding(fit, dict.fromkeys(fit, 0.1))), "registration", truth)
+    assert r["vector"] == r["per_parameter"] == pytest.approx(0.2 / 0.5)

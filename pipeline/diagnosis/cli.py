@@ -16,9 +16,10 @@ __all__ = ["register", "main"]
 
 def _run(args) -> int:
     if args.validate:
-        from .campaign import CampaignConfig, run_campaign, write_campaign
+        from .campaign import PROFILE_SETS, CampaignConfig, run_campaign, write_campaign
 
-        cfg = CampaignConfig(n_cases=args.cases, seed=args.seed, workers=args.workers)
+        cfg = CampaignConfig(n_cases=args.cases, seed=args.seed, workers=args.workers,
+                             profile_specs=PROFILE_SETS[args.profiles])
         res = run_campaign(cfg, cache_dir=args.cache_dir)
         path = write_campaign(res, args.out)
         print(json.dumps(res["summary"], indent=1))
@@ -50,6 +51,9 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cases", type=int, default=200, help="campaign cases (with --validate)")
     p.add_argument("--seed", type=int, default=1, help="campaign seed (with --validate)")
     p.add_argument("--workers", type=int, default=2, help="campaign worker processes (with --validate)")
+    p.add_argument("--profiles", default="extended", choices=("extended", "minimal"),
+                   help="campaign line-profile measurement set (with --validate): extended = J 1.25 um at "
+                        "250/100/25 mas + 1.10/1.175/1.40 um at 25 mas; minimal = J 1.25 um at 250/25 mas + 1.175 um at 25 mas")
 
 
 def register(subparsers) -> argparse.ArgumentParser:

@@ -75,6 +75,12 @@ class Effect:
         One copy of the parameter per grating blank in the data.
     description : str
         Physical meaning, for reports.
+    vector : bool
+        The parameters are the components of one vector in a common unit whose norm is
+        the effect's physical magnitude: coefficients of RMS-normalised (orthonormal)
+        Zernike terms, whose norm is the RMS of the added surface or wavefront error, or a
+        displacement in mm. The campaign also judges recovery on the vector
+        (:func:`pipeline.diagnosis.campaign.recovery_errors`).
     """
 
     name: str
@@ -82,12 +88,14 @@ class Effect:
     parameters: tuple[Parameter, ...]
     per_blank: bool = False
     description: str = ""
+    vector: bool = False
 
 
 LIBRARY: dict[str, Effect] = {e.name: e for e in (
     Effect("astigmatism", ("surface",),
            (Parameter("astig_0_um", 0.0, -1.0, 1.0, floor=0.02), Parameter("astig_45_um", 0.0, -1.0, 1.0, floor=0.02)),
-           description="mount-induced surface astigmatism (Zernike (2,2) and (2,-2), RMS-normalised over the aperture)"),
+           description="mount-induced surface astigmatism (Zernike (2,2) and (2,-2), RMS-normalised over the aperture)",
+           vector=True),
     Effect("amplitude_scale", ("surface", "line_profile"),
            (Parameter("scale", 1.0, 0.3, 3.0, floor=0.05),), per_blank=True,
            description="deformation amplitude differs (NiP thickness or polish; e.g. a re-polished blank)"),
@@ -102,11 +110,13 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
     Effect("pupil_shift", ("line_profile",),
            (Parameter("pupil_x_mm", 0.0, -10.0, 10.0, (-7.0, -3.5, 0.0, 3.5, 7.0), floor=1.0),
             Parameter("pupil_y_mm", 0.0, -10.0, 10.0, (0.0, 4.5), floor=3.0)),
-           description="beam footprint offset on the grating (x dispersion, y ruling), common to all profiles"),
+           description="beam footprint offset on the grating (x dispersion, y ruling), common to all profiles",
+           vector=True),
     Effect("collimator_wfe", ("line_profile",),
            (Parameter("coll_coma_um", 0.0, -0.4, 0.4, floor=0.04), Parameter("coll_defocus_um", 0.0, -0.4, 0.4, floor=0.04),
             Parameter("coll_astig45_um", 0.0, -0.4, 0.4, floor=0.06)),
-           description="extra low-order spectrograph WFE (RMS-normalised Zernike over the 110 mm pupil)"),
+           description="extra low-order spectrograph WFE (RMS-normalised Zernike over the 110 mm pupil)",
+           vector=True),
     Effect("slit_width", ("line_profile",),
            (Parameter("slit_image_width_um", NOMINAL_SLIT_UM, 15.0, 45.0, floor=1.0),),
            description="geometric slit image width differs from 27 µm (29 µm for HK, scaled alike)"),
