@@ -1,7 +1,7 @@
 """Benchmark: the paper's 15-case table on the default mesh (wall time, peak memory).
 
-Run on demand (not a test):  .venv/bin/python benchmarks/bench_tables.py
-Writes benchmarks/results_tables.md. Target (issue 2): <= 60 s wall, <= 4 GB peak.
+Run on demand (not a test):  .venv/bin/python benchmarks/bench_tables.py [OUT.md [SIZE BULK]]
+Writes benchmarks/results_tables.md (or OUT.md); SIZE/BULK override the mesh sizes (mm). Target (issue 2): <= 60 s wall, <= 4 GB peak.
 """
 from __future__ import annotations
 
@@ -12,14 +12,16 @@ from pathlib import Path
 from fea.api import prepare
 from fea.calibration import STRESS_SCALE, paper_cases
 from fea.coating import Coating
+from fea.mesh import MeshSpec
 
 
-def main(out: Path | None = None) -> None:
+def main(out: Path | None = None, spec: MeshSpec | None = None) -> None:
     out = Path(__file__).with_name("results_tables.md") if out is None else out
+    spec = MeshSpec() if spec is None else spec
     t0 = time.perf_counter()
-    model = prepare()
+    model = prepare(mesh=spec)
     t_prep = time.perf_counter() - t0
-    lines = ["# 15-case paper table on the default mesh", "",
+    lines = [f"# 15-case paper table, mesh {spec.size_mm}/{spec.size_bulk_mm} mm", "",
              f"Prepare (mesh from cache or gmsh, bulk stiffness): {t_prep:.1f} s, {model.ndof} DOFs.", "",
              ("| case | P/V_center (µm) | assembly (s) | solve (s) | CG iterations | initial residual "
               "| preconditioner | reduced basis |"), "|---|---|---|---|---|---|---|---|"]
@@ -42,4 +44,5 @@ def main(out: Path | None = None) -> None:
 if __name__ == "__main__":
     import sys
 
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else None)
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else None,
+         MeshSpec(float(sys.argv[2]), float(sys.argv[3])) if len(sys.argv) > 3 else None)

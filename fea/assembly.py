@@ -181,7 +181,7 @@ class FilmOperators:
         """v ↦ (non-local part) v for thickness ``t`` (mm); the t-weighted sparse sums are
         formed once here, not on every product (they cost ~5x the products themselves)."""
         X, Y, Z = self.coupling_parts(t)
-        R, RT, ZT = self.R, self.R.T.tocsr(), Z.T.tocsr()
+        R, RT, ZT = self.R, self.R.T, Z.T  # transposed views: CSC products cost the same
 
         def apply(v: np.ndarray) -> np.ndarray:
             Rv = R @ v

@@ -20,7 +20,7 @@ import numpy as np
 
 from optics.sagmap import Region, SagMap, resolve_region
 
-__all__ = ["FrontSag", "front_sag"]
+__all__ = ["FrontSag", "FrontSampler", "front_sag"]
 
 
 @dataclass(frozen=True)
@@ -126,6 +126,47 @@ def _mirror(x, y, vals, w, flag, planes):
     return _dedupe(x, y, vals, w, flag)
 
 
+class FrontSampler:
+    """Front-face sag of any displacement field on one mesh (geometry work done once).
+
+    The lattice points, their P2 basis values, normals, area weights and the
+    mirror/deduplication map depend on the mesh only; each call is then one
+    contraction. Calling it is equivalent to :func:`front_sag`.
+
+    Parameters
+    ----------
+    mesh : skfem mesh with a ``front`` boundary.
+    basis : scalar P2 CellBasis on ``mesh``.
+    symmetry_planes : iterable of str
+        ``sym_x``/``sym_y`` present means the face is mirrored about x=0 / y=0.
+    """
+
+    def __init__(self, mesh, basis, symmetry_planes):
+        from skfem import ElementTetP2, FacetBasis
+
+        X, node = _lattice(4)
+        k = X.shape[1]
+        fb = FacetBasis(mesh, ElementTetP2(), facets=mesh.boundaries["front"],
+                        quadrature=(X, np.full(k, 0.5 / k)))
+        self._ed = fb.element_dofs  # (10, nf)
+        self._phi = np.stack([np.asarray(fb.basis[a][0]) for a in range(fb.Nbfun)])  # (10, nf, k)
+        xyz = fb.mapping.G(fb.X, find=fb.find)  # (3, nf, k)
+        self._n = np.asarray(fb.normals)  # (3, nf, k)
+        area = fb.dx.sum(axis=1)  # (nf,) facet areas (weights sum to the area)
+        w = np.repeat(area[:, None] / k, k, axis=1)
+        flag = np.broadcast_to(node[None, :], w.shape)
+        raw = np.arange(w.size, dtype=float)  # carried through mirror + dedupe as a "value"
+        self.x_mm, self.y_mm, (take,), self.weight_mm2, self.is_node = _mirror(
+            xyz[0].ravel(), xyz[1].ravel(), [raw], w.ravel(), flag.ravel(), symmetry_planes)
+        self._take = take.astype(np.int64)
+
+    def __call__(self, displacement_mm: np.ndarray) -> FrontSag:
+        u = np.einsum("afk,iaf->ifk", self._phi, displacement_mm[:, self._ed])  # (3, nf, k)
+        sag = 1e3 * u[2].ravel()[self._take]
+        sag_n = 1e3 * np.einsum("ifk,ifk->fk", u, self._n).ravel()[self._take]
+        return FrontSag(self.x_mm, self.y_mm, sag, sag_n, self.weight_mm2, self.is_node)
+
+
 def front_sag(mesh, basis, displacement_mm: np.ndarray, symmetry_planes) -> FrontSag:
     """Evaluate the front-face sag of a nodal P2 displacement field.
 
@@ -137,21 +178,4 @@ def front_sag(mesh, basis, displacement_mm: np.ndarray, symmetry_planes) -> Fron
     symmetry_planes : iterable of str
         ``sym_x``/``sym_y`` present means the face is mirrored about x=0 / y=0.
     """
-    from skfem import ElementTetP2, FacetBasis
-
-    X, node = _lattice(4)
-    k = X.shape[1]
-    fb = FacetBasis(mesh, ElementTetP2(), facets=mesh.boundaries["front"], quadrature=(X, np.full(k, 0.5 / k)))
-    ed = fb.element_dofs  # (10, nf)
-    phi = np.stack([np.asarray(fb.basis[a][0]) for a in range(fb.Nbfun)])  # (10, nf, k)
-    u = np.einsum("afk,iaf->ifk", phi, displacement_mm[:, ed])  # (3, nf, k)
-    xyz = fb.mapping.G(fb.X, find=fb.find)  # (3, nf, k)
-    n = np.asarray(fb.normals)  # (3, nf, k)
-    area = fb.dx.sum(axis=1)  # (nf,) facet areas (weights sum to the area)
-    w = np.repeat(area[:, None] / k, k, axis=1)
-    sag = 1e3 * u[2]
-    sag_n = 1e3 * np.einsum("ifk,ifk->fk", u, n)
-    flag = np.broadcast_to(node[None, :], sag.shape)
-    x, y, (sag, sag_n), w, flag = _mirror(xyz[0].ravel(), xyz[1].ravel(), [sag.ravel(), sag_n.ravel()],
-                                          w.ravel(), flag.ravel(), symmetry_planes)
-    return FrontSag(x, y, sag, sag_n, w, flag)
+    return FrontSampler(mesh, basis, symmetry_planes)(displacement_mm)

@@ -26,7 +26,7 @@ from .coating import COVERAGES, Coating
 from .materials import NIP_HIGH_P, Material, get_material
 from .model import PreparedBlank, ThermalLoad
 from .reduced import ReducedBasis
-from .surface import FrontSag, front_sag
+from .surface import FrontSag
 
 __all__ = ["FEASurrogate", "SurrogateDomain", "build_surrogate"]
 
@@ -106,10 +106,45 @@ class FEASurrogate:
     sag_basis_um: np.ndarray  # (n_samples, m): sag of each basis vector
     sag_normal_basis_um: np.ndarray
     build_info: dict = field(default_factory=dict)
+    _region_ops: dict = field(default_factory=dict, repr=False)
 
     @property
     def size(self) -> int:
         return self.rb.size
+
+    def _region_operator(self, region: str):
+        """Detrended sag basis over ``region`` and its weighted Gram matrix.
+
+        The piston/tilt removal of :meth:`FrontSag.detrended` is a linear projection, so
+        it is applied once to the basis: a case's P/V is then max − min of one
+        (n_region × m) product and its RMS an m × m quadratic form.
+        """
+        if region not in self._region_ops:
+            t = self.sag_template
+            m = t._sel(region)
+            S, w = self.sag_basis_um[m], t.weight_mm2[m]
+            A = np.column_stack([np.ones(m.sum()), t.x_mm[m], t.y_mm[m]])
+            sw = np.sqrt(w)[:, None]
+            C, *_ = np.linalg.lstsq(A * sw, S * sw, rcond=None)
+            D = S - A @ C
+            self._region_ops[region] = (D, D.T @ (w[:, None] * D), D.T @ w, w.sum())
+        return self._region_ops[region]
+
+    def statistics(self, coating: Coating, load: ThermalLoad | None = None,
+                   stress_scale: float | None = None, regions=("center", "full")) -> dict:
+        """P/V and RMS (µm, piston/tilt removed per region) of one case, without forming the sag.
+
+        Returns ``{"pv_<region>_um": ..., "rms_<region>_um": ..., "residual_estimate": ...}``;
+        equal to ``evaluate(...).sag.pv_um(region)`` / ``rms_um(region)`` to rounding.
+        """
+        a, res = self.coefficients(coating, load, stress_scale)
+        out = {"residual_estimate": res}
+        for region in regions:
+            D, G, c, W = self._region_operator(region)
+            d = D @ a
+            out[f"pv_{region}_um"] = float(d.max() - d.min())
+            out[f"rms_{region}_um"] = float(np.sqrt(max(a @ G @ a / W - (c @ a / W) ** 2, 0.0)))
+        return out
 
     def coefficients(self, coating: Coating, load: ThermalLoad | None = None,
                      stress_scale: float | None = None):
@@ -242,7 +277,7 @@ def build_surrogate(model: PreparedBlank, domain: SurrogateDomain = SurrogateDom
     # sag of each basis vector (the sag is linear in the displacement)
     cols, ncols, template = [], [], None
     for q in rb.Q.T:
-        s = front_sag(model.mesh, model.basis, q.reshape(-1, 3).T, model.symmetry_planes)
+        s = model.front_sampler()(q.reshape(-1, 3).T)
         template = s if template is None else template
         cols.append(s.sag_um)
         ncols.append(s.sag_normal_um)

@@ -85,13 +85,10 @@ class SurrogateCaseRunner:
     def __call__(self, params: dict) -> dict:
         s = self.build()
         _, _, _, coating, _, load, scale = _split(params)
-        r = s.evaluate(coating, load, stress_scale=scale)
-        sag = r.sag
-        out = {"pv_center_um": sag.pv_um("center"), "rms_center_um": sag.rms_um("center"),
-               "pv_full_um": sag.pv_um("full"), "rms_full_um": sag.rms_um("full"),
-               "quilt_direction_um": _quilt_direction_um(sag, self.blank),
-               "residual_estimate": r.residual_estimate, "surrogate_basis": s.size,
-               "stress_scale_used": float(scale)}
+        r = s.evaluate(coating, load, stress_scale=scale)  # checks the domain and temperatures
+        out = s.statistics(coating, load, stress_scale=scale)
+        out.update(quilt_direction_um=_quilt_direction_um(r.sag, self.blank), surrogate_basis=s.size,
+                   stress_scale_used=float(scale))
         if self.with_maps:
             a, _ = s.coefficients(coating, load, stress_scale=scale)
             out["sag_um"] = (("y_mm", "x_mm"), np.tensordot(a, self._maps, axes=1).astype(np.float32))

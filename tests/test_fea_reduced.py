@@ -85,6 +85,12 @@ def test_surrogate_matches_full_solves(model):
         model.release_preconditioner()
     for r in rows:
         assert abs(r["rel_error"]) < 5e-3, r
+    c = Coating.symmetric(130, 0.8, "holes")
+    sag = s.evaluate(c).sag
+    st = s.statistics(c)
+    for region in ("center", "full"):
+        assert st[f"pv_{region}_um"] == pytest.approx(sag.pv_um(region), rel=1e-9)
+        assert st[f"rms_{region}_um"] == pytest.approx(sag.rms_um(region), rel=1e-7)
     # temperature enters only through the load: P/V scales with the mismatch strain
     c = Coating.symmetric(150, 0.75, "all")
     cold = ThermalLoad(cold_K=150.0)
