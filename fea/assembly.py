@@ -167,6 +167,33 @@ class FilmOperators:
         A0C = c1 * self.A0C + c2 * self.A0Ck
         return (t * self.A00 + c1 * self.A00k + A0C + A0C.T + c2 * self.ACC + c3 * self.ACCk).tocsr()
 
+    def apply_power_terms(self, V: np.ndarray, offset: bool = True) -> np.ndarray:
+        """Coefficients of t, t², t³, t⁴ of the whole film stiffness applied to ``V``.
+
+        ``local_stiffness(t) V + apply_coupling(t, V) = Σ_k t^k terms[k-1]``, formed from
+        products with the stored matrices only (no new matrices: at the default mesh the
+        t-weighted sums would cost ~3 GB per set of four thicknesses). Tested against the
+        two methods it expands (tests/test_fea_reduced.py).
+
+        Returns
+        -------
+        ndarray, shape (4, *V.shape)
+        """
+        out = np.zeros((4,) + np.shape(V))
+        A00V = self.A00 @ V
+        out[0] = A00V
+        if not offset:
+            return out
+        RV = self.R @ V
+        RT = self.R.T
+        A00kV, A0CV, A0CkV = self.A00k @ V, self.A0C @ V, self.A0Ck @ V
+        A00RV = self.A00 @ RV
+        out[1] = 0.5 * (self.A00k @ V + A0CV + self.A0C.T @ V) + 0.5 * (A00RV + RT @ A00V)
+        out[2] = (A0CkV + self.A0Ck.T @ V + self.ACC @ V) / 3 \
+            + (self.A00k @ RV + RT @ (A00kV + A00RV + A0CV) + self.A0C.T @ RV) / 3
+        out[3] = 0.25 * (self.ACCk @ V) + 0.25 * (RT @ (self.A00k @ RV + A0CkV) + self.A0Ck.T @ RV)
+        return out
+
     def coupling_parts(self, t: float):
         """(X, Y, Z) with the non-local film stiffness = X R + Rᵀ X + Rᵀ Y R + Rᵀ Z + Zᵀ R."""
         c1, c2, c3 = t**2 / 2, t**3 / 3, t**4 / 4

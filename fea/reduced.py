@@ -9,10 +9,10 @@ With the mesh fixed, the system of one coating is
 where g runs over the plated surface groups (front/back faces, hole walls, side
 faces), t_g is the group's film thickness and ε_m the mismatch strain: the film's
 through-thickness integrals are exact polynomials of degree ≤ 4 in t
-(:class:`fea.assembly.FilmOperators`). The coefficient operators are not written out
-a second time here: they are recovered from the film operators themselves by
-evaluating them at four thicknesses and inverting the (exact) Vandermonde system,
-so this module cannot drift from the physics in :mod:`fea.assembly`.
+(:class:`fea.assembly.FilmOperators`). The coefficients are not written out here: the
+stiffness ones come from :meth:`fea.assembly.FilmOperators.apply_power_terms` (tested
+against ``local_stiffness`` + ``apply_coupling``), the load ones from evaluating
+``load`` at four thicknesses and inverting the exact Vandermonde system.
 
 A :class:`ReducedBasis` keeps an orthonormal basis Q of displacement fields and the
 projected pieces QᵀK_bQ, QᵀK_{g,k}Q, Qᵀf_{g,k}; the Galerkin solution for any
@@ -56,22 +56,15 @@ class FilmPolynomial:
     offset: bool = True
 
     def __post_init__(self):
-        self._local = [self.ops.local_stiffness(s * T_REF_MM, self.offset) for s in _NODES]
-        self._coupling = [self.ops.coupling_operator(s * T_REF_MM) for s in _NODES] if self.offset else []
         # load per unit mismatch strain, coefficients of (t/T_REF)^k, k = 1..4
         samples = np.array([self.ops.load(s * T_REF_MM, 1.0, self.offset) for s in _NODES])
         self.load_coeffs = _VINV @ samples
 
-    def _apply_at(self, i: int, V: np.ndarray) -> np.ndarray:
-        out = self._local[i] @ V
-        if self.offset:
-            out = out + self._coupling[i](V)
-        return out
-
     def stiffness_coeffs_apply(self, V: np.ndarray) -> np.ndarray:
         """K_{g,k} V for k = 1..4 (coefficients of (t/T_REF)^k), shape (4, *V.shape)."""
-        samples = np.array([self._apply_at(i, V) for i in range(len(_NODES))])
-        return np.tensordot(_VINV, samples, axes=1)
+        terms = self.ops.apply_power_terms(V, self.offset)
+        scale = T_REF_MM ** np.arange(1, 5)
+        return terms * scale.reshape((4,) + (1,) * (terms.ndim - 1))
 
 
 def powers(t_mm: float) -> np.ndarray:
