@@ -223,7 +223,7 @@ def _restore(rb: ReducedBasis, state: dict) -> None:
 def build_surrogate(model: PreparedBlank, domain: SurrogateDomain = SurrogateDomain(),
                     film: Material | str = NIP_HIGH_P, stress_scale: float = 1.0, tol: float = 2e-3,
                     max_solves: int = 24, n_candidates: int = 300, seed: int = 0,
-                    progress=None) -> FEASurrogate:
+                    progress=None, snapshot_rtol: float | None = None) -> FEASurrogate:
     """Greedy reduced-basis construction on ``model`` over ``domain``.
 
     Parameters
@@ -245,8 +245,13 @@ def build_surrogate(model: PreparedBlank, domain: SurrogateDomain = SurrogateDom
         Random candidate points (plus the domain's corners).
     progress : callable, optional
         Called with a dict after each full solve.
+    snapshot_rtol : float, optional
+        Residual to which the training solves are converged; default ``tol / 10``, not below
+        1e-5: a snapshot needs no more accuracy than the basis it joins, and the looser
+        solve saves iterations.
     """
     film = get_material(film)
+    snap_rtol = max(1e-5, tol / 10) if snapshot_rtol is None else snapshot_rtol
     rng = np.random.default_rng(seed)
     cands = domain.corners() + domain.sample(n_candidates, rng)
     rb = model.reduced_basis(film)
@@ -268,7 +273,7 @@ def build_surrogate(model: PreparedBlank, domain: SurrogateDomain = SurrogateDom
             if worst < tol or solves >= max_solves:
                 break
             next_case = cands[i]
-        model.solve(next_case, film, stress_scale=stress_scale)
+        model.solve(next_case, film, stress_scale=stress_scale, rtol=snap_rtol)
         solves += 1
         if progress is not None:
             progress({"solves": solves, "basis": rb.size, "worst_residual": worst,
@@ -285,6 +290,6 @@ def build_surrogate(model: PreparedBlank, domain: SurrogateDomain = SurrogateDom
     _restore(frozen, _freeze(rb))
     info = {"full_solves": solves, "basis_size": rb.size, "worst_residual_estimate": worst,
             "converged": worst < tol, "tol": tol, "build_s": time.perf_counter() - t_start,
-            "residual_history": history, "n_candidates": len(cands)}
+            "residual_history": history, "n_candidates": len(cands), "snapshot_rtol": snap_rtol}
     return FEASurrogate(model, film, stress_scale, domain, frozen, template,
                         np.column_stack(cols), np.column_stack(ncols), info)
