@@ -32,7 +32,7 @@ from .zernike import (
 __all__ = [
     "FitResult", "FourierFit", "BasisCapture", "resolve_terms", "fit_zernike",
     "fit_zernike_map", "fit_fourier", "fit_fourier_points", "compare_bases",
-    "remove_terms", "aperture_geometry",
+    "remove_terms", "aperture_geometry", "fit_zernike_maps", "fit_fourier_maps",
 ]
 
 _TO_NM = {"noll": noll_to_nm, "ansi": ansi_to_nm, "fringe": fringe_to_nm}
@@ -178,7 +178,8 @@ def aperture_geometry(region: Region, x_mm: np.ndarray, y_mm: np.ndarray) -> tup
 
 
 def _solve(A: np.ndarray, d: np.ndarray, what: str) -> tuple[np.ndarray, float]:
-    """Least squares ``A (N, k) c = d``; raises when under-determined.
+    """Least squares ``A (N, k) c = d``; raises when under-determined. ``d`` may be
+    ``(N, K)`` (K data vectors, one factorisation): ``c`` is then ``(k, K)``.
 
     Well-conditioned problems (the usual case) go through the k x k normal equations
     plus one step of iterative refinement: ~30x faster than a QR/SVD of a tall
@@ -191,9 +192,10 @@ def _solve(A: np.ndarray, d: np.ndarray, what: str) -> tuple[np.ndarray, float]:
         raise ValueError(f"{what}: {n_pts} valid points for {k} terms; need at least {k}")
     G = A.T @ A
     w, V = np.linalg.eigh(G)
+    wd = w.reshape(-1, *([1] * (d.ndim - 1)))  # d may hold several data vectors as columns
     if w[0] > 0 and w[-1] / w[0] < 1e12:
-        c = V @ ((V.T @ (A.T @ d)) / w)
-        c = c + V @ ((V.T @ (A.T @ (d - A @ c))) / w)  # refinement
+        c = V @ ((V.T @ (A.T @ d)) / wd)
+        c = c + V @ ((V.T @ (A.T @ (d - A @ c))) / wd)  # refinement
         return c, float(np.sqrt(w[-1] / w[0]))
     r = np.linalg.qr(np.column_stack([A, d]), mode="r")
     u, s, vt = np.linalg.svd(r[:k, :k])
@@ -205,7 +207,8 @@ def _solve(A: np.ndarray, d: np.ndarray, what: str) -> tuple[np.ndarray, float]:
             f"(numerical rank {rank}, condition number {cond:.3g} >= {_MAX_COND:g}); "
             "use fewer terms or a better-sampled aperture"
         )
-    return vt.T @ ((u.T @ r[:k, k]) / s), cond
+    rhs = r[:k, k] if d.ndim == 1 else r[:k, k:]
+    return vt.T @ ((u.T @ rhs) / s.reshape(-1, *([1] * (d.ndim - 1)))), cond
 
 
 def _stats(d: np.ndarray, model: np.ndarray) -> tuple[float, float, float]:
@@ -257,6 +260,10 @@ def _zernike_fit(x, y, d, terms, index, center, radius, norm, aperture_name, mas
         raise ValueError(f"{what}: no valid points")
     A = zernike_basis_xy(nm, x - center[0], y - center[1], radius, norm).T
     c, cond = _solve(A, d, what)
+    return _zernike_result(nm, index, norm, radius, center, aperture_name, mask, template, A, d, c, cond)
+
+
+def _zernike_result(nm, index, norm, radius, center, aperture_name, mask, template, A, d, c, cond):
     model = A @ c
     rms, pv, cap = _stats(d, model)
     return FitResult(
@@ -313,6 +320,44 @@ def fit_zernike_map(sagmap: SagMap, terms=37, aperture: str | Region | None = No
     return _zernike_fit(x, y, d, terms, index, center, radius, norm, region.name, m, sagmap)
 
 
+def _mask_groups(sagmaps, aperture, key=lambda i: ()):
+    """Indices of ``sagmaps`` grouped by identical fitted samples (and ``key(i)``)."""
+    groups: dict = {}
+    for i, s in enumerate(sagmaps):
+        region, m, x, y, d = _points_in(s, aperture)
+        if not (np.array_equal(s.x_mm, sagmaps[0].x_mm) and np.array_equal(s.y_mm, sagmaps[0].y_mm)):
+            raise ValueError(f"SagMap {s.label!r} is not on the grid of {sagmaps[0].label!r}; fit maps one by one")
+        groups.setdefault((m.tobytes(), key(i)), []).append((i, region, m, x, y, d))
+    return groups.values()
+
+
+def fit_zernike_maps(sagmaps, terms=37, aperture: str | Region | None = None,
+                     radius_mm: float | None = None, norm: bool = True,
+                     index: str = "noll") -> list[FitResult]:
+    """:func:`fit_zernike_map` for many maps on one grid (e.g. every case of a study).
+
+    The design matrix is built and factorised once per distinct set of valid samples,
+    so K maps cost little more than one. Returns one :class:`FitResult` per map, in
+    order, identical to fitting each map alone.
+    """
+    sagmaps = list(sagmaps)
+    out: list = [None] * len(sagmaps)
+    for group in _mask_groups(sagmaps, aperture):
+        _, region, m, x, y, _ = group[0]
+        center, r_default = aperture_geometry(region, x, y)
+        radius = r_default if radius_mm is None else radius_mm
+        if not (np.isscalar(radius) and radius > 0):
+            raise ValueError(f"radius_mm={radius!r} must be a positive number")
+        nm = resolve_terms(terms, index)
+        idx = "nm" if not np.isscalar(terms) and all(np.ndim(t) for t in terms) else index
+        A = zernike_basis_xy(nm, x - center[0], y - center[1], radius, norm).T
+        D = np.column_stack([g[5] for g in group])
+        C, cond = _solve(A, D, f"Zernike fit over aperture {region.name!r}")
+        for k, (i, *_rest, d) in enumerate(group):
+            out[i] = _zernike_result(nm, idx, norm, radius, center, region.name, m, sagmaps[i], A, d, C[:, k], cond)
+    return out
+
+
 def remove_terms(sagmap: SagMap, terms, aperture: str | Region | None = None,
                  radius_mm: float | None = None, fit_terms=11) -> SagMap:
     """Subtract the Zernike ``terms`` (e.g. astigmatism) fitted over ``aperture``.
@@ -355,6 +400,13 @@ def _fourier_fit(x, y, d, px, py, harmonics, include_cross, include_plane, origi
     for n, v in (("period_x_mm", px), ("period_y_mm", py)):
         if not v > 0:
             raise ValueError(f"{n}={v!r} must be > 0")
+    A, comps, n_lead, sx, sy = _fourier_design(x, y, px, py, harmonics, include_cross, include_plane, origin)
+    c, cond = _solve(A, d, f"Fourier fit over aperture {name!r}")
+    return _fourier_result(px, py, origin, name, mask, template, include_plane, A, comps, n_lead, sx, sy,
+                           d, c, cond)
+
+
+def _fourier_design(x, y, px, py, harmonics, include_cross, include_plane, origin):
     comps = _fourier_components(harmonics, include_cross)
     xs, ys = x - origin[0], y - origin[1]
     # plane columns scaled to O(1) so the condition number reflects the basis, not mm
@@ -362,8 +414,10 @@ def _fourier_fit(x, y, d, px, py, harmonics, include_cross, include_plane, origi
     sy = max(float(np.abs(ys).max()), 1e-12)
     cols = [np.ones_like(xs)] + ([xs / sx, ys / sy] if include_plane else [])
     n_lead = len(cols)
-    A = np.column_stack(cols + _fourier_columns(comps, xs, ys, px, py))
-    c, cond = _solve(A, d, f"Fourier fit over aperture {name!r}")
+    return np.column_stack(cols + _fourier_columns(comps, xs, ys, px, py)), comps, n_lead, sx, sy
+
+
+def _fourier_result(px, py, origin, name, mask, template, include_plane, A, comps, n_lead, sx, sy, d, c, cond):
     model = A @ c
     rms, pv, cap = _stats(d, model)
     ab = c[n_lead:].reshape(-1, 2)  # (a, b) = (A cos phi, A sin phi)
@@ -409,6 +463,34 @@ def fit_fourier(sagmap: SagMap, period_x_mm: float = 21.0, period_y_mm: float = 
     region, m, x, y, d = _points_in(sagmap, aperture)
     return _fourier_fit(x, y, d, period_x_mm, period_y_mm, harmonics, include_cross,
                         include_plane, phase_origin_mm, region.name, m, sagmap)
+
+
+def fit_fourier_maps(sagmaps, periods_mm, harmonics: int = 3, aperture: str | Region | None = None,
+                     include_cross: bool = True, include_plane: bool = True,
+                     phase_origin_mm=(0.0, 0.0)) -> list[FourierFit]:
+    """:func:`fit_fourier` for many maps on one grid, ``periods_mm[i] = (Dx, Dy)`` of map i.
+
+    One factorisation per distinct (valid samples, periods); results identical to
+    fitting each map alone.
+    """
+    sagmaps, periods = list(sagmaps), [tuple(float(v) for v in p) for p in periods_mm]
+    if len(periods) != len(sagmaps):
+        raise ValueError(f"periods_mm has {len(periods)} entries for {len(sagmaps)} maps")
+    out: list = [None] * len(sagmaps)
+    for group in _mask_groups(sagmaps, aperture, key=lambda i: periods[i]):
+        _, region, m, x, y, _ = group[0]
+        px, py = periods[group[0][0]]
+        for n, v in (("period_x_mm", px), ("period_y_mm", py)):
+            if not v > 0:
+                raise ValueError(f"{n}={v!r} must be > 0")
+        A, comps, n_lead, sx, sy = _fourier_design(x, y, px, py, harmonics, include_cross, include_plane,
+                                                   phase_origin_mm)
+        D = np.column_stack([g[5] for g in group])
+        C, cond = _solve(A, D, f"Fourier fit over aperture {region.name!r}")
+        for k, (i, *_rest, d) in enumerate(group):
+            out[i] = _fourier_result(px, py, phase_origin_mm, region.name, m, sagmaps[i], include_plane, A, comps,
+                                     n_lead, sx, sy, d, C[:, k], cond)
+    return out
 
 
 def fit_fourier_points(x_mm, y_mm, sag_um, period_x_mm: float = 21.0, period_y_mm: float = 18.0,

@@ -10,7 +10,7 @@ key with its meaning, unit and range)::
                      pupil shifts x deformations (FEA cases chosen by selectors)
     [[figures]]      PNG figures (kinds: sag_maps, psf, profiles, compare); without
                      this key one sag-map figure and one profile figure per set and grating
-    [output]         figures, report (booleans)
+    [output]         figures, report, exports (booleans)
 
 Values are scalars, lists or ranges (:mod:`pipeline.config_schema`). FEA cases are
 selected for profiles and figures by *selectors*, inline tables of parameter values
@@ -517,13 +517,16 @@ FIGURE_KINDS = {"sag_maps": SagMapFigure, "psf": PsfFigure, "profiles": ProfileF
 
 @dataclass(frozen=True)
 class OutputOptions:
-    """What ``run`` writes besides the tables: PNG figures and the HTML report."""
+    """What ``run`` writes besides the tables and ``study.nc``: PNG figures, the HTML
+    report, and the exports for optical design codes (``exports/``: CODE V INT, Zemax
+    Grid Sag DAT, Zernike lists)."""
 
     figures: bool = True
     report: bool = True
+    exports: bool = True
 
     def __post_init__(self):
-        for name in ("figures", "report"):
+        for name in ("figures", "report", "exports"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(name, getattr(self, name), "must be true or false")
 
@@ -748,7 +751,7 @@ def study_config_from_dict(data: dict, source: str = "") -> StudyConfig:
                 raise exc.within(f"profiles[{i}]") from None
         figures = [_figure(i, t) for i, t in enumerate(_tables(data.get("figures", []), "figures"))]
         out = _table(data.get("output", {}), "output")
-        check_keys(out, ("figures", "report"), "output")
+        check_keys(out, ("figures", "report", "exports"), "output")
         try:
             output = OutputOptions(**out)
         except ConfigError as exc:

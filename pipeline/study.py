@@ -13,6 +13,12 @@ orders −2/−3/−4 (J with 200/50, H and K with 200/75, as the paper). It wri
   re-run reuses every finished case);
 * ``fea/tables.csv`` — model vs paper, for the cases that are the paper's;
 * ``profiles.csv`` and ``profiles.nc`` — detected line profiles and their metrics;
+* ``study.nc`` — the one labelled dataset: every case's parameters, P/V and RMS, sag
+  map, Zernike (Fringe 1–37 over the 82 × 72 mm box) and Fourier quilt fits with their
+  residuals, the grating wavefronts of the profiles, and the line profiles
+  (:mod:`pipeline.study_data`);
+* ``exports/`` (``[output] exports``) — sag maps as CODE V INT and Zemax Grid Sag DAT,
+  Zernike lists (Fringe and Noll), grating wavefronts as CODE V INT WFR;
 * the PNG figures of the config and ``report.html`` that puts them together.
 """
 
@@ -177,13 +183,14 @@ _MKEYS = ["fwhm_um", "fwhm_nm", "resolving_power", "resolving_power_2px", "centr
           "asymmetry", "outside_slit_fraction", "shoulder_asymmetry"]
 
 
-def _write_profiles(results, out: Path) -> None:
+def _write_profiles(results, out: Path):
+    """Write ``profiles.csv`` and ``profiles.nc``; return the profiles' Dataset (None without profiles)."""
     import xarray as xr
 
     from pipeline.io_common import atomic_path, atomic_write
 
     if not results:
-        return
+        return None
     with atomic_write(out / "profiles.csv") as fh:
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(_KEYS + _MKEYS + ["n_peaks", "peak_positions_um", "set", "pupil_shift_x_mm", "pupil_shift_y_mm"])
@@ -207,6 +214,7 @@ def _write_profiles(results, out: Path) -> None:
         attrs={"title": "cryograting study: detected line profiles (unit area)"})
     with atomic_path(out / "profiles.nc") as tmp:
         ds.to_netcdf(tmp)
+    return ds
 
 
 def _curve_label(job) -> str:
@@ -304,21 +312,70 @@ def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progre
 
     render = start_study_render(cases, out, progress=progress) if config.output.figures else None
     results = _profiles(config, maps, progress)
-    _write_profiles(results, out)
+    profiles_ds = _write_profiles(results, out)
+    fits, exports = _fits_dataset_exports(config, cases, outputs, maps, results, profiles_ds, out, progress)
     figs = _figures(config, maps, results, out) if config.output.figures else {}
     if render is not None:
         figs.update(render.figures())
     if config.output.report:
-        _report(out, config, table, format_cases(cases, outputs), results, figs, t_fea, time.perf_counter() - t0)
-    written = [p for p in ("report.html", "fea/tables.csv", "fea/cases.csv", "profiles.csv") if (out / p).exists()]
+        _report(out, config, table, format_cases(cases, outputs), results, figs, t_fea, time.perf_counter() - t0,
+                fits_table=format_fits_html(cases, *fits))
+    written = [p for p in ("report.html", "study.nc", "fea/tables.csv", "fea/cases.csv", "profiles.csv")
+               if (out / p).exists()]
     print(f"\nwritten in {out}/: {', '.join(written)}, fea/sweep.nc"
-          f"{', profiles.nc' if results else ''}{f', {len(figs)} PNG figures' if figs else ''}")
+          f"{', profiles.nc' if results else ''}{f', {len(figs)} PNG figures' if figs else ''}"
+          f"{f', {len(exports)} files in exports/' if exports else ''}")
     return {"config": config, "cases": cases, "outputs": outputs, "rows": rows, "profiles": results,
-            "figures": {k: p for k, (_, p) in figs.items()}}
+            "figures": {k: p for k, (_, p) in figs.items()}, "fits": {"zernike": fits[0], "fourier": fits[1]},
+            "dataset": out / "study.nc", "exports": exports}
+
+
+def _fits_dataset_exports(config, cases, outputs, maps, results, profiles_ds, out: Path, progress: bool):
+    """Zernike + Fourier fits of every case, ``study.nc``, and (if configured) ``exports/``."""
+    from pipeline.study_data import (
+        fit_cases,
+        study_dataset,
+        wavefront_jobs,
+        write_exports,
+        write_study_netcdf,
+    )
+
+    t = time.perf_counter()
+    zfits, ffits = fit_cases(cases, maps)
+    waves = wavefront_jobs([j for j, _, _ in results])
+    ds = study_dataset(cases, outputs, maps, zfits, ffits, profiles_ds, waves,
+                       attrs={"study_title": config.title, "study_description": config.description})
+    write_study_netcdf(ds, out / "study.nc")
+    t_ds = time.perf_counter() - t
+    exports = write_exports(out / "exports", cases, maps, zfits, waves) if config.output.exports else []
+    if progress:
+        print(f"fits and study.nc: {t_ds:.1f} s" + (f"; exports ({len(exports)} files): "
+                                                    f"{time.perf_counter() - t - t_ds:.1f} s" if exports else ""))
+    return (zfits, ffits), exports
+
+
+def format_fits_html(cases, zfits, ffits) -> str:
+    """HTML table: the main Zernike terms (nm, RMS-normalised) and quilt amplitudes (nm) per case."""
+    from pipeline.study_data import REPORT_QUILT, REPORT_ZERNIKES
+
+    def cell(v):
+        return f"<td>{v * 1e3:.1f}</td>" if v is not None and np.isfinite(v) else "<td>–</td>"
+
+    head = ("<tr><th>case</th>" + "".join(f"<th>{html.escape(n)}</th>" for n in REPORT_ZERNIKES.values())
+            + "<th>Z resid. RMS</th>" + "".join(f"<th>{html.escape(n)}</th>" for n in REPORT_QUILT.values())
+            + "<th>F resid. RMS</th></tr>")
+    rows = []
+    for c, z, f in zip(cases, zfits, ffits):
+        zc = [z.coefficients.get(t) if z is not None else None for t in REPORT_ZERNIKES]
+        fa = [f.amplitude_um.get(k) if f is not None else None for k in REPORT_QUILT]
+        rows.append(f"<tr><td>{html.escape(c.label)}</td>" + "".join(cell(v) for v in zc)
+                    + cell(z.residual_rms_um if z is not None else None) + "".join(cell(v) for v in fa)
+                    + cell(f.residual_rms_um if f is not None else None) + "</tr>")
+    return f"<table>{head}{''.join(rows)}</table>"
 
 
 def _report(out: Path, config: StudyConfig, table: str, cases_table: str, results, figs: dict,
-            t_fea: float, t_all: float) -> None:
+            t_fea: float, t_all: float, fits_table: str = "") -> None:
     import base64
 
     from optics.grating import get_grating
@@ -346,6 +403,11 @@ def _report(out: Path, config: StudyConfig, table: str, cases_table: str, result
     metrics = ("<h2>Line-profile metrics" + (" (band centres)" if shown else "") + "</h2><table><tr><th>grating</th>"
                "<th>λ µm</th><th>mas</th><th>deformation</th><th>FWHM µm</th><th>R (FWHM)</th><th>asymmetry</th>"
                f"<th>outside slit</th></tr>{rrows}</table>" if results else "")
+    fits = (f"<h2>Zernike and quilt fits over the central 82 × 72 mm (nm)</h2><p>Zernike: 37 Fringe terms, "
+            "RMS-normalised coefficients on the disc circumscribing the box (radius 54.6 mm); quilt: Fourier "
+            "amplitudes at the hole pitches D<sub>x</sub> × D<sub>y</sub> (21 × 18 mm on the paper's blank); "
+            "residual RMS after each fit. All coefficients are in <code>study.nc</code>.</p>"
+            f"{fits_table}" if fits_table else "")
     body = f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(config.title)}</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:auto}} td,th{{padding:2px 8px;text-align:right}}
 pre{{background:#f4f4f4;padding:8px}}</style></head><body>
@@ -353,7 +415,7 @@ pre{{background:#f4f4f4;padding:8px}}</style></head><body>
 <p>{html.escape(config.description)} FEA {t_fea:.0f} s, total {t_all:.0f} s.</p>
 {paper}<h2>FEA cases: P/V and RMS over the central 82 × 72 mm and the whole face</h2>
 <pre>{html.escape(cases_table)}</pre>
-{''.join(sections)}
+{fits}{''.join(sections)}
 {metrics}
 </body></html>"""
     with atomic_write(out / "report.html") as fh:

@@ -46,7 +46,8 @@ def test_example_loads_and_comments_every_key():
     cfg = loads_study_config(text, "example")
     assert len(cfg.cases()) == 4 and len(cfg.figures) == 4
     keys = [*FEA_KEYS, *PROFILE_KEYS, "set", "deformation", "name", "title", "description", "kind", "file",
-            "heading", "cases", "titles", "case", "lines", "grating", "pixel_scale_mas", "figures", "report"]
+            "heading", "cases", "titles", "case", "lines", "grating", "pixel_scale_mas", "figures", "report",
+            "exports"]
     for key in keys:
         line = next((ln for ln in text.splitlines() if re.match(rf"\s*#?\s*{key}\s*=", ln)), None)
         assert line is not None, f"{key} is missing from the example"
