@@ -90,19 +90,69 @@ def _quilt_direction_um(sag, blank: Blank) -> float:
     return sag.value_at(x0, y0) - sag.value_at(x0 + blank.pitch_x_mm / 2, y0 + blank.pitch_y_mm / 2)
 
 
+def field_path(fields_dir, params: dict) -> Path:
+    """Where the displacement field of the case ``params`` is kept (key: params + model version)."""
+    import hashlib
+    import json
+
+    norm = {k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v))
+            for k, v in sorted(params.items())}
+    text = json.dumps({"namespace": _namespace(), "params": norm}, sort_keys=True)
+    return Path(fields_dir) / f"{hashlib.sha256(text.encode()).hexdigest()[:20]}.npz"
+
+
+def save_field(path: Path, result) -> None:
+    """Displacement field (mm, float32) + node positions + case info, written atomically."""
+    import json
+
+    from pipeline.io_common import atomic_path
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, coords_mm=result.coords_mm, displacement_mm=result.displacement_mm.astype(np.float32),
+                 uniform_strain=result.uniform_strain, info=json.dumps(result.info, default=str))
+
+
+def load_field(path: Path):
+    """The :class:`fea.model.FEAResult` (without sag) saved by :func:`save_field`, or None."""
+    import json
+
+    from fea.model import FEAResult
+
+    try:
+        with np.load(path) as z:
+            return FEAResult(z["coords_mm"], z["displacement_mm"].astype(float), float(z["uniform_strain"]),
+                             None, json.loads(str(z["info"])))
+    except (OSError, KeyError, ValueError):
+        return None
+
+
 class FEACaseRunner:
     """Callable case function for :func:`pipeline.sweep.run_sweep`.
 
     Keeps prepared models (mesh + bulk stiffness) per (blank, mesh, substrate) in the
     instance; pickling sends an empty cache, so each worker process builds its own.
+
+    Parameters
+    ----------
+    with_maps : bool
+        Return the sag map on the fixed grid.
+    fields_dir : path, optional
+        Keep the displacement fields of the cases in ``fields_for`` there
+        (:func:`field_path`), e.g. for the study's 3-D renders.
+    fields_for : list of dict
+        Case parameter dicts whose fields are kept.
     """
 
-    def __init__(self, with_maps: bool = True):
+    def __init__(self, with_maps: bool = True, fields_dir=None, fields_for=()):
         self.with_maps = with_maps
+        self.fields_dir = fields_dir
+        self.fields_for = [dict(p) for p in fields_for]
         self._models: dict = {}
 
     def __getstate__(self):
-        return {"with_maps": self.with_maps, "_models": {}}
+        return {"with_maps": self.with_maps, "fields_dir": self.fields_dir, "fields_for": self.fields_for,
+                "_models": {}}
 
     def model(self, blank: Blank, spec: MeshSpec, substrate: str) -> PreparedBlank:
         from fea.mesh import blank_mesh
@@ -116,6 +166,8 @@ class FEACaseRunner:
         blank, spec, substrate, coating, film, load, scale = _split(params)
         model = self.model(blank, spec, substrate)
         r = model.solve(coating, film, load, stress_scale=scale)
+        if self.fields_dir is not None and dict(params) in self.fields_for:
+            save_field(field_path(self.fields_dir, params), r)
         s = r.sag
         out = {
             "pv_center_um": s.pv_um("center"), "rms_center_um": s.rms_um("center"),

@@ -550,7 +550,9 @@ def _render_child(out: Path, renders: dict) -> dict:
     """Solve and render (runs inside the child process); returns {file: path}."""
     from fea.mesh import blank_mesh
     from fea.model import PreparedBlank
-    from pipeline.fea_cases import _split
+    from types import SimpleNamespace
+
+    from pipeline.fea_cases import _split, field_path, load_field
 
     done, models = {}, {}
     for file, (_, params, labels) in renders.items():
@@ -562,6 +564,10 @@ def _render_child(out: Path, renders: dict) -> dict:
         results = []
         for c in params:
             blank, spec, substrate, coating, film, load, scale = _split(c)
+            saved = load_field(field_path(out / "fea" / "fields", c))  # kept by the study's FEA run
+            if saved is not None:
+                results.append((SimpleNamespace(mesh=blank_mesh(blank, spec)), saved))
+                continue
             mk = (blank, spec, substrate)
             if mk not in models:
                 models = {mk: PreparedBlank(blank_mesh(blank, spec), substrate)}  # keep one: memory

@@ -113,8 +113,13 @@ def _run_fea(config: StudyConfig, out: Path, progress: bool):
     )
     from pipeline.sweep import Case, run_sweep
 
+    from pipeline.render3d import study_renders
+
     cases = config.cases()
-    res = run_sweep(FEACaseRunner(), [Case(c.params) for c in cases], out, namespace=_namespace(), workers=1,
+    # the 3-D renders reuse these solutions instead of solving their cases again
+    keep = [p for _, ps, _ in study_renders(cases).values() for p in ps] if config.output.figures else []
+    runner = FEACaseRunner(fields_dir=out / "fields", fields_for=keep)
+    res = run_sweep(runner, [Case(c.params) for c in cases], out, namespace=_namespace(), workers=1,
                     progress=progress, description="FEA cases")
     res.write_netcdf(out / "sweep.nc")
     outputs = {c.label: o for c, (_, o) in zip(cases, res)}

@@ -114,3 +114,25 @@ def test_study_figures_render_and_are_reused(tmp_path):
     mtime = res["blank_3d.png"].stat().st_mtime_ns
     again = render3d.render_study_figures(tmp_path, mesh_size_mm=COARSE.size_mm, mesh_bulk_mm=COARSE.size_bulk_mm)
     assert again["blank_3d.png"].stat().st_mtime_ns == mtime  # reused, not re-solved
+
+
+def test_study_render_reuses_the_saved_field(coarse_case, tmp_path, monkeypatch):
+    """A field kept by the study's FEA run is rendered without preparing or solving again."""
+    import fea.model
+    from pipeline.fea_cases import field_path, load_field, save_field
+
+    model, res = coarse_case
+    params = {"coverage": "all", "t0_um": 200.0, "polish": 0.75, "mesh_size_mm": COARSE.size_mm,
+              "mesh_bulk_mm": COARSE.size_bulk_mm}
+    path = field_path(tmp_path / "fea" / "fields", params)
+    save_field(path, res)
+    back = load_field(path)
+    assert np.allclose(back.displacement_mm, res.displacement_mm, rtol=1e-6, atol=1e-12)
+    assert back.info["symmetry_planes"] == res.info["symmetry_planes"]
+
+    def no_solve(*a, **k):
+        raise AssertionError("the render solved a case whose field was saved")
+
+    monkeypatch.setattr(fea.model, "PreparedBlank", no_solve)
+    done = render3d._render_child(tmp_path, {"blank_3d.png": ("heading", [params], ["200/75"])})
+    assert (tmp_path / "blank_3d.png").stat().st_size > 20_000 and "blank_3d.png" in done
