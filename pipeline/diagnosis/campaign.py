@@ -204,11 +204,6 @@ def recovery_errors(d, effect: str, truth: dict) -> dict | None:
     return {"per_parameter": per, "vector": vec, "within_2sigma": bool(sig_ok)}
 
 
-def _recovery(d, effect: str, truth: dict) -> float | None:
-    r = recovery_errors(d, effect, truth)
-    return None if r is None else r["per_parameter"]
-
-
 def run_case(args) -> dict:
     """One campaign case (picklable arguments: index, type, config, maps)."""
     index, (kind, effect), cfg, nominal, base = args
