@@ -273,8 +273,12 @@ def build_surrogate(model: PreparedBlank, domain: SurrogateDomain = SurrogateDom
             if worst < tol or solves >= max_solves:
                 break
             next_case = cands[i]
+        size = rb.size
         model.solve(next_case, film, stress_scale=stress_scale, rtol=snap_rtol)
         solves += 1
+        if rb.size == size and worst > tol:
+            raise RuntimeError(f"the full solve of {next_case} did not enlarge the reduced basis "
+                               f"(size {size}); the surrogate cannot improve")
         if progress is not None:
             progress({"solves": solves, "basis": rb.size, "worst_residual": worst,
                       "case": f"{next_case.coverage} {next_case.t0_um:.0f}/{next_case.polish_front:.2f}"})

@@ -12,14 +12,16 @@ COARSE = ["--param", "mesh_size_mm=5", "--param", "mesh_bulk_mm=10"]
 
 def test_surrogate_sweep_cli_matches_full_solves(tmp_path, capsys):
     out = tmp_path / "sur"
+    # tol 1e-2 (looser than the default 2e-3) keeps the greedy build to a few solves here;
+    # the P/V check below still asks for 0.5 %
     rc = main(["sweep", "--t0-um", "100", "150", "200", "--polish", "0.5", "1.0", *COARSE,
-               "--surrogate", "--validate", "1", "--out", str(out), "--quiet"])
+               "--surrogate", "--validate", "1", "--tol", "1e-2", "--out", str(out), "--quiet"])
     assert rc == 0
     text = capsys.readouterr().out
     assert "validation against 1 full solves" in text
     with open(out / "sweep.csv") as fh:
         rows = list(csv.DictReader(fh))
-    assert len(rows) == 6 and all(float(r["residual_estimate"]) < 2e-3 for r in rows)
+    assert len(rows) == 6 and all(float(r["residual_estimate"]) < 1e-2 for r in rows)
     for r in rows[:: 5]:
         full = solve(float(r["t0_um"]), float(r["polish"]), "all", mesh=_coarse()).sag.pv_um("center")
         assert float(r["pv_center_um"]) == pytest.approx(full, rel=5e-3)
@@ -29,7 +31,7 @@ def test_surrogate_sweep_cli_matches_full_solves(tmp_path, capsys):
     assert (out / "sweep.nc").exists()
     # a re-run reuses every case and does not rebuild the surrogate
     res, _, info = run_surrogate_sweep({"t0_um": [100, 150, 200], "polish": [0.5, 1.0], "mesh_size_mm": [5],
-                                        "mesh_bulk_mm": [10]}, out, validate=0, progress=False)
+                                        "mesh_bulk_mm": [10]}, out, validate=0, tol=1e-2, progress=False)
     assert res.n_reused == 6 and info == {}
 
 
