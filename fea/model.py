@@ -270,7 +270,9 @@ class PreparedBlank:
                     K = K + ops.coupling_matrix(t)
                 u[fr] = solve_spd(K[fr][:, fr], f[fr], backend=backend, coords_mm=self.coords_mm, free=fr)
                 solve_info = {"method": "direct (explicit offset coupling)"}
-                self.reduced_basis(film, offset).add(u)  # the surrogate trains on these solves too
+                rb = self._reduced.get((film.youngs_modulus_Pa, film.poisson_ratio, offset))
+                if rb is not None:  # a surrogate is training on this model: it needs these solves
+                    rb.add(u)
             else:
                 Kff = (self._bulk_free() + K_film[fr][:, fr]).tocsr()
                 u[fr] = self._solve_iterative(Kff, couplings, f, film, offset, used,
