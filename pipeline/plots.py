@@ -5,8 +5,6 @@ Units: mm on map axes, µm for sag and detector offsets.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import matplotlib
@@ -21,17 +19,15 @@ __all__ = ["plot_sag_maps", "plot_line_profiles", "plot_psfs", "plot_multigratin
 
 def save(fig, path: Path) -> Path:
     """Write ``fig`` to ``path`` atomically (temp file + rename) and close it."""
+    from pipeline.io_common import atomic_path
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=110, bbox_inches="tight")
-        os.replace(tmp, path)
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=110, bbox_inches="tight")
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return path
 
 

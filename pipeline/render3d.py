@@ -349,20 +349,15 @@ def _view(plotter, pv, s: BlankSurface, exaggeration: float, clim, title: str, *
 
 
 def _screenshot(plotter, path: Path) -> Path:
+    from pipeline.io_common import atomic_path
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
-    os.close(fd)
     try:
-        plotter.screenshot(tmp)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o644 & ~umask)  # mkstemp makes it private
-        os.replace(tmp, path)
+        with atomic_path(path) as tmp:
+            plotter.screenshot(str(tmp))
     finally:
         plotter.close()
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return path
 
 
