@@ -65,6 +65,47 @@ def _scatter(local: np.ndarray, vdofs: np.ndarray, ndof: int) -> sp.csr_matrix:
     return sp.csr_matrix((local.ravel(), (rows, cols)), shape=(3 * ndof, 3 * ndof))
 
 
+class _Scatter:
+    """The CSR pattern of element matrices (n, 30, 30) on vector DOFs ``vdofs`` (n, 30).
+
+    Built once per set of elements, so that every operator assembled on them shares one
+    ``indices``/``indptr`` pair: sums of such operators are then sums of their ``data``
+    arrays (:func:`combine`), not sparse additions.
+    """
+
+    def __init__(self, vdofs: np.ndarray, ndof: int):
+        n3 = 3 * ndof
+        rows = np.repeat(vdofs, 30, axis=1).ravel().astype(np.int64)
+        cols = np.tile(vdofs, (1, 30)).ravel()
+        keys, self._inverse = np.unique(rows * n3 + cols, return_inverse=True)
+        r = keys // n3
+        self.indices = (keys - r * n3).astype(np.int32)
+        self.indptr = np.searchsorted(r, np.arange(n3 + 1)).astype(np.int32)
+        self.shape = (n3, n3)
+
+    def __call__(self, local: np.ndarray) -> sp.csr_matrix:
+        data = np.bincount(self._inverse.ravel(), weights=local.ravel(), minlength=self.indices.size)
+        return _shared_csr(data, self.indices, self.indptr, self.shape)
+
+
+def _shared_csr(data, indices, indptr, shape) -> sp.csr_matrix:
+    """A CSR matrix that keeps (does not copy or re-check) the given index arrays."""
+    A = sp.csr_matrix(shape, dtype=float)
+    A.data, A.indices, A.indptr = data, indices, indptr
+    A.has_sorted_indices = True
+    A.has_canonical_format = True
+    return A
+
+
+def combine(coefs, mats) -> sp.csr_matrix:
+    """Σ c_i A_i; a ``data`` sum when the matrices share one pattern (see :class:`_Scatter`)."""
+    first = mats[0]
+    if all(A.indices is first.indices and A.indptr is first.indptr for A in mats):
+        data = sum(c * A.data for c, A in zip(coefs, mats))
+        return _shared_csr(data, first.indices, first.indptr, first.shape)
+    return sum((c * A for c, A in zip(coefs, mats)), sp.csr_matrix(first.shape)).tocsr()
+
+
 def _isotropic_local(T: np.ndarray, w: np.ndarray, lam: float, mu: float) -> np.ndarray:
     """Element stiffness matrices of an isotropic solid in batched form.
 
@@ -164,8 +205,23 @@ class FilmOperators:
         if not offset:
             return t * self.A00
         c1, c2, c3 = t**2 / 2, t**3 / 3, t**4 / 4
-        A0C = c1 * self.A0C + c2 * self.A0Ck
-        return (t * self.A00 + c1 * self.A00k + A0C + A0C.T + c2 * self.ACC + c3 * self.ACCk).tocsr()
+        A0C = combine((c1, c2), (self.A0C, self.A0Ck))
+        return (combine((t, c1, c2, c3), (self.A00, self.A00k, self.ACC, self.ACCk)) + A0C
+                + A0C.T).tocsr()
+
+    def power_data(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """``data`` of the local stiffness on the shared pattern of ``A00``: (S, C) with
+        ``local_stiffness(t) = S + C + Cᵀ`` (offset film); see :class:`_Scatter`."""
+        c1, c2, c3 = t**2 / 2, t**3 / 3, t**4 / 4
+        S = t * self.A00.data + c1 * self.A00k.data + c2 * self.ACC.data + c3 * self.ACCk.data
+        C = c1 * self.A0C.data + c2 * self.A0Ck.data
+        return S, C
+
+    def shares_pattern(self) -> bool:
+        """All six local matrices share ``A00``'s index arrays (assembled by one scatter)."""
+        A = self.A00
+        return all(M.indices is A.indices and M.indptr is A.indptr
+                   for M in (self.A00k, self.A0C, self.A0Ck, self.ACC, self.ACCk))
 
     def apply_power_terms(self, V: np.ndarray, offset: bool = True) -> np.ndarray:
         """Coefficients of t, t², t³, t⁴ of the whole film stiffness applied to ``V``.
@@ -197,8 +253,8 @@ class FilmOperators:
     def coupling_parts(self, t: float):
         """(X, Y, Z) with the non-local film stiffness = X R + Rᵀ X + Rᵀ Y R + Rᵀ Z + Zᵀ R."""
         c1, c2, c3 = t**2 / 2, t**3 / 3, t**4 / 4
-        return (c1 * self.A00 + c2 * self.A00k, c2 * self.A00 + c3 * self.A00k,
-                c2 * self.A0C + c3 * self.A0Ck)
+        return (combine((c1, c2), (self.A00, self.A00k)), combine((c2, c3), (self.A00, self.A00k)),
+                combine((c2, c3), (self.A0C, self.A0Ck)))
 
     def apply_coupling(self, t: float, v: np.ndarray) -> np.ndarray:
         """The non-local part applied to ``v`` without forming it (large systems)."""
@@ -345,9 +401,10 @@ def film_operators(mesh, facets: np.ndarray, youngs_modulus_MPa: float, poisson_
     EC = -sym_p(S) + a_n * np.einsum("fqai,fqkl->fqaikl", T, L).reshape(nf, q, 30, 3, 3)
     w = fb.dx
     vd = _vector_dofs(fb.element_dofs)
+    scatter = _Scatter(vd, ndof)
 
     def mat(w_, X, Y):
-        return _scatter(_strain_local(X, Y, w_, lam_ps, mu), vd, ndof)
+        return scatter(_strain_local(X, Y, w_, lam_ps, mu))
 
     def vec(w_, X):  # ∫ w tr X per basis function (the load per unit biaxial mismatch stress)
         loc = np.einsum("fq,fqAii->fA", w_, X)

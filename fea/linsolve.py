@@ -86,6 +86,24 @@ def _resolve_backend(backend: str) -> str:
     return backend
 
 
+def _set_pardiso_options(solver) -> None:
+    """Explicit PARDISO options for an SPD factor used as solver and CG preconditioner.
+
+    pypardiso leaves ``iparm(1) = 0`` ("use MKL's defaults"), which silently ignores every
+    other iparm and, measured at 216 k P2 DOFs, makes each forward/backward substitution
+    3-4x slower than with the options below (0.56 s vs 0.13-0.24 s per right-hand side on
+    this 2-core machine; 16 right-hand sides 2.9 s vs 0.6 s). The solves keep a relative
+    residual ~1e-11 (checked by the callers). Indices are PARDISO's 1-based ones.
+    """
+    solver.set_iparm(1, 1)    # use the values below instead of MKL's defaults
+    solver.set_iparm(2, 2)    # nested-dissection (METIS) fill-in reducing ordering
+    solver.set_iparm(10, 8)   # pivot perturbation 1e-8 (MKL's default for SPD)
+    solver.set_iparm(18, -1)  # report the factor's non-zeros (diagnostics)
+    solver.set_iparm(24, 1)   # two-level parallel factorisation
+    # iparm 8 = 0: no iterative refinement; a CG preconditioner does not need it and
+    # direct solves check their own residual.
+
+
 class SPDFactor:
     """A reusable preconditioner/solver for one sparse SPD matrix.
 
@@ -102,6 +120,7 @@ class SPDFactor:
             import pypardiso
 
             self._solver = pypardiso.PyPardisoSolver(mtype=2)
+            _set_pardiso_options(self._solver)
             self._K = sp.triu(K, format="csr")
             self._K.sort_indices()
             try:
@@ -190,12 +209,17 @@ def solve_spd_perturbed(K: sp.spmatrix, apply_extra, f: np.ndarray, backend: str
         if x0 is None and backend == "pardiso":
             x0 = fac.solve(f)
         res0 = 1.0 if x0 is None else float(np.linalg.norm(matvec(x0) - f) / fnorm)
-        u, code = cg(A, f, x0=x0, rtol=0.1 * rtol, maxiter=maxiter, M=M,
-                     callback=lambda xk: it.__setitem__(0, it[0] + 1))
+        count = lambda xk: it.__setitem__(0, it[0] + 1)  # noqa: E731
+        # CG's recursive residual drifts a little from the true one: stop at half the
+        # target, and continue (rarely needed) when the true residual misses it
+        u, code = cg(A, f, x0=x0, rtol=0.5 * rtol, maxiter=maxiter, M=M, callback=count)
+        res = np.linalg.norm(matvec(u) - f) / fnorm
+        if code == 0 and res > rtol:
+            u, code = cg(A, f, x0=u, rtol=0.1 * rtol, maxiter=maxiter, M=M, callback=count)
+            res = np.linalg.norm(matvec(u) - f) / fnorm
     finally:
         if own:
             fac.free()
-    res = np.linalg.norm(matvec(u) - f) / fnorm
     if info is not None:
         info.update(iterations=it[0], residual=float(res), initial_residual=res0, backend=backend)
     if code != 0 or not np.isfinite(res) or res > rtol:

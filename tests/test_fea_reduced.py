@@ -50,7 +50,7 @@ def test_iterative_shared_solve_equals_direct(model):
     assert [g.info["solver"]["preconditioner"] for g in got][:2] == ["own", "shared"]
     for g, r in zip(got, ref):
         assert g.sag.pv_um("center") == pytest.approx(r, rel=1e-5)
-        assert g.info["solver"]["residual"] <= 1e-6
+        assert g.info["solver"]["residual"] <= 1e-5  # the default rtol
 
 
 def test_galerkin_reproduces_a_snapshot(model):
