@@ -41,6 +41,7 @@ both, the thin film matches an explicitly meshed NiP layer in a hole within 0.45
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -223,6 +224,27 @@ class FilmOperators:
         return all(M.indices is A.indices and M.indptr is A.indptr
                    for M in (self.A00k, self.A0C, self.A0Ck, self.ACC, self.ACCk))
 
+    @cached_property
+    def _active(self):
+        """The operators restricted to the DOFs they touch (those of the tetrahedra on the
+        surface): products then cost their non-zeros, not the 3N rows of the whole mesh
+        (2-3x faster at the default mesh, where a surface group touches ~10 % of the DOFs)."""
+        rows = np.flatnonzero(np.diff(self.A00.indptr) | np.diff(self.R.indptr))
+        idx = np.unique(np.concatenate([rows, self.A00.indices, self.R.indices]))
+
+        def sub(A):
+            out = A[idx][:, idx].tocsr()
+            out.sort_indices()
+            return out
+
+        A00, A00k, A0C, A0Ck, ACC, ACCk, R = (sub(M) for M in (self.A00, self.A00k, self.A0C, self.A0Ck,
+                                                                 self.ACC, self.ACCk, self.R))
+        # one pattern again, so that t-weighted sums stay data sums (combine)
+        for M in (A00k, A0C, A0Ck, ACC, ACCk):
+            if np.array_equal(M.indptr, A00.indptr) and np.array_equal(M.indices, A00.indices):
+                M.indices, M.indptr = A00.indices, A00.indptr
+        return idx, A00, A00k, A0C, A0Ck, ACC, ACCk, R
+
     def apply_power_terms(self, V: np.ndarray, offset: bool = True) -> np.ndarray:
         """Coefficients of t, t², t³, t⁴ of the whole film stiffness applied to ``V``.
 
@@ -235,19 +257,22 @@ class FilmOperators:
         -------
         ndarray, shape (4, *V.shape)
         """
-        out = np.zeros((4,) + np.shape(V))
-        A00V = self.A00 @ V
-        out[0] = A00V
+        V = np.asarray(V)
+        out = np.zeros((4,) + V.shape)
+        idx, A00, A00k, A0C, A0Ck, ACC, ACCk, R = self._active
+        V = V[idx]
+        A00V = A00 @ V
+        out[0][idx] = A00V
         if not offset:
             return out
-        RV = self.R @ V
-        RT = self.R.T
-        A00kV, A0CV, A0CkV = self.A00k @ V, self.A0C @ V, self.A0Ck @ V
-        A00RV = self.A00 @ RV
-        out[1] = 0.5 * (self.A00k @ V + A0CV + self.A0C.T @ V) + 0.5 * (A00RV + RT @ A00V)
-        out[2] = (A0CkV + self.A0Ck.T @ V + self.ACC @ V) / 3 \
-            + (self.A00k @ RV + RT @ (A00kV + A00RV + A0CV) + self.A0C.T @ RV) / 3
-        out[3] = 0.25 * (self.ACCk @ V) + 0.25 * (RT @ (self.A00k @ RV + A0CkV) + self.A0Ck.T @ RV)
+        RV = R @ V
+        RT = R.T
+        A00kV, A0CV, A0CkV = A00k @ V, A0C @ V, A0Ck @ V
+        A00RV = A00 @ RV
+        out[1][idx] = 0.5 * (A00kV + A0CV + A0C.T @ V) + 0.5 * (A00RV + RT @ A00V)
+        out[2][idx] = (A0CkV + A0Ck.T @ V + ACC @ V) / 3 \
+            + (A00k @ RV + RT @ (A00kV + A00RV + A0CV) + A0C.T @ RV) / 3
+        out[3][idx] = 0.25 * (ACCk @ V) + 0.25 * (RT @ (A00k @ RV + A0CkV) + A0Ck.T @ RV)
         return out
 
     def coupling_parts(self, t: float):
@@ -263,12 +288,18 @@ class FilmOperators:
     def coupling_operator(self, t: float):
         """v ↦ (non-local part) v for thickness ``t`` (mm); the t-weighted sparse sums are
         formed once here, not on every product (they cost ~5x the products themselves)."""
-        X, Y, Z = self.coupling_parts(t)
-        R, RT, ZT = self.R, self.R.T, Z.T  # transposed views: CSC products cost the same
+        idx, A00, A00k, A0C, A0Ck, _, _, R = self._active
+        c1, c2, c3 = t**2 / 2, t**3 / 3, t**4 / 4
+        X, Y, Z = combine((c1, c2), (A00, A00k)), combine((c2, c3), (A00, A00k)), combine((c2, c3), (A0C, A0Ck))
+        RT, ZT = R.T, Z.T  # transposed views: CSC products cost the same
+        n = self.A00.shape[0]
 
         def apply(v: np.ndarray) -> np.ndarray:
-            Rv = R @ v
-            return X @ Rv + RT @ (X @ v + Y @ Rv + Z @ v) + ZT @ Rv
+            vs = v[idx]
+            Rv = R @ vs
+            out = np.zeros((n,) + np.shape(v)[1:])
+            out[idx] = X @ Rv + RT @ (X @ vs + Y @ Rv + Z @ vs) + ZT @ Rv
+            return out
 
         return apply
 

@@ -78,6 +78,11 @@ class FEAResult:
         return self.displacement_mm + self.uniform_strain * self.coords_mm
 
 
+def _pattern_ones(A: sp.csr_matrix) -> sp.csr_matrix:
+    """The sparsity pattern of ``A`` with every stored entry set to 1."""
+    return _shared_csr(np.ones(A.indices.size), A.indices, A.indptr, A.shape)
+
+
 class PreparedBlank:
     """A meshed blank with its bulk stiffness assembled, ready to solve many coatings.
 
@@ -315,11 +320,12 @@ class PreparedBlank:
         matrix: no sparse additions or slicing per case (those cost ~1.5 s per case at the
         default mesh, more than the CG iterations of a neighbouring case).
         """
+        layouts = self._free_layouts(tuple(used_um), film)  # may widen the bulk pattern: first
         Kb = self._bulk_free()
         data = Kb.data.copy()
         for group, t_um in used_um.items():
             ops = self.film_ops(group, film)
-            keep, pos, pos_t = self._free_layout(group, film)
+            keep, pos, pos_t = layouts[group]
             t = t_um * 1e-3
             if offset:
                 S, C = ops.power_data(t)
@@ -329,38 +335,67 @@ class PreparedBlank:
                 data[pos] += t * ops.A00.data[keep]
         return _shared_csr(data, Kb.indices, Kb.indptr, Kb.shape)
 
-    def _free_layout(self, group: str, film: Material) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Where the entries of one group's film matrices land in ``_bulk_free().data``.
+    def _free_layouts(self, groups: tuple[str, ...], film: Material) -> dict[str, tuple]:
+        """Where the entries of each group's film matrices land in ``_bulk_free().data``.
 
-        Returns (keep, pos, pos_t): the entries of ``A00.data`` with a free row and column,
-        and the positions of those entries and of their transposes in the bulk's data.
+        Per group (keep, pos, pos_t): the entries of ``A00.data`` with a free row and
+        column, and the positions of those entries and of their transposes in the bulk's
+        data (all six film matrices share ``A00``'s pattern).
         """
-        key = (group, film.youngs_modulus_Pa, film.poisson_ratio)
-        if key in self._layouts:
-            return self._layouts[key]
-        ops = self.film_ops(group, film)
-        if not ops.shares_pattern():
-            raise RuntimeError(f"film operators of {group!r} do not share one sparsity pattern")
+        def key(g):
+            return (g, film.youngs_modulus_Pa, film.poisson_ratio)
+
+        need = [g for g in groups if key(g) not in self._layouts]
+        if not need:
+            return {g: self._layouts[key(g)] for g in groups}
+        free = self.free
+        films = {}
+        for g in need:
+            ops = self.film_ops(g, film)
+            if not ops.shares_pattern():
+                raise RuntimeError(f"film operators of {g!r} do not share one sparsity pattern")
+            A = ops.A00
+            # the film's entries on the free DOFs, carrying their entry numbers in A00.data
+            ids = _shared_csr(np.arange(1, A.nnz + 1, dtype=float), A.indices, A.indptr, A.shape)
+            F = ids[free][:, free].tocsr()
+            F.sort_indices()
+            FT = F.T.tocsr()
+            FT.sort_indices()
+            films[g] = (A.nnz, F, FT)
         Kb = self._bulk_free()
-        n = Kb.shape[0]
-        to_free = np.full(self.ndof, -1, dtype=np.int64)
-        to_free[self.free] = np.arange(n)
-        A = ops.A00
-        rows = to_free[np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))]
-        cols = to_free[A.indices]
-        keep = np.flatnonzero((rows >= 0) & (cols >= 0))
-        rows, cols = rows[keep], cols[keep]
-        bulk_keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(Kb.indptr)) * n + Kb.indices
-
-        def find(r, c):
-            q = r * n + c
-            pos = np.minimum(np.searchsorted(bulk_keys, q), bulk_keys.size - 1)
-            if not np.array_equal(bulk_keys[pos], q):
-                raise RuntimeError(f"film matrix of {group!r} has entries outside the bulk pattern")
-            return pos
-
-        self._layouts[key] = (keep, find(rows, cols), find(cols, rows))
-        return self._layouts[key]
+        # The bulk assembly drops entries that happen to be exactly zero; the film's are
+        # kept: widen the bulk pattern by explicit zeros where needed (sums of patterns of
+        # ones never cancel, so the union is exact)
+        union = _pattern_ones(Kb)
+        for _, F, _ in films.values():
+            union = union + _pattern_ones(F)
+        if union.nnz != Kb.nnz:
+            union.sum_duplicates()
+            union_ids = _shared_csr(np.arange(1, union.nnz + 1, dtype=float), union.indices,
+                                    union.indptr, union.shape)
+            at = union_ids.multiply(_pattern_ones(Kb)).tocsr().data.astype(np.int64) - 1
+            data = np.zeros(union.nnz)
+            data[at] = Kb.data
+            Kb = self._K_bulk_free = _shared_csr(data, union.indices, union.indptr, union.shape)
+            self._layouts.clear()  # positions moved; other groups are redone on demand
+            need = list(groups)
+            for g in groups:
+                if g not in films:
+                    return self._free_layouts(groups, film)
+        # positions by sparse products (linear merges of sorted rows): the bulk's data
+        # carries its entry numbers, a film pattern of ones picks them out
+        bulk_ids = _shared_csr(np.arange(1, Kb.nnz + 1, dtype=float), Kb.indices, Kb.indptr, Kb.shape)
+        for g in need:
+            nnz, F, FT = films[g]
+            hit = bulk_ids.multiply(_pattern_ones(F)).tocsr()
+            hit_t = bulk_ids.multiply(_pattern_ones(FT)).tocsr()
+            if hit.nnz != F.nnz or hit_t.nnz != FT.nnz:
+                raise RuntimeError(f"film pattern of {g!r} is not inside the widened bulk pattern")
+            keep = F.data.astype(np.int64) - 1
+            by_entry = np.empty(nnz, dtype=np.int64)
+            by_entry[FT.data.astype(np.int64) - 1] = hit_t.data.astype(np.int64) - 1
+            self._layouts[key(g)] = (keep, hit.data.astype(np.int64) - 1, by_entry[keep])
+        return {g: self._layouts[key(g)] for g in groups}
 
     def mismatch_strain(self, film: Material | str = NIP_HIGH_P, load: ThermalLoad = ThermalLoad(),
                         stress_scale: float = 1.0) -> float:

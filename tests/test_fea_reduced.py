@@ -99,3 +99,28 @@ def test_surrogate_matches_full_solves(model):
     assert s.pv_center_um(c, cold) == pytest.approx(ratio * s.pv_center_um(c), rel=1e-9)
     with pytest.raises(ValueError, match="outside the surrogate's domain"):
         s.evaluate(Coating.symmetric(300, 0.75, "all"))
+
+
+def test_free_stiffness_on_bulk_pattern_equals_sparse_sum():
+    """The per-case stiffness formed on the bulk's data array equals bulk + film local
+    matrices, also when the bulk pattern lacks entries the film has (exact zeros that the
+    bulk assembly dropped): the pattern is widened, not the entry lost."""
+    m = prepare(mesh=COARSE)
+    c = Coating.symmetric(200, 0.5, "all")
+    used = m.film_thickness_um(c)
+    Kb = m._bulk_free().copy()
+    film_rows = m.film_ops("front", NIP).A00[m.free][:, m.free].tocoo()
+    # drop a few bulk entries where the front film has entries (as exact zeros would be)
+    Kb = Kb.tolil()
+    for r, col in list(zip(film_rows.row, film_rows.col))[:50:7]:
+        Kb[r, col] = 0.0
+        Kb[col, r] = 0.0
+    Kb = Kb.tocsr()
+    Kb.eliminate_zeros()
+    m._K_bulk_free = Kb
+    fast = m._free_stiffness(used, NIP, True)
+    ref = Kb.copy()
+    for g, t in used.items():
+        ref = ref + m.film_ops(g, NIP).local_stiffness(t * 1e-3)[m.free][:, m.free]
+    assert fast.nnz > Kb.nnz
+    assert abs(fast - ref).max() <= 1e-12 * abs(ref).max()
