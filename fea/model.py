@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
@@ -27,6 +28,8 @@ from .assembly import FilmOperators, _shared_csr, bulk_stiffness, film_operators
 from .coating import SURFACE_GROUPS, Coating
 from .linsolve import SPDFactor, _rigid_modes, solve_spd, solve_spd_perturbed
 from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
+from .mesh_cache import default_cache_dir
+from .operator_cache import load_film_ops, operator_key, save_film_ops
 from .reduced import FilmPolynomial, ReducedBasis
 from .surface import FrontSag, FrontSampler
 
@@ -99,11 +102,17 @@ class PreparedBlank:
         Boundary name → displacement component (0, 1, 2) held at zero. Defaults to
         the symmetry planes present (``sym_x``→0, ``sym_y``→1, ``sym_z``→2). Rigid
         modes that survive are removed by point constraints.
+    operator_cache : "auto", path or None
+        Directory where the assembled film operators are kept between processes
+        (:mod:`fea.operator_cache`); "auto" is the mesh cache directory, None disables it.
     """
 
     def __init__(self, mesh, substrate: Material | str = AL6061_T6, intorder: int = 2,
-                 constraints: dict[str, int] | None = None):
+                 constraints: dict[str, int] | None = None, operator_cache: str | Path | None = "auto"):
         t0 = time.perf_counter()
+        #: where assembled film operators are kept between processes (None: nowhere)
+        self.operator_cache = (default_cache_dir() if operator_cache == "auto"
+                               else None if operator_cache is None else Path(operator_cache))
         self.mesh = mesh
         self.substrate = get_material(substrate)
         if "front" not in mesh.boundaries:
@@ -139,14 +148,20 @@ class PreparedBlank:
             if group not in self.mesh.boundaries:
                 raise ValueError(f"surface group {group!r} is not a boundary of this mesh "
                                  f"(available: {sorted(self.mesh.boundaries)})")
-            ops = film_operators(self.mesh, self.mesh.boundaries[group], film.youngs_modulus_Pa * 1e-6,
-                                 film.poisson_ratio, self.coords_mm)
-            # On a symmetry plane the surface normal lies in the plane and u_k ≡ 0 there, so
-            # θ_k = ∂u_k/∂n = 0 exactly; nodal averaging over elements that only touch the plane
-            # along an edge would not give that, and would load the film ends with a spurious moment.
-            keep = np.ones(self.ndof)
-            keep[self.plane_fixed] = 0.0
-            ops = replace(ops, R=(sp.diags(keep) @ ops.R).tocsr())
+            facets = self.mesh.boundaries[group]
+            E_MPa = film.youngs_modulus_Pa * 1e-6
+            disk_key = operator_key(self.mesh, facets, E_MPa, film.poisson_ratio, self.plane_fixed)
+            ops = load_film_ops(self.operator_cache, disk_key) if self.operator_cache else None
+            if ops is None:
+                ops = film_operators(self.mesh, facets, E_MPa, film.poisson_ratio, self.coords_mm)
+                # On a symmetry plane the surface normal lies in the plane and u_k ≡ 0 there, so
+                # θ_k = ∂u_k/∂n = 0 exactly; nodal averaging over elements that only touch the plane
+                # along an edge would not give that, and would load the film ends with a spurious moment.
+                keep = np.ones(self.ndof)
+                keep[self.plane_fixed] = 0.0
+                ops = replace(ops, R=(sp.diags(keep) @ ops.R).tocsr())
+                if self.operator_cache:
+                    save_film_ops(self.operator_cache, disk_key, ops)
             self._film_ops[key] = ops
         return self._film_ops[key]
 
