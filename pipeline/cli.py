@@ -82,21 +82,26 @@ def _cmd_calibrate(a) -> int:
     return calibrate(["--out", str(a.out)] if a.out else [])
 
 
-def _study_config(config: str | None, preset: str | None):
-    """The config of ``run``/``config --check``: a file, a shipped preset, or None (default)."""
-    from pipeline.config import load_study_config, preset_path
+def _study_config(config: str | None, preset: str | None, overrides=None):
+    """The config of ``run``/``config --check``: a file, a shipped preset, or None (default),
+    with ``--set KEY=VALUE`` overrides applied."""
+    from pipeline.config import (apply_overrides, load_study_config, preset_path, read_study_data,
+                                 study_config_from_dict)
 
     if config and preset:
         raise ValueError(f"give either a config file ({config}) or --preset {preset}, not both")
-    if preset:
-        return load_study_config(preset_path(preset))
-    return load_study_config(config) if config else None
+    path = preset_path(preset) if preset else config
+    base = load_study_config(path) if path else None  # file errors first, named as such
+    if not overrides:
+        return base
+    source = f"{path or 'default study'} with --set {' '.join(overrides)}"
+    return study_config_from_dict(apply_overrides(read_study_data(path), overrides), source)
 
 
 def _cmd_run(a) -> int:
     from pipeline.study import run_study
 
-    config = _study_config(a.config, a.preset)  # validated before anything is written
+    config = _study_config(a.config, a.preset, a.set)  # validated before anything is written
     run_study(a.out, config, progress=not a.quiet, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm)
     return 0
 
@@ -113,7 +118,7 @@ def _cmd_config(a) -> int:
     elif a.show:
         print(preset_path(a.show).read_text(encoding="utf-8"), end="")
     else:
-        config = _study_config(a.check, a.preset) or default_study()
+        config = _study_config(a.check, a.preset, a.set) or default_study()
         print(f"valid: {config.summary()}")
         for c in config.cases():
             print(f"  FEA  {c.label}")
@@ -133,6 +138,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--preset", default=None, metavar="NAME",
                    help="a shipped config instead of a file (list: 'cryograting config --list')")
     q.add_argument("--out", default="results", help="output directory (default: results)")
+    q.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help=(
+        "override or sweep any config key, repeatable: fea.t0_um=100:200:50, fea.polish=[0.5,1], "
+        "fea.cases[0].coverage=holes, profiles.pupil_shift_x_mm=-10:10:5n, profiles.grating=J,K, "
+        "profiles[1].pixel_scale_mas=25"))
     q.add_argument("--mesh-size-mm", type=float, default=None, help="element size near walls (mm)")
     q.add_argument("--mesh-bulk-mm", type=float, default=None, help="element size in the bulk (mm)")
     q.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -145,6 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--show", metavar="NAME", help="print a shipped config")
     g.add_argument("--check", metavar="CONFIG.toml", help="validate a config file and list its FEA cases")
     g.add_argument("--preset", metavar="NAME", help="validate a shipped config and list its FEA cases")
+    q.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="with --check/--preset: overrides as in 'cryograting run --set'")
     q.set_defaults(func=_cmd_config)
 
     q = sub.add_parser("tables", help="the paper's 15 P/V cases, model vs paper")

@@ -774,6 +774,87 @@ def loads_study_config(text: str, source: str = "<string>") -> StudyConfig:
     return study_config_from_dict(data, source)
 
 
+_SET_KEY = re.compile(r"^(study|fea|profiles|figures|output)((?:\[\d+\])?)(?:\.(cases)(\[\d+\])?)?\.([A-Za-z_][A-Za-z0-9_]*)$")
+
+
+def parse_override(text: str) -> tuple[str, object]:
+    """``KEY=VALUE`` from the command line → (dotted key, parsed value).
+
+    VALUE is read as a TOML value (``200``, ``[100, 150]``, ``"J"``, ``{start = 0.5, stop = 1,
+    num = 3}``); otherwise a comma list (``J,K`` or ``250,100,25``) or a plain string (a range
+    string such as ``100:200:50`` or ``-10:10:5n``, a name such as ``AlSi40``).
+    """
+    key, sep, raw = str(text).partition("=")
+    key, raw = key.strip(), raw.strip()
+    if not sep or not key or not raw:
+        raise ConfigError("", text, "an override must look like KEY=VALUE, e.g. fea.t0_um=100:200:50 "
+                          "or profiles.pupil_shift_x_mm=[-4,0,4]", "--set")
+
+    def value(v: str):
+        try:
+            return tomllib.loads(f"v = {v}")["v"]
+        except tomllib.TOMLDecodeError:
+            return v
+
+    if "," in raw and raw[0] not in "[{\"'":
+        return key, [value(v.strip()) for v in raw.split(",")]
+    return key, value(raw)
+
+
+def apply_overrides(data: dict, overrides) -> dict:
+    """A copy of parsed config ``data`` with ``--set`` overrides applied.
+
+    Keys: ``section.key`` (``study``, ``fea``, ``output``, ...), ``fea.cases[i].key`` (one FEA
+    table), ``profiles.key`` (every ``[[profiles]]`` table) or ``profiles[i].key`` (one).
+    The result is validated like a file (:func:`study_config_from_dict`).
+    """
+    import copy
+
+    data = copy.deepcopy(data)
+    for item in overrides or ():
+        key, val = item if isinstance(item, tuple) else parse_override(item)
+        m = _SET_KEY.match(key)
+        if not m:
+            raise ConfigError(key, val, "unknown override key; use section.key (study, fea, output), "
+                              "fea.cases[i].key, profiles.key or profiles[i].key", "--set")
+        section, index, cases, case_index, name = m.groups()
+        if section == "profiles":
+            tables = data.setdefault("profiles", [])
+            if not isinstance(tables, list) or not tables:
+                raise ConfigError(key, val, "the config has no [[profiles]] table to set it in", "--set")
+            chosen = tables if not index else _pick(tables, index, key, val)
+            for t in chosen:
+                t[name] = val
+        elif cases:
+            tables = data.setdefault("fea", {}).get("cases", [])
+            chosen = tables if not case_index else _pick(tables, case_index, key, val)
+            if not chosen:
+                raise ConfigError(key, val, "the config has no [[fea.cases]] table to set it in", "--set")
+            for t in chosen:
+                t[name] = val
+        elif index:
+            raise ConfigError(key, val, f"[{section}] is a single table: no index", "--set")
+        else:
+            data.setdefault(section, {})[name] = val
+    return data
+
+
+def _pick(tables: list, index: str, key: str, val) -> list:
+    i = int(index.strip("[]"))
+    if i >= len(tables):
+        raise ConfigError(key, val, f"there are only {len(tables)} such tables (indices from 0)", "--set")
+    return [tables[i]]
+
+
+def read_study_data(path=None) -> dict:
+    """The parsed TOML of a config file, or of the built-in default (``paper_default``)."""
+    p = PRESET_DIR / "paper_default.toml" if path is None else Path(path)
+    try:
+        return tomllib.loads(p.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError("", ..., f"malformed TOML: {exc}", str(p)) from None
+
+
 def load_study_config(path) -> StudyConfig:
     """Read and validate a study config file.
 

@@ -234,3 +234,33 @@ def test_any_wrong_value_anywhere_gives_a_one_line_config_error():
                 study_config_from_dict(data, "x.toml")
             except ConfigError as exc:
                 assert "\n" not in str(exc) and str(exc).startswith("x.toml: "), (path, value, str(exc))
+
+
+def test_set_overrides_sweep_any_key_from_the_command_line():
+    """`--set` takes lists, ranges and names for FEA and profile keys, validated like a file."""
+    from pipeline.config import apply_overrides, parse_override, read_study_data, study_config_from_dict
+
+    assert parse_override("fea.t0_um=[100, 150]") == ("fea.t0_um", [100, 150])
+    assert parse_override("profiles.grating=J,K") == ("profiles.grating", ["J", "K"])
+    assert parse_override("fea.polish=0.5:1:3n") == ("fea.polish", "0.5:1:3n")
+    assert parse_override("fea.substrate=AlSi40") == ("fea.substrate", "AlSi40")
+    data = apply_overrides(read_study_data(None), ["fea.cases[1].t0_um=100:200:50",
+                                                   "profiles.pupil_shift_x_mm=-4,0,4"])
+    base = study_config_from_dict(read_study_data(None))
+    cfg = study_config_from_dict(data)
+    assert len(cfg.profile_jobs()) == 3 * len(base.profile_jobs())
+    assert {c.params["t0_um"] for c in cfg.cases()} >= {100.0, 150.0, 200.0}
+
+
+@pytest.mark.parametrize("override, match", [
+    ("fea.t0_umm=100", "did you mean 't0_um'"),
+    ("profiles.pupil_shift_x_mm=40", "allowed |shift|"),
+    ("fea.cases[9].polish=0.5", "only"),
+    ("nonsense", "KEY=VALUE"),
+    ("colour.t0_um=1", "unknown override key"),
+])
+def test_bad_set_override_names_key_and_range(override, match):
+    from pipeline.config import apply_overrides, read_study_data, study_config_from_dict
+
+    with pytest.raises(ValueError, match=re.escape(match)):
+        study_config_from_dict(apply_overrides(read_study_data(None), [override]))
