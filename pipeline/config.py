@@ -836,6 +836,10 @@ def apply_overrides(data: dict, overrides) -> dict:
             raise ConfigError(key, val, f"[{section}] is a single table: no index", "--set")
         else:
             data.setdefault(section, {})[name] = val
+            if section == "fea":  # every FEA table: also where a [[fea.cases]] table sets it
+                for t in data["fea"].get("cases", []):
+                    if isinstance(t, dict) and name in t:
+                        t[name] = val
     return data
 
 
