@@ -269,6 +269,7 @@ def test_bad_set_override_names_key_and_range(override, match):
 def test_set_fea_key_reaches_tables_that_set_it_themselves():
     from pipeline.config import apply_overrides, study_config_from_dict
 
-    data = {"fea": {"t0_um": 200, "cases": [{"name": "a", "t0_um": 150}, {"name": "b"}]}}
+    data = {"fea": {"t0_um": 200, "cases": [{"name": "a", "t0_um": 150, "polish": 0.5},
+                                            {"name": "b", "polish": 1.0}]}}
     cfg = study_config_from_dict(apply_overrides(data, ["fea.t0_um=[100, 120]"]))
     assert sorted(c.params["t0_um"] for c in cfg.cases()) == [100, 100, 120, 120]
