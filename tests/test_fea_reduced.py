@@ -124,3 +124,14 @@ def test_free_stiffness_on_bulk_pattern_equals_sparse_sum():
         ref = ref + m.film_ops(g, NIP).local_stiffness(t * 1e-3)[m.free][:, m.free]
     assert fast.nnz > Kb.nnz
     assert abs(fast - ref).max() <= 1e-12 * abs(ref).max()
+
+
+def test_batched_statistics_equal_per_case(model):
+    """statistics_many (one matrix product per chunk) gives statistics() per case."""
+    s = build_surrogate(model, SurrogateDomain(), stress_scale=STRESS_SCALE, tol=5e-3)
+    cases = SurrogateDomain().sample(7, np.random.default_rng(3))
+    many = s.statistics_many(cases, chunk=3)
+    for c, m in zip(cases, many):
+        one = s.statistics(c)
+        for k, v in one.items():
+            assert m[k] == pytest.approx(v, rel=1e-10, abs=1e-14), k
