@@ -98,6 +98,23 @@ def _shared_csr(data, indices, indptr, shape) -> sp.csr_matrix:
     return A
 
 
+def renumbered(A: sp.csr_matrix, row_map: np.ndarray, col_map: np.ndarray, shape) -> tuple[sp.csr_matrix, np.ndarray]:
+    """``A`` restricted to the rows/columns whose map is >= 0, renumbered by the maps.
+
+    The maps must increase over the kept indices (e.g. full → free DOF numbers), so the
+    canonical order of ``A`` carries over: O(nnz), no sorting (``A[rows][:, cols]`` costs
+    ~0.1 s per matrix at the default mesh). Returns the matrix and the positions in
+    ``A.data`` of its entries.
+    """
+    rows = row_map[np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))]
+    cols = col_map[A.indices]
+    keep = np.flatnonzero((rows >= 0) & (cols >= 0))
+    indptr = np.zeros(shape[0] + 1, dtype=np.int64)
+    np.cumsum(np.bincount(rows[keep], minlength=shape[0]), out=indptr[1:])
+    B = _shared_csr(A.data[keep], cols[keep].astype(np.int32), indptr.astype(np.int32), shape)
+    return B, keep
+
+
 def combine(coefs, mats) -> sp.csr_matrix:
     """Σ c_i A_i; a ``data`` sum when the matrices share one pattern (see :class:`_Scatter`)."""
     first = mats[0]
@@ -231,19 +248,19 @@ class FilmOperators:
         (2-3x faster at the default mesh, where a surface group touches ~10 % of the DOFs)."""
         rows = np.flatnonzero(np.diff(self.A00.indptr) | np.diff(self.R.indptr))
         idx = np.unique(np.concatenate([rows, self.A00.indices, self.R.indices]))
-
-        def sub(A):
-            out = A[idx][:, idx].tocsr()
-            out.sort_indices()
-            return out
-
-        A00, A00k, A0C, A0Ck, ACC, ACCk, R = (sub(M) for M in (self.A00, self.A00k, self.A0C, self.A0Ck,
-                                                                 self.ACC, self.ACCk, self.R))
-        # one pattern again, so that t-weighted sums stay data sums (combine)
-        for M in (A00k, A0C, A0Ck, ACC, ACCk):
-            if np.array_equal(M.indptr, A00.indptr) and np.array_equal(M.indices, A00.indices):
-                M.indices, M.indptr = A00.indices, A00.indptr
-        return idx, A00, A00k, A0C, A0Ck, ACC, ACCk, R
+        to_active = np.full(self.A00.shape[0], -1, dtype=np.int64)
+        to_active[idx] = np.arange(idx.size)
+        shape = (idx.size, idx.size)
+        R, _ = renumbered(self.R.tocsr(), to_active, to_active, shape)
+        if not self.shares_pattern():
+            mats = [renumbered(M.tocsr(), to_active, to_active, shape)[0]
+                    for M in (self.A00, self.A00k, self.A0C, self.A0Ck, self.ACC, self.ACCk)]
+            return (idx, *mats, R)
+        # one pattern, renumbered once and shared: t-weighted sums stay data sums (combine)
+        A00, keep = renumbered(self.A00, to_active, to_active, shape)
+        mats = [A00] + [_shared_csr(M.data[keep], A00.indices, A00.indptr, shape)
+                        for M in (self.A00k, self.A0C, self.A0Ck, self.ACC, self.ACCk)]
+        return (idx, *mats, R)
 
     def apply_power_terms(self, V: np.ndarray, offset: bool = True) -> np.ndarray:
         """Coefficients of t, t², t³, t⁴ of the whole film stiffness applied to ``V``.

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from .assembly import FilmOperators, _shared_csr, bulk_stiffness, film_operators, scalar_basis
+from .assembly import FilmOperators, _shared_csr, bulk_stiffness, film_operators, renumbered, scalar_basis
 from .coating import SURFACE_GROUPS, Coating
 from .linsolve import SPDFactor, _rigid_modes, solve_spd, solve_spd_perturbed
 from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
@@ -366,6 +366,8 @@ class PreparedBlank:
         if not need:
             return {g: self._layouts[key(g)] for g in groups}
         free = self.free
+        to_free = np.full(self.ndof, -1, dtype=np.int64)
+        to_free[free] = np.arange(free.size)
         films = {}
         for g in need:
             ops = self.film_ops(g, film)
@@ -374,8 +376,7 @@ class PreparedBlank:
             A = ops.A00
             # the film's entries on the free DOFs, carrying their entry numbers in A00.data
             ids = _shared_csr(np.arange(1, A.nnz + 1, dtype=float), A.indices, A.indptr, A.shape)
-            F = ids[free][:, free].tocsr()
-            F.sort_indices()
+            F, _ = renumbered(ids, to_free, to_free, (free.size, free.size))
             FT = F.T.tocsr()
             FT.sort_indices()
             films[g] = (A.nnz, F, FT)
