@@ -324,9 +324,11 @@ class PreparedBlank:
     def _bulk_free(self) -> sp.csr_matrix:
         """Bulk stiffness on the free DOFs (sliced once per mesh)."""
         if getattr(self, "_K_bulk_free", None) is None:
-            Kb = self.K_bulk[self.free][:, self.free].tocsr()
-            Kb.sum_duplicates()  # canonical (sorted, unique) indices: _free_layout searches them
-            self._K_bulk_free = Kb
+            K = self.K_bulk.tocsr()
+            K.sum_duplicates()  # canonical (sorted, unique) indices: _free_layouts relies on them
+            to_free = np.full(self.ndof, -1, dtype=np.int64)
+            to_free[self.free] = np.arange(self.free.size)
+            self._K_bulk_free, _ = renumbered(K, to_free, to_free, (self.free.size,) * 2)
         return self._K_bulk_free
 
     def _free_stiffness(self, used_um: dict[str, float], film: Material, offset: bool) -> sp.csr_matrix:
