@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import secrets
+import uuid
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
@@ -103,3 +104,27 @@ def read_text(path: str | Path, what: str) -> str:
 def numbered_lines(text: str) -> list[tuple[int, str]]:
     """``(line_number, line)`` pairs (1-based), without line terminators."""
     return list(enumerate(text.splitlines(), start=1))
+
+
+def ensure_writable_dir(path: str | Path, what: str = "output directory") -> Path:
+    """Create directory ``path`` and prove it writable before anything is computed or written.
+
+    Raises
+    ------
+    NotADirectoryError
+        ``path`` exists and is not a directory.
+    PermissionError
+        It cannot be created or written (the message names the path and the reason).
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise NotADirectoryError(f"{what} {str(path)!r} exists and is not a directory")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".write-probe.{os.getpid()}.{uuid.uuid4().hex[:8]}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise PermissionError(f"{what} {str(path)!r} is not a writable directory: "
+                              f"{exc.strerror or exc}") from None
+    return path

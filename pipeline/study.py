@@ -26,9 +26,7 @@ from __future__ import annotations
 
 import csv
 import html
-import os
 import time
-import uuid
 from pathlib import Path
 
 import numpy as np
@@ -87,16 +85,9 @@ def default_study() -> StudyConfig:
 
 def _prepare_out(out: Path) -> None:
     """Create ``out`` and prove it writable before anything is computed or written."""
-    if out.exists() and not out.is_dir():
-        raise NotADirectoryError(f"output directory {str(out)!r} exists and is not a directory")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / f".write-probe.{os.getpid()}.{uuid.uuid4().hex[:8]}"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as exc:
-        raise PermissionError(f"output directory {str(out)!r} is not a writable directory: "
-                              f"{exc.strerror or exc}") from None
+    from pipeline.io_common import ensure_writable_dir
+
+    ensure_writable_dir(out)
 
 
 def _run_fea(config: StudyConfig, out: Path, progress: bool):

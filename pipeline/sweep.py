@@ -20,7 +20,6 @@ import math
 import os
 import pickle
 import sys
-import uuid
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -227,18 +226,15 @@ def parse_range(text: str) -> list[float]:
 
 def _prepare_out_dir(out_dir) -> Path:
     """Create ``out_dir/cases`` and prove it writable, before any case runs."""
+    from pipeline.io_common import ensure_writable_dir
+
     path = Path(out_dir)
     if path.exists() and not path.is_dir():
         raise ValueError(f"out_dir {str(path)!r} exists and is not a directory")
-    cases_dir = path / "cases"
     try:
-        cases_dir.mkdir(parents=True, exist_ok=True)
-        probe = cases_dir / f".write-probe.{os.getpid()}.{uuid.uuid4().hex[:8]}"
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as exc:
+        return ensure_writable_dir(path / "cases", "out_dir")
+    except OSError as exc:  # the sweep API reports bad input as ValueError
         raise ValueError(f"out_dir {str(path)!r} is not a writable directory: {exc}") from exc
-    return cases_dir
 
 
 def run_sweep(func, cases, out_dir, *, namespace: str, workers: int | None = None,
