@@ -3,9 +3,10 @@ injection-recovery campaign. Writes benchmarks/results_diagnosis_raw.json; the
 numbers in results_diagnosis.md were pasted from its output.
 
     .venv/bin/python benchmarks/bench_diagnosis.py [--cases 208] [--workers 2] [--seed 1] [--cache-dir DIR]
-        [--profiles extended|minimal] [--no-scenarios] [--out FILE]
+        [--profiles extended|minimal] [--no-scenarios] [--out FILE] [--progress FILE.jsonl]
 
-``--profiles``: the campaign's line-profile measurement set
+``--progress``: every finished case is appended there as a JSON line (partial results
+survive an interrupted run). ``--profiles``: the campaign's line-profile measurement set
 (:data:`pipeline.diagnosis.campaign.PROFILE_SETS`).
 """
 
@@ -32,6 +33,7 @@ def main(argv=None):
     ap.add_argument("--profiles", default="extended", choices=sorted(PROFILE_SETS))
     ap.add_argument("--no-scenarios", action="store_true")
     ap.add_argument("--out", default=str(HERE / "results_diagnosis_raw.json"))
+    ap.add_argument("--progress", default=None)
     a = ap.parse_args(argv)
     out = {"scenarios": {}}
     for name in () if a.no_scenarios else ("cryo_astigmatism", "j_repolished", "hk_amplitude"):
@@ -45,7 +47,7 @@ def main(argv=None):
                                   "seconds": time.perf_counter() - t, "timings_s": d.timings_s}
         print(name, json.dumps(out["scenarios"][name], default=float))
     cfg = CampaignConfig(n_cases=a.cases, seed=a.seed, workers=a.workers, profile_specs=PROFILE_SETS[a.profiles])
-    res = run_campaign(cfg, cache_dir=a.cache_dir)
+    res = run_campaign(cfg, cache_dir=a.cache_dir, progress=a.progress)
     res["profile_set"] = a.profiles
     out["campaign"] = res
     s = res["summary"]

@@ -229,6 +229,8 @@ def run_case(args) -> dict:
             "uncertainties": d.finding(effect).uncertainties if in_lib and d.finding(effect) else None,
             "fitted": d.finding(effect).parameters if in_lib and d.finding(effect) else None,
             "sign_degenerate": list(d.finding(effect).sign_degenerate) if in_lib and d.finding(effect) else [],
+            "companions": list(d.finding(effect).companions) if in_lib and d.finding(effect) else [],
+            "top_companions": list(best.companions) if best else [],
             "seconds": time.perf_counter() - t0}
 
 
@@ -268,6 +270,13 @@ def _summary(rows: list[dict], wall_s: float, cfg: CampaignConfig) -> dict:
             "wall_s": wall_s, "workers": cfg.workers, "seed": cfg.seed}
 
 
+def _log(row: dict, progress) -> dict:
+    if progress is not None:
+        with open(progress, "a") as fh:
+            fh.write(json.dumps(row, default=float) + "\n")
+    return row
+
+
 def campaign_maps(cfg: CampaignConfig, cache_dir=None) -> tuple[SagMap, SagMap]:
     """(diagnosed nominal, truth base) FEA maps of 200 µm / 75 % at 80 K."""
     nominal = fea_sag_map(200.0, 0.75, "all", 80.0, cfg.nominal_mesh, cache_dir=cache_dir)
@@ -275,8 +284,11 @@ def campaign_maps(cfg: CampaignConfig, cache_dir=None) -> tuple[SagMap, SagMap]:
     return nominal, base
 
 
-def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None) -> dict:
-    """Run ``cfg.n_cases`` cases (types cycled) in ``cfg.workers`` processes."""
+def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None, progress=None) -> dict:
+    """Run ``cfg.n_cases`` cases (types cycled) in ``cfg.workers`` processes.
+
+    ``progress`` (path, optional): each finished case is appended to it as one JSON line
+    (in case order), so an interrupted campaign leaves its partial results."""
     t0 = time.perf_counter()
     nominal, base = campaign_maps(cfg, cache_dir)
     tasks = [(i, cfg.case_types[i % len(cfg.case_types)], cfg, nominal, base) for i in range(cfg.n_cases)]
@@ -285,9 +297,9 @@ def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None) -> dict
         # One BLAS/FFT thread per worker: the workers already fill the cores.
         os.environ.setdefault("OMP_NUM_THREADS", "1")
         with ProcessPoolExecutor(cfg.workers) as ex:
-            rows = list(ex.map(run_case, tasks, chunksize=1))
+            rows = [_log(r, progress) for r in ex.map(run_case, tasks, chunksize=1)]
     else:
-        rows = [run_case(t) for t in tasks]
+        rows = [_log(run_case(t), progress) for t in tasks]
     wall = time.perf_counter() - t0
     s = _summary(rows, wall, cfg)
     s["maps_s"] = t_maps

@@ -23,7 +23,23 @@ collimator_wfe      coll_coma_um Z(3,1), coll_defocus_um Z(2,0), extra spectrogr
                     coll_astig45_um Z(2,-2) (0; ±0.4 µm)         of the default collimator
 slit_width          slit_image_width_um (27; 15…45 µm)           slit image width ≠ 27 µm
                                                                  (29 µm grating HK scaled alike)
+plating_gradient    plating_grad_x, plating_grad_y (0; ±0.1)     NiP thickness varies linearly
+                    relative change of the deformation           across the blank: deformation
+                    amplitude at x or y = +70 mm                 x (1 + gx x/70 + gy y/70)
+                    (companion, below)
 ==================  ===========================================  ============================
+
+``companion`` effects (``plating_gradient``) are candidates on their own *and* are refitted
+jointly with the best-ranked other candidates (:class:`~pipeline.diagnosis.engine.Criteria`
+``companion_top``); the joint fit replaces a finding only where the data support it
+(BIC lower by ``companion_bic``). The finding keeps its own name and lists the companion in
+``Finding.companions``. Reason: a plating-thickness gradient is present at some level on
+every real blank (the campaign's truths carry a random ±1.5–3 % one), so it is a
+nuisance-like discrepancy that biases the other effects' parameters (collimator defocus,
+the sign of pupil_y) unless it is fitted alongside them; it is not a nuisance of the
+forward model (piston/tilt, offset shift, flux, background), because those are removed
+from every fit including the nominal, while the gradient must be *tested* (it is a
+physical claim about the blank and costs parameters in the BIC).
 
 ``floor`` is the absolute tolerance used when judging parameter recovery
 (relative error is ``|fit - true| / max(|true|, floor)``).
@@ -33,7 +49,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Parameter", "Effect", "LIBRARY", "effect_parameters", "applicable_effects", "NOMINAL_SLIT_UM"]
+__all__ = ["Parameter", "Effect", "LIBRARY", "PLATING_GRADIENT_REF_MM", "effect_parameters", "applicable_effects", "NOMINAL_SLIT_UM"]
 
 NOMINAL_SLIT_UM = 27.0
 
@@ -75,6 +91,8 @@ class Effect:
         One copy of the parameter per grating blank in the data.
     description : str
         Physical meaning, for reports.
+    companion : bool
+        Also refitted jointly with the best other candidates (module docstring).
     vector : bool
         The parameters are the components of one vector in a common unit whose norm is
         the effect's physical magnitude: coefficients of RMS-normalised (orthonormal)
@@ -89,6 +107,7 @@ class Effect:
     per_blank: bool = False
     description: str = ""
     vector: bool = False
+    companion: bool = False
 
 
 LIBRARY: dict[str, Effect] = {e.name: e for e in (
@@ -120,7 +139,15 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
     Effect("slit_width", ("line_profile",),
            (Parameter("slit_image_width_um", NOMINAL_SLIT_UM, 15.0, 45.0, floor=1.0),),
            description="geometric slit image width differs from 27 µm (29 µm for HK, scaled alike)"),
+    Effect("plating_gradient", ("surface", "line_profile"),
+           (Parameter("plating_grad_x", 0.0, -0.1, 0.1, floor=0.01), Parameter("plating_grad_y", 0.0, -0.1, 0.1, floor=0.01)),
+           description="NiP thickness gradient across the blank: deformation x (1 + gx x/70 mm + gy y/70 mm) "
+                       "(blank coordinates; gx, gy = relative amplitude change at the blank's half-width)",
+           vector=True, companion=True),
 )}
+
+#: Half-width (mm) at which ``plating_grad_x/y`` are the relative amplitude change.
+PLATING_GRADIENT_REF_MM = 70.0
 
 
 def effect_parameters(effect: Effect, blanks: tuple[str, ...]) -> tuple[Parameter, ...]:

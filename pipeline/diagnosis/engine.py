@@ -15,6 +15,14 @@ Decision logic (thresholds in :class:`Criteria`, passed explicitly):
    residual are listed in each other's ``degenerate_with`` — the data cannot tell them apart.
    Signed parameters whose sign the data cannot tell (negated, the score changes by
    less than ``degenerate_bic``) are listed in ``sign_degenerate``.
+   **Companions** (``Effect.companion``: ``plating_gradient``): after the first ranking
+   the ``companion_top`` best findings that are not the companion itself are refitted
+   jointly with it (warm start); the joint fit replaces the finding (same name, the
+   companion listed in ``Finding.companions``) iff its BIC is lower by at least
+   ``companion_bic``. Such a finding is ``significant`` only if it also beats the
+   companion alone by ``min_delta_bic``, and its ``excess_explained`` is measured from
+   the companion-alone fit (what the finding adds beyond the gradient), so a gradient
+   present in the data cannot lend its evidence to another effect.
 5. **Held out** (:mod:`.heldout`): the effect is refitted on part of the data and its
    shrinkage measured on the rest; ``overfit`` if the held-out shrink is below
    ``heldout_ratio`` times the in-sample shrink.
@@ -50,7 +58,7 @@ from .manifest import Manifest, load_data, load_manifest
 from .nominal import nominal_sag_map
 from .where import measurement_parts, profile_parts, satellite_spacing_um, surface_parts
 
-__all__ = ["Criteria", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects"]
+__all__ = ["Criteria", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects", "all_effects"]
 
 
 @dataclass(frozen=True)
@@ -66,6 +74,8 @@ class Criteria:
     degenerate_prediction: float = 0.2
     no_gap_ratio: float = 1.3
     heldout_top: int = 3
+    companion_top: int = 2
+    companion_bic: float = 6.0
 
 
 @dataclass(frozen=True)
@@ -91,6 +101,7 @@ class Finding:
     sign_degenerate: tuple = ()
     per_measurement: tuple = ()
     significant: bool = False
+    companions: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -202,6 +213,11 @@ def _noise_cost(prob: Problem, n: dict) -> float:
     return out
 
 
+def all_effects(f: Finding) -> tuple:
+    """The effects whose parameters a finding holds: its own plus its companions."""
+    return tuple(f.effects) + tuple(f.companions)
+
+
 def excess_explained(prob: Problem, nom: FitOutcome, fo: FitOutcome) -> float:
     """Fraction of the nominal residual *beyond noise* that ``fo`` removes (module docstring)."""
     wb = sum(prob.weights[m] ** 2 * nom.rss[m] for m in nom.rss)
@@ -226,6 +242,47 @@ def fit_effects(prob: Problem, nom: FitOutcome, names: tuple, criteria: Criteria
     f = Finding("+".join(names), tuple(names), fo.parameters, fo.errors, fo.bic(prob.weights), dbic, before, after, 1 - ratio, ve,
                 excess_explained(prob, nom, fo), per_measurement=per, significant=bool(dbic <= -criteria.min_delta_bic))
     return f, fo
+
+
+def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict, cands, c: Criteria,
+                     joint_fits: dict | None = None) -> list:
+    """Refit the ``c.companion_top`` best findings jointly with the companion effects
+    (module docstring, step 3); ``findings`` ranked best first, ``fits`` updated in place;
+    every joint fit (adopted or not) is stored in ``joint_fits[effect] = (names, fit)``
+    for the sign test."""
+    comp = tuple(e.name for e in cands if e.companion)
+    if not comp or c.companion_top <= 0:
+        return findings
+    joint_fits = {} if joint_fits is None else joint_fits
+    ref = {n: fits[n] for n in comp if n in fits}  # the companions fitted alone
+    out, done = list(findings), 0
+    for i, f in enumerate(findings):
+        if done >= c.companion_top:
+            break
+        if set(f.effects) & set(comp):
+            continue
+        done += 1
+        names = tuple(f.effects) + comp
+        start = {**f.parameters, **{k: v for n in comp if n in fits for k, v in fits[n].parameters.items()}}
+        joint, fo = fit_effects(prob, nom, names, c, start=start)
+        joint_fits[f.effect] = (names, fo)
+        # Model-mismatch term: how far modelling one known discrepancy (the companion)
+        # moves the finding's own parameters, added in quadrature to both fits' errors.
+        shift = {q: abs(joint.parameters[q] - v) for q, v in f.parameters.items() if q in joint.parameters}
+        infl = lambda errs: {q: (math.hypot(e, shift[q]) if q in shift else e) for q, e in errs.items()}
+        if not joint.score <= f.score - c.companion_bic:
+            out[i] = _replace(f, uncertainties=infl(f.uncertainties))
+            continue
+        joint = _replace(joint, uncertainties=infl(joint.uncertainties))
+        # Evidence and excess for the finding itself: measured from the companions alone.
+        base = min((ref[n] for n in ref), key=lambda o: o.bic(prob.weights), default=nom)
+        base_bic = min(base.bic(prob.weights), nom.bic(prob.weights))
+        sig = bool(joint.score - base_bic <= -c.min_delta_bic)
+        ex = excess_explained(prob, base, fo) if base is not nom else joint.excess_explained
+        out[i] = _replace(joint, effect=f.effect, effects=f.effects, companions=comp, significant=sig,
+                          excess_explained=ex)
+        fits[f.effect] = fo
+    return out
 
 
 def _same_rescaling(names, prob) -> bool:
@@ -254,7 +311,7 @@ def _degeneracies(findings, fits, prob, c: Criteria):
     return out
 
 
-def _sign_degeneracies(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria) -> tuple:
+def _sign_degeneracies(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, joint=None) -> tuple:
     """Signed parameters (null 0, fitted > 2 sigma from 0) whose sign the data cannot tell:
     with that parameter held at its mirror value ``-v`` and the *other* parameters of the
     finding refitted from the mirrored start (nuisances too), the score is within
@@ -267,19 +324,46 @@ def _sign_degeneracies(prob: Problem, finding: Finding, fo: FitOutcome, c: Crite
     fitted values (the previous test) scored the mirror with the other parameters still
     tuned to the original sign: three pupil_y sign flips of the campaign went unflagged
     (fit -1.6 mm vs truth +1.5 mm). Such a parameter is reported with its sign
-    undetermined (``sign_degenerate``) rather than with an arbitrary sign."""
+    undetermined (``sign_degenerate``) rather than with an arbitrary sign.
+
+    ``joint`` = (effect names, fit) of the finding refitted with its companions
+    (``plating_gradient``) when that fit was not adopted: the test is then repeated with
+    the companions free on both sides (reference: the joint fit; mirror: the joint
+    parameters refitted with the tested one held at ``-v``), and the sign counts as
+    undetermined if either test says so. Reason: a plating gradient breaks the blank's
+    y-mirror symmetry, so the asymmetry that picks pupil_y's sign may come from the
+    blank rather than from the footprint; the sign is only claimed if it survives a
+    plausible gradient (measured: campaign case 203, truth pupil_y +1.47 mm, fitted
+    -1.61 and unflagged; without the truth's gradient the fit gives +1.57)."""
+    out = _sign_test(prob, finding, fo, c, all_effects(finding))
+    if joint is not None:
+        names, jfo = joint
+        extra = _sign_test(prob, finding, jfo, c, names, start=jfo.parameters)
+        out = tuple(n for n in finding.parameters if n in set(out) | set(extra))
+    return out
+
+
+def _sign_test(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, effects: tuple,
+               start: dict | None = None) -> tuple:
+    """Profile-likelihood sign test of ``finding``'s own signed parameters with the
+    parameters of ``effects`` free (reference fit ``fo``); see :func:`_sign_degeneracies`."""
     out = []
+    start = finding.parameters if start is None else start
     neff = max(sum(fo.n_eff.values()), 2.0)
     cost = sum(prob.weights[m] ** 2 * fo.rss[m] for m in fo.rss)
-    params = tuple(q for e in finding.effects for q in effect_parameters(LIBRARY[e], _blanks_for(LIBRARY[e], prob.forwards)))
-    for name, v in finding.parameters.items():
+    params = tuple(q for e in effects for q in effect_parameters(LIBRARY[e], _blanks_for(LIBRARY[e], prob.forwards)))
+    own = {q.name for e in finding.effects for q in effect_parameters(LIBRARY[e], _blanks_for(LIBRARY[e], prob.forwards))}
+    for name in finding.parameters:
+        if name not in own:
+            continue  # a companion's sign is not tested (it is refitted with the others)
+        v = fo.parameters.get(name, finding.parameters[name])
         q = next((q for q in params if q.name == name), None)
         if q is None or q.null != 0.0 or not q.lo <= -v <= q.hi:
             continue
         if not abs(v) > 2.0 * finding.uncertainties.get(name, math.inf):
             continue  # consistent with zero: its sign is trivially unknown, nothing to report
         others = tuple(o for o in params if o.name != name)
-        flip = fit(prob, others, fixed={name: -v}, start={o.name: finding.parameters[o.name] for o in others})
+        flip = fit(prob, others, fixed={name: -v}, start={o.name: start[o.name] for o in others if o.name in start})
         cflip = sum(prob.weights[m] ** 2 * flip.rss[m] for m in flip.rss)
         if cost > 0 and neff * math.log(max(cflip, 1e-300) / cost) < c.degenerate_bic:
             out.append(name)
@@ -356,10 +440,14 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
         f, fo = fit_effects(prob, nom, names, criteria, start={**a.parameters, **b.parameters})
         findings.append(f)
         fits[f.effect] = fo
+    findings.sort(key=lambda f: _rank_key(f, criteria))
+    joint_fits = {}
+    findings = _with_companions(prob, nom, findings, fits, cands, criteria, joint_fits)
     t["fit_s"] = time.perf_counter() - t["start"] - t["load_s"]
     findings.sort(key=lambda f: _rank_key(f, criteria))
     findings = _degeneracies(findings, fits, prob, criteria)
-    findings = [_replace(f, sign_degenerate=_sign_degeneracies(prob, f, fits[f.effect], criteria))
+    findings = [_replace(f, sign_degenerate=_sign_degeneracies(prob, f, fits[f.effect], criteria,
+                                                               None if f.companions else joint_fits.get(f.effect)))
                 if len(f.effects) == 1 and f.significant else f for f in findings]
     if heldout:
         for i, f in enumerate(findings[:criteria.heldout_top]):

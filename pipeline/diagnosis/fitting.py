@@ -18,7 +18,18 @@ counted over effective samples — the same weighted sum of squares the fit mini
 so the score ranks what the fit optimises. Lower is better; ``delta_bic`` below -10 is
 "very strong" evidence (Kass & Raftery 1995).
 Uncertainties: ``s^2 (J^T J)^-1`` at the optimum with ``s^2`` the weighted residual per
-effective degree of freedom — i.e. inflated by the residual correlation.
+effective degree of freedom — i.e. inflated by the residual correlation. Because the
+weights are normalised by the nominal residual, not by the noise, ``s^2`` is already the
+reduced chi^2 of the fit (Birge-ratio scaling: errors grow with any misfit, noise or model
+mismatch) counted over the nominal residual's effective samples. Model mismatch left in
+the *post-fit* residual is correlated over its own length, which can exceed the
+nominal residual's: ``s^2`` is therefore the larger of the above and the residual's
+long-run variance ``sum_i w_i^2 RSS_i L_i / (N - k)`` (``L_i`` the integral correlation
+length of measurement i's post-fit residual in samples, a Newey-West-type estimate;
+:func:`_long_run_s2`). Mismatch absorbed *into* the parameters is invisible to any
+residual-based estimate; the engine adds the shift caused by modelling one known
+mismatch (the plating-gradient companion) in quadrature
+(:func:`pipeline.diagnosis.engine._with_companions`).
 """
 
 from __future__ import annotations
@@ -114,6 +125,25 @@ def effective_samples(residual: np.ndarray, x: np.ndarray, y: np.ndarray | None 
             bucket.append(r[sel[np.argsort(other[sel])]])
     L = _integral_scale(rows) * _integral_scale(cols)
     return float(np.clip(r.size / L, min(10.0, r.size), r.size))
+
+
+def _long_run_s2(problem, fws, masks: dict, resid: dict, k: int) -> float:
+    """Weighted post-fit residual variance per degree of freedom with each measurement's
+    samples counted ``L_i`` times (``L_i`` = its post-fit residual's integral correlation
+    length): the long-run variance that the projection ``J^T r`` of a correlated residual
+    has (white noise: ``L = 1``)."""
+    tot, n_all = 0.0, 0
+    for f in fws:
+        r = resid[f.name]
+        if r.size < 5:
+            continue
+        m = masks.get(f.name)
+        x = f.x if m is None else f.x[m]
+        y = None if f.kind != "surface" else (f.y if m is None else f.y[m])
+        L = r.size / effective_samples(r, x, y)
+        tot += problem.weights[f.name] ** 2 * float(np.sum(r**2)) * L
+        n_all += r.size
+    return tot / max(n_all - k, 1.0)
 
 
 @dataclass(eq=False)
@@ -248,18 +278,19 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
                 best = sol
         z, jac, success, nfev, res_vec = best.x, best.jac, bool(best.success), int(best.nfev), best.fun
     p, d = _unpack(z, params, profiles, fixed)
-    rss, n, neff = {}, {}, {}
+    rss, n, neff, resid = {}, {}, {}, {}
     for f in fws:
         m = masks.get(f.name)
         r = f.residual(p, d.get(f.name, 0.0), m)
         rss[f.name], n[f.name] = float(np.sum(r**2)), int(r.size)
         neff[f.name] = problem.n_eff[f.name] * r.size / f.n
+        resid[f.name] = r
     n_lin = sum(3 if f.kind == "surface" else 2 for f in fws)
     k = len(params) + len(profiles) + n_lin
     errors = {}
     if params:
         cost_w = float(np.sum(res_vec**2))
-        s2 = cost_w / max(sum(neff.values()) - k, 1.0)
+        s2 = max(cost_w / max(sum(neff.values()) - k, 1.0), _long_run_s2(problem, fws, masks, resid, k))
         J = np.asarray(jac)[:, :len(params)]
         JtJ = J.T @ J
         # Columns with no leverage (the parameter does not touch these data) are unconstrained.

@@ -29,11 +29,11 @@ from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
 
-from .effects import NOMINAL_SLIT_UM
+from .effects import NOMINAL_SLIT_UM, PLATING_GRADIENT_REF_MM
 from .manifest import ProfileData, SurfaceData
 from .nominal import thermal_factor
 
-__all__ = ["FIT_LSF_SETTINGS", "SurfaceForward", "ProfileForward", "profile_curve"]
+__all__ = ["FIT_LSF_SETTINGS", "SurfaceForward", "ProfileForward", "profile_curve", "plating_gradient_map"]
 
 #: Line-profile sampling used while fitting (measured: 0.1-0.45 % L1 from the defaults).
 FIT_LSF_SETTINGS = LsfSettings(detector_step_um=1.5, n_fft=256, source_step_mm=2.5, min_source_rows=5,
@@ -46,7 +46,9 @@ def _lstsq_residual(A: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 class SurfaceForward:
-    """Cold-minus-warm surface map model: ``k * S0(R^-1(p - d)) + astigmatism``.
+    """Cold-minus-warm surface map model: ``k * g(q) * S0(q) + astigmatism`` with
+    ``q = R^-1(p - d)`` the blank coordinates of measured point ``p`` and
+    ``g(q) = 1 + (plating_grad_x q_x + plating_grad_y q_y) / 70 mm`` (plating gradient).
 
     ``k = thermal_factor(T_meas + temperature_offset_K, cold_K) * scale_<blank>``;
     ``S0`` is the nominal map at the simulation's ``cold_K``; the astigmatism is
@@ -91,10 +93,14 @@ class SurfaceForward:
         if dx or dy or rot:
             c, s = math.cos(math.radians(rot)), math.sin(math.radians(rot))
             xr, yr = self.x - dx, self.y - dy
-            base = self._sample(c * xr + s * yr, -s * xr + c * yr)
+            qx, qy = c * xr + s * yr, -s * xr + c * yr
+            base = self._sample(qx, qy)
             base = np.where(np.isfinite(base), base, 0.0)  # points moved off the map: no deformation there
         else:
-            base = self.base
+            base, qx, qy = self.base, self.x, self.y
+        gx, gy = p.get("plating_grad_x", 0.0), p.get("plating_grad_y", 0.0)
+        if gx or gy:
+            base = base * (1.0 + (gx * qx + gy * qy) / PLATING_GRADIENT_REF_MM)
         return self.factor(p) * base + p.get("astig_0_um", 0.0) * self.z22 + p.get("astig_45_um", 0.0) * self.z2m2
 
     def residual(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
@@ -109,6 +115,13 @@ class SurfaceForward:
         m = self.predict(p)
         _, c = _lstsq_residual(self.nuisance[sel], self.data[sel] - m[sel])
         return m + self.nuisance @ c
+
+
+def plating_gradient_map(sag: SagMap, gx: float, gy: float) -> SagMap:
+    """``sag`` times ``1 + (gx x + gy y) / 70 mm`` (blank coordinates): a linear NiP
+    thickness gradient scales the local deformation (:mod:`.effects`, ``plating_gradient``)."""
+    X, Y = sag.grid()
+    return sag.with_sag(sag.sag_um * (1.0 + (gx * X + gy * Y) / PLATING_GRADIENT_REF_MM))
 
 
 def profile_curve(grating: str, wavelength_um: float, order: int, pixel_scale_mas: int, sag: SagMap | None,
@@ -137,7 +150,8 @@ class ProfileForward:
     """Line-profile model: ``flux * P(u - delta_um; params) + background``."""
 
     kind = "line_profile"
-    _KEYS = ("pupil_x_mm", "pupil_y_mm", "coll_coma_um", "coll_defocus_um", "coll_astig45_um", "slit_image_width_um")
+    _KEYS = ("pupil_x_mm", "pupil_y_mm", "coll_coma_um", "coll_defocus_um", "coll_astig45_um", "slit_image_width_um",
+             "plating_grad_x", "plating_grad_y")
 
     def __init__(self, data: ProfileData, nominal: SagMap, cold_K: float, warm_K: float = 293.0,
                  settings: LsfSettings = FIT_LSF_SETTINGS, cache_size: int = 512):
@@ -166,6 +180,9 @@ class ProfileForward:
             self._cache.move_to_end(key)
             return hit
         sag = self.nominal.scaled(k)
+        gx, gy = p.get("plating_grad_x", 0.0), p.get("plating_grad_y", 0.0)
+        if gx or gy:
+            sag = plating_gradient_map(sag, gx, gy)
         u, y = profile_curve(self.m.grating, self.m.wavelength_um, self.m.order, self.m.pixel_scale_mas, sag, p,
                              self.m.slit_position, self.settings)
         spl = CubicSpline(u, y, extrapolate=False)

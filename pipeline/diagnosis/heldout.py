@@ -87,7 +87,7 @@ def _prediction_spread(prob: Problem, params, tr, test: dict) -> tuple[float, fl
 
 def heldout_check(prob: Problem, finding, criteria) -> tuple[float | None, str]:
     """Held-out shrink fraction of ``finding`` (None if no fold constrains it) and a note."""
-    params = tuple(q for n in finding.effects
+    params = tuple(q for n in tuple(finding.effects) + tuple(getattr(finding, "companions", ()))
                    for q in effect_parameters(LIBRARY[n], tuple(dict.fromkeys(
                        f.blank for f in prob.forwards if f.kind in LIBRARY[n].kinds))))
     before = after = 0.0
