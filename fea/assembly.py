@@ -276,20 +276,36 @@ class FilmOperators:
         """
         V = np.asarray(V)
         out = np.zeros((4,) + V.shape)
+        out[:, self._active[0]] = self.apply_power_terms_active(V, offset)
+        return out
+
+    def apply_with_powers(self, V: np.ndarray, T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Whole film stiffness of column j's thickness applied to column j of ``V``.
+
+        ``T`` (4, m) holds t_j, t_j², t_j³, t_j⁴ (mm) per column; returns the DOFs the film
+        touches and the product on them, (idx, (len(idx), m)): the columns of a block of
+        cases with different thicknesses in one set of sparse products.
+        """
+        terms = self.apply_power_terms_active(V)
+        return self._active[0], np.einsum("km,knm->nm", T, terms, optimize=True)
+
+    def apply_power_terms_active(self, V: np.ndarray, offset: bool = True) -> np.ndarray:
+        """:meth:`apply_power_terms` on the touched DOFs only, shape (4, len(idx), *V.shape[1:])."""
         idx, A00, A00k, A0C, A0Ck, ACC, ACCk, R = self._active
-        V = V[idx]
+        V = np.asarray(V)[idx]
+        out = np.zeros((4,) + V.shape)
         A00V = A00 @ V
-        out[0][idx] = A00V
+        out[0] = A00V
         if not offset:
             return out
         RV = R @ V
         RT = R.T
         A00kV, A0CV, A0CkV = A00k @ V, A0C @ V, A0Ck @ V
         A00RV = A00 @ RV
-        out[1][idx] = 0.5 * (A00kV + A0CV + A0C.T @ V) + 0.5 * (A00RV + RT @ A00V)
-        out[2][idx] = (A0CkV + A0Ck.T @ V + ACC @ V) / 3 \
+        out[1] = 0.5 * (A00kV + A0CV + A0C.T @ V) + 0.5 * (A00RV + RT @ A00V)
+        out[2] = (A0CkV + A0Ck.T @ V + ACC @ V) / 3 \
             + (A00k @ RV + RT @ (A00kV + A00RV + A0CV) + A0C.T @ RV) / 3
-        out[3][idx] = 0.25 * (ACCk @ V) + 0.25 * (RT @ (A00k @ RV + A0CkV) + A0Ck.T @ RV)
+        out[3] = 0.25 * (ACCk @ V) + 0.25 * (RT @ (A00k @ RV + A0CkV) + A0Ck.T @ RV)
         return out
 
     def coupling_parts(self, t: float):

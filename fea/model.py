@@ -301,6 +301,11 @@ class PreparedBlank:
                 u[fr] = self._solve_iterative(Kff, couplings, f, film, offset, used,
                                               eps_mis, backend, rtol, solve_info)
         t_solve = time.perf_counter() - t0 - t_asm
+        return self._result(coating, film, load, stress_scale, offset, used, eps_mis, u,
+                            t_asm, t_solve, solve_info)
+
+    def _result(self, coating, film, load, stress_scale, offset, used, eps_mis, u, t_asm, t_solve,
+                solve_info) -> FEAResult:
         disp = u.reshape(-1, 3).T
         sag = self.front_sampler()(disp)
         info = {
@@ -313,7 +318,128 @@ class PreparedBlank:
             "symmetry_planes": list(self.symmetry_planes), "offset": offset,
             "solver": solve_info,
         }
+        eps_sub = self.substrate.strain_between(load.warm_K, load.cold_K)
         return FEAResult(self.coords_mm, disp, eps_sub, sag, info)
+
+    def solve_many(self, coatings, film: Material | str = NIP_HIGH_P, load: ThermalLoad = ThermalLoad(),
+                   stress_scale: float = 1.0, backend: str = "auto", rtol: float = 1e-5,
+                   maxiter: int = 200) -> list[FEAResult]:
+        """Solve several coatings together; same answers as :meth:`solve` one by one.
+
+        Large meshes: conjugate gradients run in lockstep on all cases, so that each step
+        applies the shared PARDISO factor to a block of residuals at once (one pass over the
+        ~0.7 GB factor for the whole block instead of one per case: 16 right-hand sides cost
+        0.6 s instead of 16 x 0.15 s at the default mesh); the film terms of every case
+        come from one set of products per surface group (:meth:`FilmOperators.apply_power_terms`
+        with per-case thickness powers). Converged cases leave the block. Small meshes, the
+        AMG back-end and cases CG cannot finish fall back to :meth:`solve`.
+        """
+        from .linsolve import SolverError, _resolve_backend
+
+        film = get_material(film)
+        coatings = list(coatings)
+        fallback = (len(coatings) < 2 or self.ndof <= self.explicit_offset_max_dof
+                    or _resolve_backend(backend) != "pardiso")
+        if fallback:
+            return [self.solve(c, film, load, stress_scale, backend, rtol=rtol) for c in coatings]
+        self.substrate.check_temperature(load.warm_K, "warm_K")
+        self.substrate.check_temperature(load.cold_K, "cold_K")
+        film.check_temperature(load.cold_K, "cold_K")
+        if not (np.isfinite(stress_scale) and stress_scale >= 0):
+            raise ValueError(f"stress_scale={stress_scale} must be a finite number >= 0")
+        for c in coatings:
+            self._check_symmetry(c)
+        t0 = time.perf_counter()
+        eps_mis = self.mismatch_strain(film, load, stress_scale)
+        fr = self.free
+        used = [self.film_thickness_um(c) for c in coatings]
+        groups = sorted({g for u_ in used for g in u_})
+        F = np.zeros((fr.size, len(coatings)))
+        for j, u_ in enumerate(used):
+            f = np.zeros(self.ndof)
+            for g, t_um in u_.items():
+                f += self.film_ops(g, film).load(t_um * 1e-3, eps_mis)
+            F[:, j] = f[fr]
+        # per group and case: the powers t, t², t³, t⁴ (zero where the group is bare)
+        P = {g: np.array([(u_.get(g, 0.0) * 1e-3) ** np.arange(1, 5) for u_ in used]).T for g in groups}
+        Kb = self._bulk_free()
+        full = np.zeros((self.ndof, len(coatings)))
+
+        acc = np.zeros((self.ndof, len(coatings)))
+
+        def apply(V, cols):
+            m = len(cols)
+            full[:, :m] = 0.0
+            full[fr, :m] = V
+            acc[:, :m] = 0.0
+            for g in groups:
+                idx, y = self.film_ops(g, film).apply_with_powers(full[:, :m], P[g][:, cols])
+                acc[idx, :m] += y
+            return Kb @ V + acc[fr, :m]
+
+        solve_case = [j for j in range(len(coatings)) if used[j] and eps_mis != 0]
+        X = np.zeros_like(F)
+        info = [dict() for _ in coatings]
+        if self._shared is not None and self._shared[1] != "pardiso":
+            self.release_preconditioner()
+        own = self._shared is None
+        if own and solve_case:
+            j0 = solve_case[0]
+            self._shared = (SPDFactor(self._free_stiffness(used[j0], film, True), "pardiso",
+                                      self.coords_mm, fr), "pardiso")
+        t_asm = time.perf_counter() - t0
+        fac = self._shared[0] if solve_case else None
+        act = np.array(solve_case, dtype=int)
+        it = np.zeros(len(coatings), dtype=int)
+        if act.size:
+            fn = np.linalg.norm(F[:, act], axis=0)
+            target = dict(zip(act.tolist(), 0.5 * rtol * fn))
+            X[:, act] = fac.solve(np.asfortranarray(F[:, act]))
+            R = F[:, act] - apply(X[:, act], act)
+            res0 = np.linalg.norm(R, axis=0) / fn
+            for j, r0 in zip(act, res0):
+                info[j]["initial_residual"] = float(r0)
+            Z = fac.solve(np.asfortranarray(R))
+            Pd = Z.copy()
+            rz = np.einsum("nm,nm->m", R, Z)
+            for _ in range(maxiter):
+                keep = np.linalg.norm(R, axis=0) > np.array([target[j] for j in act])
+                if not keep.any():
+                    break
+                act, R, Pd, rz = act[keep], R[:, keep], Pd[:, keep], rz[keep]
+                AP = apply(Pd, act)
+                alpha = rz / np.einsum("nm,nm->m", Pd, AP)
+                X[:, act] += Pd * alpha
+                R -= AP * alpha
+                it[act] += 1
+                Z = fac.solve(np.asfortranarray(R))
+                rz_new = np.einsum("nm,nm->m", R, Z)
+                Pd = Z + Pd * (rz_new / rz)
+                rz = rz_new
+        t_solve = time.perf_counter() - t0 - t_asm
+        results = []
+        checked = apply(X[:, solve_case], np.array(solve_case, dtype=int)) if solve_case else None
+        for j, c in enumerate(coatings):
+            u = np.zeros(self.ndof)
+            solve_info = {}
+            if j in solve_case:
+                k = solve_case.index(j)
+                res = float(np.linalg.norm(checked[:, k] - F[:, j]) / np.linalg.norm(F[:, j]))
+                if not np.isfinite(res) or res > rtol:  # rare: finish this case on its own
+                    try:
+                        results.append(self.solve(c, film, load, stress_scale, backend, rtol=rtol))
+                        continue
+                    except SolverError as exc:
+                        raise SolverError(f"case {j} ({c.coverage} t0={c.t0_um} polish={c.polish_front}): "
+                                          f"{exc}") from None
+                u[fr] = X[:, j]
+                solve_info = {"method": "block CG (lockstep, shared factor)", "iterations": int(it[j]),
+                              "residual": res, "initial_residual": info[j].get("initial_residual"),
+                              "backend": "pardiso", "preconditioner": "own" if own else "shared",
+                              "block_size": len(solve_case)}
+            results.append(self._result(c, film, load, stress_scale, True, used[j], eps_mis, u,
+                                        t_asm / len(coatings), t_solve / len(coatings), solve_info))
+        return results
 
     def front_sampler(self) -> FrontSampler:
         """Front-face sag of a displacement field on this mesh (built once)."""

@@ -162,10 +162,59 @@ class FEACaseRunner:
             self._models = {key: PreparedBlank(blank_mesh(blank, spec), substrate)}  # keep one: memory
         return self._models[key]
 
+    #: cases solved together in one lockstep block (PreparedBlank.solve_many); a block is
+    #: also a unit of progress, so it stays small enough for the progress bar to move
+    block_size = 16
+
+    def plan(self, params_list) -> None:
+        """Announce the cases about to be run (inline sweeps): those that share a mesh,
+        materials and load are then solved in blocks (:meth:`PreparedBlank.solve_many`),
+        one block when its first case is asked for."""
+        self._planned = [dict(p) for p in params_list]
+        self._solved: dict = {}
+
+    def _solve_block(self, params: dict):
+        """Solve the planned block that holds ``params``; returns its FEAResult or None."""
+        key = _params_key(params)
+        if key in getattr(self, "_solved", {}):
+            return self._solved.pop(key)
+        planned = getattr(self, "_planned", None)
+        if not planned:
+            return None
+        try:
+            blank, spec, substrate, _, film, load, scale = _split(params)
+        except ValueError:
+            return None
+        same, rest = [], []
+        for p in planned:  # this case first, then the planned ones that share its model
+            try:
+                b, sp_, sub, c, f, ld, sc = _split(p)
+            except ValueError:
+                rest.append(p)
+                continue
+            if (b, sp_, sub, f, ld, sc) != (blank, spec, substrate, film, load, scale):
+                rest.append(p)
+            elif _params_key(p) == key:
+                same.insert(0, (p, c))
+            else:
+                same.append((p, c))
+        if not same or _params_key(same[0][0]) != key or len(same) < 2:
+            return None
+        same, later = same[:self.block_size], same[self.block_size:]
+        self._planned = rest + [p for p, _ in later]
+        model = self.model(blank, spec, substrate)
+        try:
+            results = model.solve_many([c for _, c in same], film, load, stress_scale=scale)
+        except ValueError:  # e.g. one case the model refuses: let each case say it on its own
+            return None
+        for (p, _), r in zip(same, results):
+            self._solved[_params_key(p)] = r
+        return self._solved.pop(key)
+
     def __call__(self, params: dict) -> dict:
         blank, spec, substrate, coating, film, load, scale = _split(params)
         model = self.model(blank, spec, substrate)
-        r = model.solve(coating, film, load, stress_scale=scale)
+        r = self._solve_block(params) or model.solve(coating, film, load, stress_scale=scale)
         if self.fields_dir is not None and dict(params) in self.fields_for:
             save_field(field_path(self.fields_dir, params), r)
         s = r.sag
@@ -182,6 +231,12 @@ class FEACaseRunner:
             out["coord:y_mm"] = SAG_GRID_Y_MM
             out["coord:x_mm"] = SAG_GRID_X_MM
         return out
+
+
+def _params_key(params: dict) -> str:
+    import json
+
+    return json.dumps({k: params[k] for k in sorted(params)}, sort_keys=True, default=str)
 
 
 def fea_grid(**axes) -> list:

@@ -325,6 +325,8 @@ def run_sweep(func, cases, out_dir, *, namespace: str, workers: int | None = Non
             if scheduler is not None:
                 outcomes = iter_dask(func, jobs, scheduler, workers, connect_timeout_s)
             elif workers == 1:
+                if hasattr(func, "plan"):  # e.g. FEACaseRunner: solves the planned cases in blocks
+                    func.plan([params for _, params in jobs])
                 outcomes = iter_inline(func, jobs)
             else:
                 outcomes = iter_processes(func, jobs, workers)
