@@ -260,11 +260,7 @@ class PreparedBlank:
         full solve's to ``rtol`` whatever the order of the cases.
         """
         film = get_material(film)
-        self.substrate.check_temperature(load.warm_K, "warm_K")
-        self.substrate.check_temperature(load.cold_K, "cold_K")
-        film.check_temperature(load.cold_K, "cold_K")
-        if not (np.isfinite(stress_scale) and stress_scale >= 0):
-            raise ValueError(f"stress_scale={stress_scale} must be a finite number >= 0")
+        self._check_inputs(film, load, stress_scale)
         self._check_symmetry(coating)
         t0 = time.perf_counter()
         eps_sub = self.substrate.strain_between(load.warm_K, load.cold_K)
@@ -304,6 +300,13 @@ class PreparedBlank:
         return self._result(coating, film, load, stress_scale, offset, used, eps_mis, u,
                             t_asm, t_solve, solve_info)
 
+    def _check_inputs(self, film: Material, load: ThermalLoad, stress_scale: float) -> None:
+        self.substrate.check_temperature(load.warm_K, "warm_K")
+        self.substrate.check_temperature(load.cold_K, "cold_K")
+        film.check_temperature(load.cold_K, "cold_K")
+        if not (np.isfinite(stress_scale) and stress_scale >= 0):
+            raise ValueError(f"stress_scale={stress_scale} must be a finite number >= 0")
+
     def _result(self, coating, film, load, stress_scale, offset, used, eps_mis, u, t_asm, t_solve,
                 solve_info) -> FEAResult:
         disp = u.reshape(-1, 3).T
@@ -342,11 +345,7 @@ class PreparedBlank:
                     or _resolve_backend(backend) != "pardiso")
         if fallback:
             return [self.solve(c, film, load, stress_scale, backend, rtol=rtol) for c in coatings]
-        self.substrate.check_temperature(load.warm_K, "warm_K")
-        self.substrate.check_temperature(load.cold_K, "cold_K")
-        film.check_temperature(load.cold_K, "cold_K")
-        if not (np.isfinite(stress_scale) and stress_scale >= 0):
-            raise ValueError(f"stress_scale={stress_scale} must be a finite number >= 0")
+        self._check_inputs(film, load, stress_scale)
         for c in coatings:
             self._check_symmetry(c)
         t0 = time.perf_counter()
@@ -452,10 +451,17 @@ class PreparedBlank:
         if getattr(self, "_K_bulk_free", None) is None:
             K = self.K_bulk.tocsr()
             K.sum_duplicates()  # canonical (sorted, unique) indices: _free_layouts relies on them
-            to_free = np.full(self.ndof, -1, dtype=np.int64)
-            to_free[self.free] = np.arange(self.free.size)
-            self._K_bulk_free, _ = renumbered(K, to_free, to_free, (self.free.size,) * 2)
+            self._K_bulk_free, _ = renumbered(K, self._to_free, self._to_free, (self.free.size,) * 2)
         return self._K_bulk_free
+
+    @property
+    def _to_free(self) -> np.ndarray:
+        """Full DOF number → free DOF number (−1 for constrained DOFs)."""
+        if getattr(self, "_to_free_map", None) is None:
+            m = np.full(self.ndof, -1, dtype=np.int64)
+            m[self.free] = np.arange(self.free.size)
+            self._to_free_map = m
+        return self._to_free_map
 
     def _free_stiffness(self, used_um: dict[str, float], film: Material, offset: bool) -> sp.csr_matrix:
         """Bulk + local film stiffness on the free DOFs, for film thicknesses ``used_um`` (µm).
@@ -493,9 +499,7 @@ class PreparedBlank:
         need = [g for g in groups if key(g) not in self._layouts]
         if not need:
             return {g: self._layouts[key(g)] for g in groups}
-        free = self.free
-        to_free = np.full(self.ndof, -1, dtype=np.int64)
-        to_free[free] = np.arange(free.size)
+        free, to_free = self.free, self._to_free
         films = {}
         for g in need:
             ops = self.film_ops(g, film)
