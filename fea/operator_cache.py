@@ -18,10 +18,8 @@ an unreadable or inconsistent file is ignored and rebuilt, never used.
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import os
-import tempfile
 import warnings
 import zipfile
 from pathlib import Path
@@ -31,6 +29,7 @@ import scipy.sparse as sp
 
 from . import MODEL_VERSION
 from .assembly import FilmOperators, _shared_csr
+from .mesh_cache import atomic_file
 
 __all__ = ["FORMAT_VERSION", "operator_key", "load_film_ops", "save_film_ops"]
 
@@ -73,16 +72,9 @@ def save_film_ops(cache_dir: Path, key: str, ops: FilmOperators) -> Path | None:
     path = _path(cache_dir, key)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **arrays)
-            os.chmod(tmp, 0o666 & ~_umask())
-            os.replace(tmp, path)
-        except BaseException:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-            raise
+        with atomic_file(path) as fh:
+            np.savez(fh, **arrays)
+        os.chmod(path, 0o666 & ~_umask())
     except OSError as exc:
         warnings.warn(f"film operators not cached in {path.parent}: {exc}", stacklevel=2)
         return None

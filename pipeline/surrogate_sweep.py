@@ -34,6 +34,7 @@ from .fea_cases import (
     SAG_SPACING_MM,
     FEACaseRunner,
     _namespace,
+    _params_key,
     _quilt_direction_um,
     _split,
     fea_grid,
@@ -43,10 +44,6 @@ __all__ = ["SURROGATE_PARAMETERS", "SurrogateCaseRunner", "run_surrogate_sweep"]
 
 #: parameters the surrogate may vary within one sweep
 SURROGATE_PARAMETERS = ("coverage", "t0_um", "polish", "cold_K", "warm_K", "stress_scale")
-
-
-def _params_key(params: dict) -> str:
-    return json.dumps({k: params[k] for k in sorted(params)}, sort_keys=True, default=str)
 
 
 class SurrogateCaseRunner:
@@ -88,8 +85,9 @@ class SurrogateCaseRunner:
         return self.surrogate
 
     def plan(self, cases) -> None:
-        """Announce the sweep's cases: the first call that needs the surrogate then evaluates
-        them all in one batch (a fully cached re-run builds nothing)."""
+        """Announce the cases about to run (:func:`pipeline.sweep.run_sweep` does, inline,
+        for the uncached ones): the first call that needs the surrogate then evaluates them
+        all in one batch (a fully cached re-run builds nothing)."""
         self._planned = list(cases)
 
     def precompute(self, cases) -> None:
@@ -193,7 +191,6 @@ def run_surrogate_sweep(axes: dict, out_dir, *, validate: int = 3, tol: float = 
                   f"worst residual estimate {d['worst_residual']:.1e}", file=sys.stderr, flush=True)
 
     runner = SurrogateCaseRunner(cases[0].as_dict(), domain, tol, with_maps, seed, log)
-    runner.plan(cases)
     res = run_sweep(runner, cases, out_dir, namespace=namespace, workers=1, progress=progress,
                     description="surrogate sweep")
     out = Path(out_dir)
