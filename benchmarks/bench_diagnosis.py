@@ -3,11 +3,12 @@ injection-recovery campaign. Writes benchmarks/results_diagnosis_raw.json; the
 numbers in results_diagnosis.md were pasted from its output.
 
     .venv/bin/python benchmarks/bench_diagnosis.py [--cases 208] [--workers 2] [--seed 1] [--cache-dir DIR]
-        [--profiles extended|minimal] [--no-scenarios] [--out FILE] [--progress FILE.jsonl]
+        [--profiles extended|minimal] [--no-scenarios] [--out FILE] [--progress FILE.jsonl] [--profile-map-K K]
 
 ``--progress``: every finished case is appended there as a JSON line (partial results
 survive an interrupted run). ``--profiles``: the campaign's line-profile measurement set
-(:data:`pipeline.diagnosis.campaign.PROFILE_SETS`).
+(:data:`pipeline.diagnosis.campaign.PROFILE_SETS`). ``--profile-map-K 128``: the line-profile
+cases also get a 128 K map of the same blank (``CampaignConfig.profile_map_K``).
 """
 
 from __future__ import annotations
@@ -34,6 +35,8 @@ def main(argv=None):
     ap.add_argument("--no-scenarios", action="store_true")
     ap.add_argument("--out", default=str(HERE / "results_diagnosis_raw.json"))
     ap.add_argument("--progress", default=None)
+    ap.add_argument("--profile-map-K", type=float, default=None,
+                    help="also a cold map at this temperature beside the line profiles (the paper's data set)")
     a = ap.parse_args(argv)
     out = {"scenarios": {}}
     for name in () if a.no_scenarios else ("cryo_astigmatism", "j_repolished", "hk_amplitude"):
@@ -46,7 +49,8 @@ def main(argv=None):
                                   "ranking": [(f.effect, round(f.delta_bic, 1)) for f in d.findings],
                                   "seconds": time.perf_counter() - t, "timings_s": d.timings_s}
         print(name, json.dumps(out["scenarios"][name], default=float))
-    cfg = CampaignConfig(n_cases=a.cases, seed=a.seed, workers=a.workers, profile_specs=PROFILE_SETS[a.profiles])
+    cfg = CampaignConfig(n_cases=a.cases, seed=a.seed, workers=a.workers, profile_specs=PROFILE_SETS[a.profiles],
+                         profile_map_K=a.profile_map_K)
     res = run_campaign(cfg, cache_dir=a.cache_dir, progress=a.progress)
     res["profile_set"] = a.profiles
     out["campaign"] = res

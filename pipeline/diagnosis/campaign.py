@@ -85,6 +85,10 @@ class CampaignConfig:
     noise_rel: float = 0.01
     case_types: tuple = CASE_TYPES
     profile_specs: tuple = PROFILE_SPECS
+    #: If set, the line-profile cases also get a cold-minus-warm map of the same blank at
+    #: this temperature (K), as in the paper's data (a cryogenic interferogram beside the
+    #: line profiles); None: profiles only.
+    profile_map_K: float | None = None
     criteria: Criteria = Criteria(heldout_top=1, pair_from=2)
 
 
@@ -162,6 +166,15 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         write_profile_csv(out / f"p{i}.csv", u, y)
         meas.append({"kind": "line_profile", "file": f"p{i}.csv", "name": f"{g}_{wl}_{ps}mas", "grating": g,
                      "order": order, "wavelength_um": wl, "pixel_scale_mas": ps})
+    if cfg.profile_map_K is not None:
+        # The same blank (discrepancy included) cooled to the map's temperature; a
+        # temperature offset is one of the cryostat's reading, so it applies here too.
+        # Drawn after the profiles: the profiles are those of the profile-only campaign.
+        T = cfg.profile_map_K + truth.get("temperature_offset_K", 0.0)
+        m = synthetic_surface(t.scaled(thermal_factor(T, 80.0 + truth.get("temperature_offset_K", 0.0))), rng,
+                              noise_um=cfg.noise_um)
+        np.savez(out / "map.npz", x_mm=m.x_mm, y_mm=m.y_mm, sag_um=m.sag_um)
+        meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K, "aperture_diameter_mm": 137.0})
     return {"simulation": sim, "measurement": meas}, truth
 
 

@@ -27,9 +27,14 @@ plating_gradient    plating_grad_x, plating_grad_y (0; ±0.1)     NiP thickness 
                     relative change of the deformation           across the blank: deformation
                     amplitude at x or y = +70 mm                 x (1 + gx x/70 + gy y/70)
                     (companion, below)
+blank_bow           bow_defocus_um Z(2,0), bow_spherical_um      rotationally symmetric figure
+                    Z(4,0) (0; ±0.2 µm), RMS-normalised over     change of the cold blank
+                    a 70 mm radius disc in blank coordinates,    (front/back plating or polish
+                    at the simulation's cold_K, scaled with the  imbalance bends it like a
+                    deformation (companion, below)               bimetal; mount)
 ==================  ===========================================  ============================
 
-``companion`` effects (``plating_gradient``) are candidates on their own *and* are refitted
+``companion`` effects (``plating_gradient``, ``blank_bow``) are candidates on their own *and* are refitted
 jointly with the best-ranked other candidates (:class:`~pipeline.diagnosis.engine.Criteria`
 ``companion_top``); the joint fit replaces a finding only where the data support it
 (BIC lower by ``companion_bic``). The finding keeps its own name and lists the companion in
@@ -39,7 +44,17 @@ nuisance-like discrepancy that biases the other effects' parameters (collimator 
 the sign of pupil_y) unless it is fitted alongside them; it is not a nuisance of the
 forward model (piston/tilt, offset shift, flux, background), because those are removed
 from every fit including the nominal, while the gradient must be *tested* (it is a
-physical claim about the blank and costs parameters in the BIC).
+physical claim about the blank and costs parameters in the BIC). A ``blank_bow`` is the same kind of discrepancy: the FEA
+predicts the quilting and the edge roll-off of a symmetric plating well, but a small
+front/back imbalance of the plating thickness or of the polished-off fraction bends the
+blank like a bimetal strip, adding power and spherical aberration that the nominal
+model does not have (measured in the campaign: a bow of 0.01 µm RMS biased the
+temperature fitted on one 128 K map by 8–13 K, and collimator defocus on line profiles
+by up to 0.09 µm). On line profiles alone the bow is degenerate with collimator defocus
+(both curve the wavefront along the dispersion; measured: with the bow free, the
+defocus error of a campaign case grew from 0.01 to 0.35 µm), so it is only tried where
+a surface map is in the data (``requires``), which pins it down; it then acts on every
+measurement (one bow for all blanks: a per-blank bow would need one map per blank).
 
 ``floor`` is the absolute tolerance used when judging parameter recovery
 (relative error is ``|fit - true| / max(|true|, floor)``).
@@ -49,7 +64,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["Parameter", "Effect", "LIBRARY", "PLATING_GRADIENT_REF_MM", "effect_parameters", "applicable_effects", "NOMINAL_SLIT_UM"]
+__all__ = ["Parameter", "Effect", "LIBRARY", "PLATING_GRADIENT_REF_MM", "BOW_REF_RADIUS_MM", "effect_parameters", "applicable_effects", "NOMINAL_SLIT_UM"]
 
 NOMINAL_SLIT_UM = 27.0
 
@@ -99,6 +114,9 @@ class Effect:
         Zernike terms, whose norm is the RMS of the added surface or wavefront error, or a
         displacement in mm. The campaign also judges recovery on the vector
         (:func:`pipeline.diagnosis.campaign.recovery_errors`).
+    requires : tuple of str
+        Measurement kinds that must be in the data for the effect to be tried: the kinds
+        that can identify it (it still changes every kind in ``kinds``).
     """
 
     name: str
@@ -108,6 +126,7 @@ class Effect:
     description: str = ""
     vector: bool = False
     companion: bool = False
+    requires: tuple[str, ...] = ()
 
 
 LIBRARY: dict[str, Effect] = {e.name: e for e in (
@@ -144,10 +163,19 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
            description="NiP thickness gradient across the blank: deformation x (1 + gx x/70 mm + gy y/70 mm) "
                        "(blank coordinates; gx, gy = relative amplitude change at the blank's half-width)",
            vector=True, companion=True),
+    Effect("blank_bow", ("surface", "line_profile"),
+           (Parameter("bow_defocus_um", 0.0, -0.2, 0.2, floor=0.01), Parameter("bow_spherical_um", 0.0, -0.2, 0.2, floor=0.01)),
+           description="rotationally symmetric figure change of the cold blank: Zernike (2,0) and (4,0), "
+                       "RMS-normalised over a 70 mm radius disc in blank coordinates, at the simulation's cold_K "
+                       "(scaled with the deformation)",
+           vector=True, companion=True, requires=("surface",)),
 )}
 
 #: Half-width (mm) at which ``plating_grad_x/y`` are the relative amplitude change.
 PLATING_GRADIENT_REF_MM = 70.0
+#: Radius (mm, blank coordinates) of the disc over which the ``blank_bow`` Zernike terms
+#: are RMS-normalised: half the blank's 140 mm height, independent of any measurement.
+BOW_REF_RADIUS_MM = 70.0
 
 
 def effect_parameters(effect: Effect, blanks: tuple[str, ...]) -> tuple[Parameter, ...]:
@@ -165,4 +193,4 @@ def applicable_effects(kinds: set[str], names: tuple[str, ...] | None = None) ->
     if unknown:
         raise ValueError(f"effects {sorted(unknown)} are unknown; valid: {sorted(LIBRARY)}")
     chosen = LIBRARY if names is None else {n: LIBRARY[n] for n in names}
-    return tuple(e for e in chosen.values() if set(e.kinds) & kinds)
+    return tuple(e for e in chosen.values() if set(e.kinds) & kinds and set(e.requires) <= kinds)

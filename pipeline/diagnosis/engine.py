@@ -15,14 +15,15 @@ Decision logic (thresholds in :class:`Criteria`, passed explicitly):
    residual are listed in each other's ``degenerate_with`` — the data cannot tell them apart.
    Signed parameters whose sign the data cannot tell (negated, the score changes by
    less than ``degenerate_bic``) are listed in ``sign_degenerate``.
-   **Companions** (``Effect.companion``: ``plating_gradient``): after the first ranking
-   the ``companion_top`` best findings that are not the companion itself are refitted
-   jointly with it (warm start); the joint fit replaces the finding (same name, the
-   companion listed in ``Finding.companions``) iff its BIC is lower by at least
+   **Companions** (``Effect.companion``: ``plating_gradient``, ``blank_bow``): after the
+   first ranking the ``companion_top`` best findings that are not companions themselves
+   are refitted jointly with each companion (and with all of them where more than one
+   helps; warm start); the best joint fit replaces the finding (same name, the
+   companions listed in ``Finding.companions``) iff its BIC is lower by at least
    ``companion_bic``. Such a finding is ``significant`` only if it also beats the
-   companion alone by ``min_delta_bic``, and its ``excess_explained`` is measured from
-   the companion-alone fit (what the finding adds beyond the gradient), so a gradient
-   present in the data cannot lend its evidence to another effect.
+   companions alone by ``min_delta_bic``, and its ``excess_explained`` is measured from
+   the companion-alone fit (what the finding adds beyond the gradient or bow), so a
+   discrepancy present in the data cannot lend its evidence to another effect.
 5. **Held out** (:mod:`.heldout`): the effect is refitted on part of the data and its
    shrinkage measured on the rest; ``overfit`` if the held-out shrink is below
    ``heldout_ratio`` times the in-sample shrink.
@@ -247,14 +248,19 @@ def fit_effects(prob: Problem, nom: FitOutcome, names: tuple, criteria: Criteria
 def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict, cands, c: Criteria,
                      joint_fits: dict | None = None) -> list:
     """Refit the ``c.companion_top`` best findings jointly with the companion effects
-    (module docstring, step 3); ``findings`` ranked best first, ``fits`` updated in place;
-    every joint fit (adopted or not) is stored in ``joint_fits[effect] = (names, fit)``
-    for the sign test."""
+    (module docstring, step 4); ``findings`` ranked best first, ``fits`` updated in place;
+    every joint fit (adopted or not) is appended to ``joint_fits[effect]`` as
+    ``(names, fit)`` for the sign test.
+
+    Each companion is tried on its own beside the finding, and all of them together when
+    more than one lowered the BIC: the cheapest joint model the data support is adopted
+    (a plating gradient and a bow are independent claims; making every finding pay for
+    both would hide either one on a smooth map, where the effective sample count is small)."""
     comp = tuple(e.name for e in cands if e.companion)
     if not comp or c.companion_top <= 0:
         return findings
     joint_fits = {} if joint_fits is None else joint_fits
-    ref = {n: fits[n] for n in comp if n in fits}  # the companions fitted alone
+    w = prob.weights
     out, done = list(findings), 0
     for i, f in enumerate(findings):
         if done >= c.companion_top:
@@ -262,26 +268,57 @@ def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict,
         if set(f.effects) & set(comp):
             continue
         done += 1
-        names = tuple(f.effects) + comp
-        start = {**f.parameters, **{k: v for n in comp if n in fits for k, v in fits[n].parameters.items()}}
-        joint, fo = fit_effects(prob, nom, names, c, start=start)
-        joint_fits[f.effect] = (names, fo)
-        # Model-mismatch term: how far modelling one known discrepancy (the companion)
-        # moves the finding's own parameters, added in quadrature to both fits' errors.
-        shift = {q: abs(joint.parameters[q] - v) for q, v in f.parameters.items() if q in joint.parameters}
-        infl = lambda errs: {q: (math.hypot(e, shift[q]) if q in shift else e) for q, e in errs.items()}
+        tried = []  # (joint finding, fit, companion subset)
+        for sub in [(n,) for n in comp]:
+            start = {**f.parameters, **(fits[sub[0]].parameters if sub[0] in fits else {})}
+            tried.append((*fit_effects(prob, nom, tuple(f.effects) + sub, c, start=start), sub))
+        better = [t for t in tried if t[0].score < f.score]
+        if len(comp) > 1 and len(better) > 1:
+            start = {k: v for t in better for k, v in t[0].parameters.items()}
+            tried.append((*fit_effects(prob, nom, tuple(f.effects) + comp, c, start=start), comp))
+        joint_fits.setdefault(f.effect, []).extend((tuple(f.effects) + sub, fo) for _, fo, sub in tried)
+        joint, fo, sub = min(tried, key=lambda t: t[0].score)
+        models = [f] + [j for j, _, _ in tried]
         if not joint.score <= f.score - c.companion_bic:
-            out[i] = _replace(f, uncertainties=infl(f.uncertainties))
+            out[i] = _replace(f, uncertainties=_model_averaged_errors(f, models))
             continue
-        joint = _replace(joint, uncertainties=infl(joint.uncertainties))
-        # Evidence and excess for the finding itself: measured from the companions alone.
-        base = min((ref[n] for n in ref), key=lambda o: o.bic(prob.weights), default=nom)
-        base_bic = min(base.bic(prob.weights), nom.bic(prob.weights))
+        joint = _replace(joint, uncertainties=_model_averaged_errors(joint, models))
+        # Evidence and excess for the finding itself: measured from the companions alone
+        # (the best of each alone and the adopted set alone).
+        key = "+".join(sub)
+        if key not in fits:
+            fits[key] = fit_effects(prob, nom, sub, c, start=fo.parameters)[1]
+        ref = [fits[n] for n in set(comp) | {key} if n in fits]
+        base = min(ref, key=lambda o: o.bic(w), default=nom)
+        base_bic = min(base.bic(w), nom.bic(w))
         sig = bool(joint.score - base_bic <= -c.min_delta_bic)
-        ex = excess_explained(prob, base, fo) if base is not nom else joint.excess_explained
-        out[i] = _replace(joint, effect=f.effect, effects=f.effects, companions=comp, significant=sig,
+        ex = excess_explained(prob, base, fo)
+        out[i] = _replace(joint, effect=f.effect, effects=f.effects, companions=sub, significant=sig,
                           excess_explained=ex)
         fits[f.effect] = fo
+    return out
+
+
+def _model_averaged_errors(chosen: Finding, models: list) -> dict:
+    """Uncertainties of ``chosen``'s parameters including the model choice.
+
+    The finding without companions and its joint fits with them are alternative models
+    of the same data; with BIC weights ``w_m ~ exp(-BIC_m / 2)`` (an approximation to
+    the posterior model probabilities) the model-averaged variance of a parameter about
+    the reported value is ``sum_m w_m (sigma_m^2 + (theta_m - theta)^2)``. A companion
+    the data clearly need (Delta BIC >= 6, weight <= 5 % for the model without it)
+    hardly widens the errors; one they cannot decide on widens them by the distance
+    between the two answers — mismatch absorbed *into* a parameter is invisible to any
+    residual-based estimate, this is the part of it that can be measured."""
+    best = min(m.score for m in models)
+    w = np.array([math.exp(-0.5 * (m.score - best)) for m in models])
+    w /= w.sum()
+    out = dict(chosen.uncertainties)
+    for q, v in chosen.parameters.items():
+        if not all(q in m.parameters for m in models):
+            continue  # a companion's own parameter: only in some models
+        var = sum(wm * (m.uncertainties.get(q, chosen.uncertainties.get(q, 0.0)) ** 2 + (m.parameters[q] - v) ** 2) for wm, m in zip(w, models))
+        out[q] = float(math.sqrt(var))
     return out
 
 
@@ -326,21 +363,19 @@ def _sign_degeneracies(prob: Problem, finding: Finding, fo: FitOutcome, c: Crite
     (fit -1.6 mm vs truth +1.5 mm). Such a parameter is reported with its sign
     undetermined (``sign_degenerate``) rather than with an arbitrary sign.
 
-    ``joint`` = (effect names, fit) of the finding refitted with its companions
-    (``plating_gradient``) when that fit was not adopted: the test is then repeated with
-    the companions free on both sides (reference: the joint fit; mirror: the joint
+    ``joint`` = list of (effect names, fit) of the finding refitted with its companions
+    (``plating_gradient``, ``blank_bow``) when none was adopted: the test is then repeated
+    with each set of companions free on both sides (reference: the joint fit; mirror: the joint
     parameters refitted with the tested one held at ``-v``), and the sign counts as
     undetermined if either test says so. Reason: a plating gradient breaks the blank's
     y-mirror symmetry, so the asymmetry that picks pupil_y's sign may come from the
     blank rather than from the footprint; the sign is only claimed if it survives a
     plausible gradient (measured: campaign case 203, truth pupil_y +1.47 mm, fitted
     -1.61 and unflagged; without the truth's gradient the fit gives +1.57)."""
-    out = _sign_test(prob, finding, fo, c, all_effects(finding))
-    if joint is not None:
-        names, jfo = joint
-        extra = _sign_test(prob, finding, jfo, c, names, start=jfo.parameters)
-        out = tuple(n for n in finding.parameters if n in set(out) | set(extra))
-    return out
+    out = set(_sign_test(prob, finding, fo, c, all_effects(finding)))
+    for names, jfo in joint or ():
+        out |= set(_sign_test(prob, finding, jfo, c, names, start=jfo.parameters))
+    return tuple(n for n in finding.parameters if n in out)
 
 
 def _sign_test(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, effects: tuple,

@@ -27,9 +27,9 @@ nominal residual's: ``s^2`` is therefore the larger of the above and the residua
 long-run variance ``sum_i w_i^2 RSS_i L_i / (N - k)`` (``L_i`` the integral correlation
 length of measurement i's post-fit residual in samples, a Newey-West-type estimate;
 :func:`_long_run_s2`). Mismatch absorbed *into* the parameters is invisible to any
-residual-based estimate; the engine adds the shift caused by modelling one known
-mismatch (the plating-gradient companion) in quadrature
-(:func:`pipeline.diagnosis.engine._with_companions`).
+residual-based estimate; the engine averages the errors over the models with and
+without the known mismatches (the ``plating_gradient`` and ``blank_bow`` companions),
+BIC-weighted (:func:`pipeline.diagnosis.engine._model_averaged_errors`).
 """
 
 from __future__ import annotations

@@ -29,11 +29,12 @@ from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
 
-from .effects import NOMINAL_SLIT_UM, PLATING_GRADIENT_REF_MM
+from .effects import BOW_REF_RADIUS_MM, NOMINAL_SLIT_UM, PLATING_GRADIENT_REF_MM
 from .manifest import ProfileData, SurfaceData
 from .nominal import thermal_factor
 
-__all__ = ["FIT_LSF_SETTINGS", "SurfaceForward", "ProfileForward", "profile_curve", "plating_gradient_map"]
+__all__ = ["FIT_LSF_SETTINGS", "SurfaceForward", "ProfileForward", "profile_curve", "plating_gradient_map", "bow_um",
+           "blank_bow_map"]
 
 #: Line-profile sampling used while fitting (measured: 0.1-0.45 % L1 from the defaults).
 FIT_LSF_SETTINGS = LsfSettings(detector_step_um=1.5, n_fft=256, source_step_mm=2.5, min_source_rows=5,
@@ -45,10 +46,28 @@ def _lstsq_residual(A: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return d - A @ c, c
 
 
+def bow_um(x_mm: np.ndarray, y_mm: np.ndarray, defocus_um: float, spherical_um: float) -> np.ndarray:
+    """``blank_bow`` surface (µm) at blank coordinates: Zernike (2,0) and (4,0),
+    RMS-normalised over the ``BOW_REF_RADIUS_MM`` disc (:mod:`.effects`)."""
+    out = np.zeros(np.broadcast(x_mm, y_mm).shape)
+    if defocus_um:
+        out = out + defocus_um * zernike_xy(2, 0, x_mm, y_mm, BOW_REF_RADIUS_MM)
+    if spherical_um:
+        out = out + spherical_um * zernike_xy(4, 0, x_mm, y_mm, BOW_REF_RADIUS_MM)
+    return out
+
+
+def blank_bow_map(sag: SagMap, defocus_um: float, spherical_um: float) -> SagMap:
+    """``sag`` plus the ``blank_bow`` surface (same grid)."""
+    X, Y = sag.grid()
+    return sag.with_sag(sag.sag_um + bow_um(X, Y, defocus_um, spherical_um))
+
+
 class SurfaceForward:
-    """Cold-minus-warm surface map model: ``k * g(q) * S0(q) + astigmatism`` with
-    ``q = R^-1(p - d)`` the blank coordinates of measured point ``p`` and
-    ``g(q) = 1 + (plating_grad_x q_x + plating_grad_y q_y) / 70 mm`` (plating gradient).
+    """Cold-minus-warm surface map model: ``k * (g(q) * S0(q) + B(q)) + astigmatism`` with
+    ``q = R^-1(p - d)`` the blank coordinates of measured point ``p``,
+    ``g(q) = 1 + (plating_grad_x q_x + plating_grad_y q_y) / 70 mm`` (plating gradient)
+    and ``B`` the blank bow (:func:`bow_um`).
 
     ``k = thermal_factor(T_meas + temperature_offset_K, cold_K) * scale_<blank>``;
     ``S0`` is the nominal map at the simulation's ``cold_K``; the astigmatism is
@@ -101,6 +120,9 @@ class SurfaceForward:
         gx, gy = p.get("plating_grad_x", 0.0), p.get("plating_grad_y", 0.0)
         if gx or gy:
             base = base * (1.0 + (gx * qx + gy * qy) / PLATING_GRADIENT_REF_MM)
+        b2, b4 = p.get("bow_defocus_um", 0.0), p.get("bow_spherical_um", 0.0)
+        if b2 or b4:
+            base = base + bow_um(qx, qy, b2, b4)
         return self.factor(p) * base + p.get("astig_0_um", 0.0) * self.z22 + p.get("astig_45_um", 0.0) * self.z2m2
 
     def residual(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
@@ -151,7 +173,7 @@ class ProfileForward:
 
     kind = "line_profile"
     _KEYS = ("pupil_x_mm", "pupil_y_mm", "coll_coma_um", "coll_defocus_um", "coll_astig45_um", "slit_image_width_um",
-             "plating_grad_x", "plating_grad_y")
+             "plating_grad_x", "plating_grad_y", "bow_defocus_um", "bow_spherical_um")
 
     def __init__(self, data: ProfileData, nominal: SagMap, cold_K: float, warm_K: float = 293.0,
                  settings: LsfSettings = FIT_LSF_SETTINGS, cache_size: int = 512):
@@ -179,10 +201,14 @@ class ProfileForward:
         if hit is not None:
             self._cache.move_to_end(key)
             return hit
-        sag = self.nominal.scaled(k)
+        sag = self.nominal
         gx, gy = p.get("plating_grad_x", 0.0), p.get("plating_grad_y", 0.0)
         if gx or gy:
             sag = plating_gradient_map(sag, gx, gy)
+        b2, b4 = p.get("bow_defocus_um", 0.0), p.get("bow_spherical_um", 0.0)
+        if b2 or b4:
+            sag = blank_bow_map(sag, b2, b4)
+        sag = sag.scaled(k)
         u, y = profile_curve(self.m.grating, self.m.wavelength_um, self.m.order, self.m.pixel_scale_mas, sag, p,
                              self.m.slit_position, self.settings)
         spl = CubicSpline(u, y, extrapolate=False)

@@ -1,0 +1,101 @@
+"""The blank_bow effect (alone, as a companion, only with a map in the data) and the
+BIC-weighted model-averaged uncertainties. Nominal: the analytic sum quilt (no FEA)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.diagnosis import diagnose
+from pipeline.diagnosis.effects import LIBRARY, applicable_effects
+from pipeline.diagnosis.engine import Finding, _model_averaged_errors
+from pipeline.diagnosis.forward import blank_bow_map, bow_um
+from pipeline.diagnosis.nominal import thermal_factor
+from pipeline.diagnosis.synth import synthetic_surface
+from pipeline.interchange import write_sag_map
+
+from test_diagnosis import _manifest, _nominal
+
+
+def _bow_map(tmp_path, b2, b4, temperature_K=128.0, seed=7):
+    """A 128 K map of a blank whose cold deformation at 80 K carries a bow (b2, b4) µm,
+    really at ``temperature_K`` (the manifest says 128 K)."""
+    nom = _nominal(tmp_path)
+    t = blank_bow_map(nom, b2, b4).scaled(thermal_factor(temperature_K, 80))
+    write_sag_map(synthetic_surface(t, np.random.default_rng(seed), noise_um=0.005), tmp_path / "map.npz")
+    return _manifest(tmp_path)
+
+
+def test_bow_is_rms_normalised_zernike_on_70mm():
+    r = (np.arange(4000) + 0.5) * 70 / 4000
+    th = np.linspace(0, 2 * np.pi, 180, endpoint=False)
+    R, T = np.meshgrid(r, th)
+    w = R  # area element
+    for args in ((0.1, 0.0), (0.0, 0.1)):
+        z = bow_um(R * np.cos(T), R * np.sin(T), *args)
+        z = z - np.sum(z * w) / np.sum(w)
+        assert math.sqrt(np.sum(z**2 * w) / np.sum(w)) == pytest.approx(0.1, rel=1e-2)
+
+
+def test_bow_needs_a_map():
+    """On line profiles alone the bow is degenerate with collimator defocus: not tried."""
+    e = LIBRARY["blank_bow"]
+    assert e.companion and e.requires == ("surface",)
+    assert "blank_bow" not in {x.name for x in applicable_effects({"line_profile"})}
+    assert "blank_bow" in {x.name for x in applicable_effects({"line_profile", "surface"})}
+
+
+def test_bow_alone_recovered(tmp_path):
+    d = diagnose(_bow_map(tmp_path, 0.05, -0.02))
+    assert d.verdict == "explained" and d.best.effect == "blank_bow"
+    assert d.best.parameters["bow_defocus_um"] == pytest.approx(0.05, rel=0.1)
+    assert d.best.parameters["bow_spherical_um"] == pytest.approx(-0.02, rel=0.2)
+
+
+def test_bow_companion_unbiases_temperature(tmp_path):
+    """A map really at 150 K (stated 128 K) of a bowed blank: the temperature fitted with
+    the bow as companion is right; the bow is listed in ``companions``."""
+    d = diagnose(_bow_map(tmp_path, 0.04, 0.0, temperature_K=150.0))
+    f = d.finding("temperature") or d.finding("amplitude_scale")
+    assert "blank_bow" in f.companions
+    t = d.finding("temperature")
+    assert t is not None and t.parameters["temperature_offset_K"] == pytest.approx(22.0, abs=4.0)
+    assert t.parameters["bow_defocus_um"] == pytest.approx(0.04, rel=0.2)
+
+
+def _finding(score, value, sigma, **extra):
+    return Finding("x", ("x",), {"a": value, **extra}, {"a": sigma}, score, 0.0, 1.0, 1.0, 0.0, 0.0)
+
+
+def test_model_averaged_errors():
+    """Two models: equal BIC -> variance = mean of variances + spread; a model 20 BIC
+    worse does not count; parameters missing from some models keep their own error."""
+    a, b = _finding(0.0, 1.0, 0.1, c=5.0), _finding(0.0, 2.0, 0.1)
+    e = _model_averaged_errors(a, [a, b])
+    assert e["a"] == pytest.approx(math.sqrt(0.01 + 0.5 * 1.0))
+    far = _finding(20.0, 2.0, 0.1)
+    assert _model_averaged_errors(a, [a, far])["a"] == pytest.approx(0.1, rel=1e-2)
+    assert "c" not in e  # c only in model a: no error reported for it here
+
+
+def test_campaign_map_beside_profiles(tmp_path):
+    """``profile_map_K``: a line-profile case also gets a map of the same blank; the
+    profiles are those of the profile-only case (the map is drawn after them)."""
+    from pipeline.diagnosis.campaign import PROFILE_SETS, CampaignConfig, make_case
+    from pipeline.diagnosis.manifest import parse_manifest
+
+    base = _nominal(tmp_path)
+    cfgs = [CampaignConfig(profile_specs=PROFILE_SETS["minimal"][:1], profile_map_K=k) for k in (None, 128.0)]
+    out = []
+    for cfg in cfgs:
+        d = tmp_path / str(cfg.profile_map_K)
+        d.mkdir()
+        man, truth = make_case("line_profile", "temperature", np.random.default_rng([1, 7]), base, d, cfg)
+        out.append((man, truth, (d / "p0.csv").read_text()))
+    (m0, t0, p0), (m1, t1, p1) = out
+    assert t0 == t1 and p0 == p1
+    assert [m["kind"] for m in m1["measurement"]] == ["line_profile", "surface"]
+    assert m1["measurement"][1]["temperature_K"] == 128.0
+    parse_manifest(m1, tmp_path / "128.0")  # a valid manifest
