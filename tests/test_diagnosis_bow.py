@@ -1,5 +1,5 @@
-"""The blank_bow effect (alone, as a companion, only with a map in the data) and the
-BIC-weighted model-averaged uncertainties. Nominal: the analytic sum quilt (no FEA)."""
+"""The blank_bow effect (alone, as a companion, only with a map in the data), the
+model-choice term of the uncertainties and the campaign's map beside the profiles. Nominal: the analytic sum quilt (no FEA)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.effects import LIBRARY, applicable_effects
-from pipeline.diagnosis.engine import Finding, _model_averaged_errors
+from pipeline.diagnosis.engine import Finding, _mismatch_errors
 from pipeline.diagnosis.forward import blank_bow_map, bow_um
 from pipeline.diagnosis.nominal import thermal_factor
 from pipeline.diagnosis.synth import synthetic_surface
@@ -65,19 +65,19 @@ def test_bow_companion_unbiases_temperature(tmp_path):
     assert t.parameters["bow_defocus_um"] == pytest.approx(0.04, rel=0.2)
 
 
-def _finding(score, value, sigma, **extra):
-    return Finding("x", ("x",), {"a": value, **extra}, {"a": sigma}, score, 0.0, 1.0, 1.0, 0.0, 0.0)
+def _finding(value, sigma, **extra):
+    return Finding("x", ("x",), {"a": value, **extra}, {"a": sigma}, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0)
 
 
-def test_model_averaged_errors():
-    """Two models: equal BIC -> variance = mean of variances + spread; a model 20 BIC
-    worse does not count; parameters missing from some models keep their own error."""
-    a, b = _finding(0.0, 1.0, 0.1, c=5.0), _finding(0.0, 2.0, 0.1)
-    e = _model_averaged_errors(a, [a, b])
-    assert e["a"] == pytest.approx(math.sqrt(0.01 + 0.5 * 1.0))
-    far = _finding(20.0, 2.0, 0.1)
-    assert _model_averaged_errors(a, [a, far])["a"] == pytest.approx(0.1, rel=1e-2)
-    assert "c" not in e  # c only in model a: no error reported for it here
+def test_mismatch_errors():
+    """The largest move to an alternative is added in quadrature to the finding's own
+    parameters; parameters that are not its own (a companion's) keep their error."""
+    a = _finding(1.0, 0.1, c=5.0)
+    a = Finding(a.effect, a.effects, a.parameters, {"a": 0.1, "c": 0.2}, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0)
+    e = _mismatch_errors(a, [_finding(1.3, 0.1), _finding(0.6, 0.1)], {"a"})
+    assert e["a"] == pytest.approx(math.hypot(0.1, 0.4))
+    assert e["c"] == 0.2
+    assert _mismatch_errors(a, [], {"a"})["a"] == 0.1
 
 
 def test_campaign_map_beside_profiles(tmp_path):

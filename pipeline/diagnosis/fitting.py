@@ -27,9 +27,9 @@ nominal residual's: ``s^2`` is therefore the larger of the above and the residua
 long-run variance ``sum_i w_i^2 RSS_i L_i / (N - k)`` (``L_i`` the integral correlation
 length of measurement i's post-fit residual in samples, a Newey-West-type estimate;
 :func:`_long_run_s2`). Mismatch absorbed *into* the parameters is invisible to any
-residual-based estimate; the engine averages the errors over the models with and
-without the known mismatches (the ``plating_gradient`` and ``blank_bow`` companions),
-BIC-weighted (:func:`pipeline.diagnosis.engine._model_averaged_errors`).
+residual-based estimate; the engine adds in quadrature how far the parameters move when
+a known mismatch the data do not rule out is modelled (the ``plating_gradient`` and
+``blank_bow`` companions; :func:`pipeline.diagnosis.engine._mismatch_errors`).
 """
 
 from __future__ import annotations
