@@ -363,17 +363,21 @@ def _sign_degeneracies(prob: Problem, finding: Finding, fo: FitOutcome, c: Crite
     (fit -1.6 mm vs truth +1.5 mm). Such a parameter is reported with its sign
     undetermined (``sign_degenerate``) rather than with an arbitrary sign.
 
-    ``joint`` = list of (effect names, fit) of the finding refitted with its companions
-    (``plating_gradient``, ``blank_bow``) when none was adopted: the test is then repeated
-    with each set of companions free on both sides (reference: the joint fit; mirror: the joint
+    ``joint`` = list of (effect names, fit) of the finding refitted with each set of
+    companions (``plating_gradient``, ``blank_bow``), adopted or not: the test is then
+    repeated with each set free on both sides (reference: the joint fit; mirror: the joint
     parameters refitted with the tested one held at ``-v``), and the sign counts as
     undetermined if either test says so. Reason: a plating gradient breaks the blank's
     y-mirror symmetry, so the asymmetry that picks pupil_y's sign may come from the
     blank rather than from the footprint; the sign is only claimed if it survives a
     plausible gradient (measured: campaign case 203, truth pupil_y +1.47 mm, fitted
-    -1.61 and unflagged; without the truth's gradient the fit gives +1.57)."""
+    -1.61 and unflagged; without the truth's gradient the fit gives +1.57). This holds
+    when another companion was adopted too (with a map beside the profiles the bow is
+    adopted; testing only that joint fit left case 203's flipped sign unflagged again)."""
     out = set(_sign_test(prob, finding, fo, c, all_effects(finding)))
     for names, jfo in joint or ():
+        if jfo is fo:
+            continue  # the adopted joint fit: tested above
         out |= set(_sign_test(prob, finding, jfo, c, names, start=jfo.parameters))
     return tuple(n for n in finding.parameters if n in out)
 
@@ -482,7 +486,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     findings.sort(key=lambda f: _rank_key(f, criteria))
     findings = _degeneracies(findings, fits, prob, criteria)
     findings = [_replace(f, sign_degenerate=_sign_degeneracies(prob, f, fits[f.effect], criteria,
-                                                               None if f.companions else joint_fits.get(f.effect)))
+                                                               joint_fits.get(f.effect)))
                 if len(f.effects) == 1 and f.significant else f for f in findings]
     if heldout:
         for i, f in enumerate(findings[:criteria.heldout_top]):
