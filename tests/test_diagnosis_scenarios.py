@@ -78,4 +78,3 @@ def test_reduced_campaign(cache):
     assert s["ool_unexplained_rate"] >= 0.8
     surf = [r for r in res["cases"] if r["kind"] == "surface" and not r["effect"].startswith("ool")]
     assert np.mean([r["correct"] for r in surf]) >= 0.75
-    assert s["wall_s"] < 400

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.io_common import atomic_write
+
 __all__ = ["write_report"]
 
 
@@ -86,7 +88,8 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     jpath = out / "diagnosis.json"
-    jpath.write_text(json.dumps(diagnosis.to_dict(), indent=1, default=float))
+    with atomic_write(jpath) as fh:
+        fh.write(json.dumps(diagnosis.to_dict(), indent=1, default=float))
     d = diagnosis
     parts = [f"<h1>Sim-to-real diagnosis</h1><p>manifest: {html.escape(d.manifest)}</p>",
              f"<h2>Verdict: {html.escape(d.verdict)}</h2>"]
@@ -96,12 +99,15 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
                      + ", ".join(f"{k} = {v:.4g} ± {b.uncertainties.get(k, float('nan')):.2g}" for k, v in b.parameters.items())
                      + f"; residual RMS {b.residual_rms_before:.4g} → {b.residual_rms_after:.4g} (shrink {b.shrink_fraction:.2f}, "
                      f"held-out shrink {b.heldout_shrink_fraction if b.heldout_shrink_fraction is None else round(b.heldout_shrink_fraction, 2)})"
-                     + (f"; degenerate with {', '.join(b.degenerate_with)}" if b.degenerate_with else "") + "</p>")
+                     + (f"; degenerate with {', '.join(b.degenerate_with)}" if b.degenerate_with else "")
+                     + (f"; fitted together with {', '.join(b.companions)}" if b.companions else "")
+                     + (f"; sign undetermined: {', '.join(b.sign_degenerate)}" if b.sign_degenerate else "") + "</p>")
     rows = [{"effect": f.effect, "ΔBIC": _fmt(f.delta_bic), "shrink": _fmt(f.shrink_fraction),
              "variance explained": _fmt(f.variance_explained),
              "excess over noise explained": _fmt(f.excess_explained),
              "held-out shrink": _fmt(f.heldout_shrink_fraction) if f.heldout_shrink_fraction is not None else "—",
              "overfit": f.overfit, "degenerate with": ", ".join(f.degenerate_with),
+             "fitted with": ", ".join(f.companions), "sign undetermined": ", ".join(f.sign_degenerate),
              "parameters": ", ".join(f"{k}={v:.4g}±{f.uncertainties.get(k, float('nan')):.2g}" for k, v in f.parameters.items())}
             for f in d.findings]
     parts += ["<h2>Ranking</h2>", _png(_ranking_figure(d.findings)) if d.findings else "",
@@ -125,5 +131,6 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
     parts.append(f"<p>timings (s): {html.escape(json.dumps(d.timings_s))}</p>")
     style = "<style>body{font-family:sans-serif;max-width:1100px} table{border-collapse:collapse;font-size:12px} td,th{border:1px solid #ccc;padding:2px 6px}</style>"
     hpath = out / "report.html"
-    hpath.write_text(f"<html><head><meta charset='utf-8'>{style}</head><body>{''.join(parts)}</body></html>")
+    with atomic_write(hpath) as fh:
+        fh.write(f"<html><head><meta charset='utf-8'>{style}</head><body>{''.join(parts)}</body></html>")
     return jpath, hpath
