@@ -371,9 +371,11 @@ def _sign_degeneracies(prob: Problem, finding: Finding, fo: FitOutcome, c: Crite
     y-mirror symmetry, so the asymmetry that picks pupil_y's sign may come from the
     blank rather than from the footprint; the sign is only claimed if it survives a
     plausible gradient (measured: campaign case 203, truth pupil_y +1.47 mm, fitted
-    -1.61 and unflagged; without the truth's gradient the fit gives +1.57). This holds
-    when another companion was adopted too (with a map beside the profiles the bow is
-    adopted; testing only that joint fit left case 203's flipped sign unflagged again)."""
+    -1.61 and unflagged; without the truth's gradient the fit gives +1.57). The joint fits
+    are tested also when a companion was adopted (with a map beside the profiles the bow
+    is adopted, and the gradient must still be free in some test). Measured limit: with a
+    map in the data case 203 stays unflagged all the same — the map restrains the
+    gradient, so the mirror solution costs too much, yet the sign stays wrong."""
     out = set(_sign_test(prob, finding, fo, c, all_effects(finding)))
     for names, jfo in joint or ():
         if jfo is fo:
