@@ -99,3 +99,12 @@ def test_campaign_map_beside_profiles(tmp_path):
     assert [m["kind"] for m in m1["measurement"]] == ["line_profile", "surface"]
     assert m1["measurement"][1]["temperature_K"] == 128.0
     parse_manifest(m1, tmp_path / "128.0")  # a valid manifest
+
+
+def test_campaign_map_temperature_checked():
+    from pipeline.diagnosis.campaign import CampaignConfig
+    from pipeline.diagnosis.cli import main
+
+    with pytest.raises(ValueError, match=r"profile_map_K=5.0 K is outside the valid range 20 ... 290 K"):
+        CampaignConfig(profile_map_K=5.0)
+    assert main(["diagnose", "--validate", "--profile-map-K", "500", "--out", "unused"]) == 2

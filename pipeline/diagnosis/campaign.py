@@ -91,6 +91,11 @@ class CampaignConfig:
     profile_map_K: float | None = None
     criteria: Criteria = Criteria(heldout_top=1, pair_from=2)
 
+    def __post_init__(self) -> None:
+        if self.profile_map_K is not None and not 20.0 <= self.profile_map_K <= 290.0:
+            raise ValueError(f"CampaignConfig: profile_map_K={self.profile_map_K} K is outside the valid range "
+                             "20 ... 290 K (or None: profiles only)")
+
 
 def _signed(rng, lo, hi):
     return float(rng.choice([-1.0, 1.0]) * rng.uniform(lo, hi))
