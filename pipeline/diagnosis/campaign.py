@@ -175,9 +175,8 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         # The same blank (discrepancy included) cooled to the map's temperature; a
         # temperature offset is one of the cryostat's reading, so it applies here too.
         # Drawn after the profiles: the profiles are those of the profile-only campaign.
-        T = cfg.profile_map_K + truth.get("temperature_offset_K", 0.0)
-        m = synthetic_surface(t.scaled(thermal_factor(T, 80.0 + truth.get("temperature_offset_K", 0.0))), rng,
-                              noise_um=cfg.noise_um)
+        dT = truth.get("temperature_offset_K", 0.0)
+        m = synthetic_surface(t.scaled(thermal_factor(cfg.profile_map_K + dT, 80.0 + dT)), rng, noise_um=cfg.noise_um)
         np.savez(out / "map.npz", x_mm=m.x_mm, y_mm=m.y_mm, sag_um=m.sag_um)
         meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K, "aperture_diameter_mm": 137.0})
     return {"simulation": sim, "measurement": meas}, truth

@@ -59,7 +59,7 @@ from .manifest import Manifest, load_data, load_manifest
 from .nominal import nominal_sag_map
 from .where import measurement_parts, profile_parts, satellite_spacing_um, surface_parts
 
-__all__ = ["Criteria", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects", "all_effects"]
+__all__ = ["Criteria", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects", "all_effects", "parameters_of"]
 
 
 @dataclass(frozen=True)
@@ -229,13 +229,16 @@ def excess_explained(prob: Problem, nom: FitOutcome, fo: FitOutcome) -> float:
     return float(np.clip((wb - wa) / excess, 0.0, 1.0))
 
 
-def _blanks_for(effect, fws) -> tuple:
-    return tuple(dict.fromkeys(f.blank for f in fws if f.kind in effect.kinds))
+def parameters_of(names, forwards) -> tuple:
+    """The concrete parameters of library effects ``names`` for the data's forward models
+    (a per-blank effect gets one copy per blank seen by a measurement kind it changes)."""
+    return tuple(q for n in names for q in effect_parameters(
+        LIBRARY[n], tuple(dict.fromkeys(f.blank for f in forwards if f.kind in LIBRARY[n].kinds))))
 
 
 def fit_effects(prob: Problem, nom: FitOutcome, names: tuple, criteria: Criteria, start: dict | None = None):
     """Fit one combination of library effects; returns (Finding, FitOutcome)."""
-    params = tuple(q for n in names for q in effect_parameters(LIBRARY[n], _blanks_for(LIBRARY[n], prob.forwards)))
+    params = parameters_of(names, prob.forwards)
     fo = fit(prob, params, start=start)
     before, after, ratio, per = _stats(prob, nom, fo)
     dbic = fo.bic(prob.weights) - nom.bic(prob.weights)
@@ -392,8 +395,8 @@ def _sign_test(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, eff
     start = finding.parameters if start is None else start
     neff = max(sum(fo.n_eff.values()), 2.0)
     cost = sum(prob.weights[m] ** 2 * fo.rss[m] for m in fo.rss)
-    params = tuple(q for e in effects for q in effect_parameters(LIBRARY[e], _blanks_for(LIBRARY[e], prob.forwards)))
-    own = {q.name for e in finding.effects for q in effect_parameters(LIBRARY[e], _blanks_for(LIBRARY[e], prob.forwards))}
+    params = parameters_of(effects, prob.forwards)
+    own = {q.name for q in parameters_of(finding.effects, prob.forwards)}
     for name in finding.parameters:
         if name not in own:
             continue  # a companion's sign is not tested (it is refitted with the others)

@@ -34,7 +34,7 @@ from .manifest import ProfileData, SurfaceData
 from .nominal import thermal_factor
 
 __all__ = ["FIT_LSF_SETTINGS", "SurfaceForward", "ProfileForward", "profile_curve", "plating_gradient_map", "bow_um",
-           "blank_bow_map"]
+           "blank_bow_map", "blank_shape_um"]
 
 #: Line-profile sampling used while fitting (measured: 0.1-0.45 % L1 from the defaults).
 FIT_LSF_SETTINGS = LsfSettings(detector_step_um=1.5, n_fft=256, source_step_mm=2.5, min_source_rows=5,
@@ -57,10 +57,30 @@ def bow_um(x_mm: np.ndarray, y_mm: np.ndarray, defocus_um: float, spherical_um: 
     return out
 
 
+def blank_shape_um(base_um: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, p: dict) -> np.ndarray:
+    """Deformation ``base_um`` (µm, at blank coordinates ``x_mm``, ``y_mm``) changed by the
+    blank effects in ``p``: times ``1 + (plating_grad_x x + plating_grad_y y) / 70 mm``
+    (plating gradient), plus the blank bow (:func:`bow_um`). Shared by the map and the
+    line-profile models."""
+    gx, gy = p.get("plating_grad_x", 0.0), p.get("plating_grad_y", 0.0)
+    if gx or gy:
+        base_um = base_um * (1.0 + (gx * x_mm + gy * y_mm) / PLATING_GRADIENT_REF_MM)
+    b2, b4 = p.get("bow_defocus_um", 0.0), p.get("bow_spherical_um", 0.0)
+    if b2 or b4:
+        base_um = base_um + bow_um(x_mm, y_mm, b2, b4)
+    return base_um
+
+
 def blank_bow_map(sag: SagMap, defocus_um: float, spherical_um: float) -> SagMap:
     """``sag`` plus the ``blank_bow`` surface (same grid)."""
-    X, Y = sag.grid()
-    return sag.with_sag(sag.sag_um + bow_um(X, Y, defocus_um, spherical_um))
+    return sag.with_sag(blank_shape_um(sag.sag_um, *sag.grid(), {"bow_defocus_um": defocus_um,
+                                                                   "bow_spherical_um": spherical_um}))
+
+
+def plating_gradient_map(sag: SagMap, gx: float, gy: float) -> SagMap:
+    """``sag`` times ``1 + (gx x + gy y) / 70 mm`` (blank coordinates): a linear NiP
+    thickness gradient scales the local deformation (:mod:`.effects`, ``plating_gradient``)."""
+    return sag.with_sag(blank_shape_um(sag.sag_um, *sag.grid(), {"plating_grad_x": gx, "plating_grad_y": gy}))
 
 
 class SurfaceForward:
@@ -117,12 +137,7 @@ class SurfaceForward:
             base = np.where(np.isfinite(base), base, 0.0)  # points moved off the map: no deformation there
         else:
             base, qx, qy = self.base, self.x, self.y
-        gx, gy = p.get("plating_grad_x", 0.0), p.get("plating_grad_y", 0.0)
-        if gx or gy:
-            base = base * (1.0 + (gx * qx + gy * qy) / PLATING_GRADIENT_REF_MM)
-        b2, b4 = p.get("bow_defocus_um", 0.0), p.get("bow_spherical_um", 0.0)
-        if b2 or b4:
-            base = base + bow_um(qx, qy, b2, b4)
+        base = blank_shape_um(base, qx, qy, p)
         return self.factor(p) * base + p.get("astig_0_um", 0.0) * self.z22 + p.get("astig_45_um", 0.0) * self.z2m2
 
     def residual(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
@@ -137,13 +152,6 @@ class SurfaceForward:
         m = self.predict(p)
         _, c = _lstsq_residual(self.nuisance[sel], self.data[sel] - m[sel])
         return m + self.nuisance @ c
-
-
-def plating_gradient_map(sag: SagMap, gx: float, gy: float) -> SagMap:
-    """``sag`` times ``1 + (gx x + gy y) / 70 mm`` (blank coordinates): a linear NiP
-    thickness gradient scales the local deformation (:mod:`.effects`, ``plating_gradient``)."""
-    X, Y = sag.grid()
-    return sag.with_sag(sag.sag_um * (1.0 + (gx * X + gy * Y) / PLATING_GRADIENT_REF_MM))
 
 
 def profile_curve(grating: str, wavelength_um: float, order: int, pixel_scale_mas: int, sag: SagMap | None,
@@ -183,6 +191,7 @@ class ProfileForward:
         self.data = np.asarray(data.intensity, float)
         self.n = self.data.size
         self.nominal, self.cold_K, self.warm_K, self.settings = nominal, cold_K, warm_K, settings
+        self._grid = nominal.grid()
         self._cache: OrderedDict = OrderedDict()
         self._cache_size = cache_size
         self.noise_known = m.noise_rel
@@ -201,14 +210,7 @@ class ProfileForward:
         if hit is not None:
             self._cache.move_to_end(key)
             return hit
-        sag = self.nominal
-        gx, gy = p.get("plating_grad_x", 0.0), p.get("plating_grad_y", 0.0)
-        if gx or gy:
-            sag = plating_gradient_map(sag, gx, gy)
-        b2, b4 = p.get("bow_defocus_um", 0.0), p.get("bow_spherical_um", 0.0)
-        if b2 or b4:
-            sag = blank_bow_map(sag, b2, b4)
-        sag = sag.scaled(k)
+        sag = self.nominal.with_sag(k * blank_shape_um(self.nominal.sag_um, *self._grid, p))
         u, y = profile_curve(self.m.grating, self.m.wavelength_um, self.m.order, self.m.pixel_scale_mas, sag, p,
                              self.m.slit_position, self.settings)
         spl = CubicSpline(u, y, extrapolate=False)

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from .effects import LIBRARY, effect_parameters
+from .engine import all_effects, parameters_of
 from .fitting import Problem, fit
 
 __all__ = ["folds", "heldout_check"]
@@ -87,9 +87,7 @@ def _prediction_spread(prob: Problem, params, tr, test: dict) -> tuple[float, fl
 
 def heldout_check(prob: Problem, finding, criteria) -> tuple[float | None, str]:
     """Held-out shrink fraction of ``finding`` (None if no fold constrains it) and a note."""
-    params = tuple(q for n in tuple(finding.effects) + tuple(getattr(finding, "companions", ()))
-                   for q in effect_parameters(LIBRARY[n], tuple(dict.fromkeys(
-                       f.blank for f in prob.forwards if f.kind in LIBRARY[n].kinds))))
+    params = parameters_of(all_effects(finding), prob.forwards)
     before = after = 0.0
     notes, used = [], 0
     for train, test, label in folds(prob):
