@@ -248,6 +248,7 @@ def run_case(args) -> dict:
             "sign_degenerate": list(d.finding(effect).sign_degenerate) if in_lib and d.finding(effect) else [],
             "companions": list(d.finding(effect).companions) if in_lib and d.finding(effect) else [],
             "top_companions": list(best.companions) if best else [],
+            "top_absorbs": best.absorbs if best else {},
             "seconds": time.perf_counter() - t0}
 
 
@@ -271,7 +272,8 @@ def _summary(rows: list[dict], wall_s: float, cfg: CampaignConfig) -> dict:
                          "recovered_20pct_vector": sum(x <= 0.2 for x in ev),
                          "median_recovery_error_vector": float(np.median(ev)) if ev else None,
                          "within_2sigma": sum(bool(r.get("within_2sigma")) for r in rs),
-                         "sign_degenerate_flagged": sum(bool(r.get("sign_degenerate")) for r in rs)}
+                         "sign_degenerate_flagged": sum(bool(r.get("sign_degenerate")) for r in rs),
+                         "top_absorbs_flagged": sum(bool(r.get("top_absorbs")) for r in rs)}
     recv = [r["recovery_error_vector"] for r in lib if r.get("recovery_error_vector") is not None]
     return {"n_cases": len(rows), "correct_top_rate": sum(r["correct"] for r in lib) / max(len(lib), 1),
             "recovered_20pct_rate": sum(x <= 0.2 for x in rec) / max(len(lib), 1),

@@ -53,7 +53,9 @@ temperature fitted on one 128 K map by 8–13 K, and collimator defocus on line 
 by up to 0.09 µm). On line profiles alone the bow is degenerate with collimator defocus
 (both curve the wavefront along the dispersion; measured: with the bow free, the
 defocus error of a campaign case grew from 0.01 to 0.35 µm), so it is only tried where
-a surface map is in the data (``requires``), which pins it down; it then acts on every
+a surface map is in the data (``requires``), which pins it down (on profiles alone the
+finding that takes it up lists it in ``degenerate_with`` and reports how much of it its
+parameters contain, ``Finding.absorbs``); it then acts on every
 measurement (one bow for all blanks: a per-blank bow would need one map per blank).
 
 ``floor`` is the absolute tolerance used when judging parameter recovery

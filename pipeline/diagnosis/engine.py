@@ -77,6 +77,7 @@ class Criteria:
     heldout_top: int = 3
     companion_top: int = 2
     companion_bic: float = 6.0
+    absorb_test_bic: float = 25.0
 
 
 @dataclass(frozen=True)
@@ -103,6 +104,7 @@ class Finding:
     per_measurement: tuple = ()
     significant: bool = False
     companions: tuple = ()
+    absorbs: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True, eq=False)
@@ -414,6 +416,63 @@ def _sign_test(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, eff
     return tuple(out)
 
 
+def _absorbed(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, kinds: set) -> tuple[dict, tuple]:
+    """Parameters of effects the data cannot identify on their own (``Effect.requires``
+    not met, so never fitted) that ``finding``'s parameters absorb: returns
+    ``({absorbed parameter q: {own parameter: K}}, absorbed effects)`` where, to first
+    order, the fitted own parameter = its true value + ``K (q - q_null)``.
+
+    Profile-likelihood test per parameter ``q``: set ``q`` to a test value ``v`` at which
+    its signature alone, with only the nuisances refitted on top of the finding's fit,
+    would cost ``absorb_test_bic`` (very strong evidence: it would be seen if nothing
+    could mimic it); then refit the finding's parameters too. If the cost drops back to
+    within ``degenerate_bic`` of the finding's own fit, the finding's parameters take up
+    the signature and their values contain any such ``q``: the finding is reported as
+    degenerate with the effect, with ``K = (own - own(v)) / v`` (holding ``q`` at ``v``
+    takes ``K v`` out of the own parameter).
+
+    Physical case: a blank bow (Zernike (2,0) on the grating) on line profiles is
+    collimator defocus in all but name — both curve the wavefront across the dispersion.
+    On profiles alone the bow is therefore not fitted (``blank_bow.requires``), which
+    left the collimator's defocus reported with a 0.01 µm error although the campaign's
+    0.01 µm RMS bow moves it by up to 0.09 µm (case 126: -0.295 +- 0.017 fitted,
+    -0.202 injected). The move is reported, not added to the error: the library's prior
+    range of the bow is a search range, not a measured spread."""
+    own = parameters_of(finding.effects + tuple(finding.companions), prob.forwards)
+    have = {q.name for q in own}
+    untried = [e for e in LIBRARY.values() if set(e.kinds) & kinds and not set(e.requires) <= kinds]
+    neff = max(sum(fo.n_eff.values()), 2.0)
+    w = prob.weights
+    cost0 = sum(w[m] ** 2 * fo.rss[m] for m in fo.rss)
+    if not cost0 > 0:
+        return {}, ()
+    base = {**fo.parameters}
+    start = {q.name: base[q.name] for q in own if q.name in base}
+
+    def dbic(o):
+        return neff * math.log(max(sum(w[m] ** 2 * o.rss[m] for m in o.rss), 1e-300) / cost0)
+
+    out, effects = {}, []
+    for e in untried:
+        for q in parameters_of((e.name,), prob.forwards):
+            if q.name in have:
+                continue
+            v1 = q.null + 0.25 * (q.hi - q.null)
+            d1 = dbic(fit(prob, (), fixed={**base, q.name: v1}))
+            if not d1 > 0:
+                continue
+            v = q.null + (v1 - q.null) * math.sqrt(c.absorb_test_bic / d1)
+            if not q.lo <= v <= q.hi:
+                continue  # too weak to be seen within its prior range: nothing to absorb
+            if dbic(fit(prob, (), fixed={**base, q.name: v})) < 0.5 * c.absorb_test_bic:
+                continue  # the response is not even roughly quadratic: no clean test
+            refit = fit(prob, own, fixed={q.name: v}, start=start)
+            if dbic(refit) <= c.degenerate_bic:
+                out[q.name] = {n: (base[n] - refit.parameters[n]) / (v - q.null) for n in start}
+                effects.append(e.name)
+    return out, tuple(dict.fromkeys(effects))
+
+
 def _replace(f, **kw):
     from dataclasses import replace
 
@@ -493,12 +552,18 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     findings = [_replace(f, sign_degenerate=_sign_degeneracies(prob, f, fits[f.effect], criteria,
                                                                joint_fits.get(f.effect)))
                 if len(f.effects) == 1 and f.significant else f for f in findings]
+    t0 = time.perf_counter()
+    for i, f in enumerate(findings[:max(criteria.heldout_top, 1)]):
+        if len(f.effects) == 1 and f.significant:
+            ab, eff = _absorbed(prob, f, fits[f.effect], criteria, kinds)
+            findings[i] = _replace(f, absorbs=ab, degenerate_with=tuple(dict.fromkeys(f.degenerate_with + eff)))
+    t["absorb_s"] = time.perf_counter() - t0
     if heldout:
         for i, f in enumerate(findings[:criteria.heldout_top]):
             h, note = heldout_check(prob, f, criteria)
             over = h is not None and f.shrink_fraction > 0.05 and h < criteria.heldout_ratio * f.shrink_fraction
             findings[i] = _replace(f, heldout_shrink_fraction=h, heldout_note=note, overfit=bool(over))
-    t["heldout_s"] = time.perf_counter() - t["start"] - t["load_s"] - t["fit_s"]
+    t["heldout_s"] = time.perf_counter() - t["start"] - t["load_s"] - t["fit_s"] - t["absorb_s"]
     gap = any(math.sqrt(nom.rss[m] / nom.n[m]) > criteria.no_gap_ratio * prob.noise[m] for m in nom.rss)
     best = findings[0] if findings else None
     if not gap:

@@ -83,6 +83,13 @@ def _fmt(v):
     return f"{v:.4g}" if isinstance(v, float) else v
 
 
+def _absorbs_text(absorbed: str, k: dict) -> str:
+    """'coll_defocus_um contains -1.7 x bow_defocus_um' (terms above 5 % of the largest)."""
+    big = max((abs(m) for m in k.values()), default=0.0)
+    terms = [f"{n} contains {m:+.3g} × {absorbed}" for n, m in k.items() if big > 0 and abs(m) >= 0.05 * big]
+    return ", ".join(terms) or f"{absorbed}: no parameter moves"
+
+
 def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
     """Write ``diagnosis.json`` and ``report.html`` into ``out_dir``; returns both paths."""
     out = Path(out_dir)
@@ -102,12 +109,17 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
                      + (f"; degenerate with {', '.join(b.degenerate_with)}" if b.degenerate_with else "")
                      + (f"; fitted together with {', '.join(b.companions)}" if b.companions else "")
                      + (f"; sign undetermined: {', '.join(b.sign_degenerate)}" if b.sign_degenerate else "") + "</p>")
+        if b.absorbs:
+            parts.append("<p>These data cannot identify some effects on their own; the parameters above contain them: "
+                         + "; ".join(html.escape(_absorbs_text(k, v)) for k, v in b.absorbs.items())
+                         + ". A measurement that can (e.g. a surface map for a blank bow) separates them.</p>")
     rows = [{"effect": f.effect, "ΔBIC": _fmt(f.delta_bic), "shrink": _fmt(f.shrink_fraction),
              "variance explained": _fmt(f.variance_explained),
              "excess over noise explained": _fmt(f.excess_explained),
              "held-out shrink": _fmt(f.heldout_shrink_fraction) if f.heldout_shrink_fraction is not None else "—",
              "overfit": f.overfit, "degenerate with": ", ".join(f.degenerate_with),
              "fitted with": ", ".join(f.companions), "sign undetermined": ", ".join(f.sign_degenerate),
+             "absorbs": ", ".join(f.absorbs),
              "parameters": ", ".join(f"{k}={v:.4g}±{f.uncertainties.get(k, float('nan')):.2g}" for k, v in f.parameters.items())}
             for f in d.findings]
     parts += ["<h2>Ranking</h2>", _png(_ranking_figure(d.findings)) if d.findings else "",
