@@ -52,6 +52,8 @@ from pipeline.io_zernike import (ZERNIKE_CONVENTIONS, convert_normalisation, rea
 
 __all__ = [
     "SAG_FORMATS",
+    "read_psf_image",
+    "write_psf_image_csv",
     "write_sag_map",
     "read_sag_map",
     "load_sag_map",
@@ -355,3 +357,62 @@ def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndar
     if not flux > 0:
         raise parse_error(path, None, "no flux: all intensities are zero")
     return x, (y / flux if normalise else y)
+
+
+def read_psf_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Read a measured point-source image: CSV ``x_um,y_um,intensity`` (header, any
+    column order, other columns ignored) or ``.npz`` with arrays ``x_um``, ``y_um``,
+    ``intensity``. ``x`` is along the dispersion, ``y`` along the slit (detector µm).
+
+    Returns
+    -------
+    x_um, y_um, intensity : ndarray, shape (n,)
+        Sorted by (y, x); intensities as given (any normalisation).
+
+    Raises
+    ------
+    ValueError
+        Naming file and (where it applies) line: missing columns or arrays, non-finite
+        values, fewer than 25 samples, negative intensities, duplicate points, no flux.
+    """
+    path = Path(path)
+    if path.suffix.lower() == ".npz":
+        try:
+            with np.load(path) as z:
+                missing = [k for k in ("x_um", "y_um", "intensity") if k not in z.files]
+                if missing:
+                    raise parse_error(path, None, f"lacks arrays {missing}; has {sorted(z.files)}")
+                v = np.column_stack([np.ravel(z[k]).astype(float) for k in ("x_um", "y_um", "intensity")])
+        except (OSError, ValueError) as exc:
+            if isinstance(exc, ValueError) and str(path) in str(exc):
+                raise
+            raise parse_error(path, None, f"is not a readable .npz: {exc}") from None
+        lines = np.zeros(v.shape[0], int)
+    else:
+        v, lines = _read_csv_columns(path, "PSF image", ("x_um", "y_um", "intensity"))
+    line = (lambda k: int(lines[k]) if lines[k] else None)
+    if v.shape[0] < 25:
+        raise parse_error(path, None, f"needs >= 25 samples, found {v.shape[0]}")
+    bad = ~np.isfinite(v).all(axis=1)
+    if bad.any():
+        raise parse_error(path, line(int(np.flatnonzero(bad)[0])), "x_um, y_um and intensity must be finite numbers")
+    neg = v[:, 2] < 0
+    if neg.any():
+        k = int(np.flatnonzero(neg)[0])
+        raise parse_error(path, line(k), f"intensity {v[k, 2]:g} is negative; intensities must be >= 0")
+    order = np.lexsort((v[:, 0], v[:, 1]))
+    v, lines = v[order], lines[order]
+    dup = np.flatnonzero((np.diff(v[:, 0]) == 0) & (np.diff(v[:, 1]) == 0))
+    if dup.size:
+        raise parse_error(path, line(dup[0] + 1), f"duplicate point x_um={v[dup[0], 0]:g}, y_um={v[dup[0], 1]:g}")
+    if not v[:, 2].max() > 0:
+        raise parse_error(path, None, "no flux: all intensities are zero")
+    return v[:, 0], v[:, 1], v[:, 2]
+
+
+def write_psf_image_csv(path: str | Path, x_um: np.ndarray, y_um: np.ndarray, intensity: np.ndarray) -> None:
+    """CSV ``x_um,y_um,intensity`` (header, one sample per line), written atomically."""
+    with atomic_write(Path(path)) as fh:
+        fh.write("x_um,y_um,intensity\n")
+        for a, b, c in zip(np.ravel(x_um), np.ravel(y_um), np.ravel(intensity)):
+            fh.write(f"{a:.3f},{b:.3f},{c:.6g}\n")

@@ -29,7 +29,7 @@ def test_library_keeps_names_and_adds_plating_gradient():
     assert {"astigmatism", "amplitude_scale", "temperature", "registration", "pupil_shift", "collimator_wfe",
             "slit_width", "plating_gradient"} <= set(LIBRARY)
     e = LIBRARY["plating_gradient"]
-    assert e.companion and set(e.kinds) == {"surface", "line_profile"}
+    assert e.companion and set(e.kinds) == {"surface", "line_profile", "psf_image"}
     assert [q.name for q in e.parameters] == ["plating_grad_x", "plating_grad_y"]
 
 

@@ -101,7 +101,7 @@ class Effect:
     name : str
         Library key.
     kinds : tuple of str
-        Measurement kinds it changes ("surface", "line_profile").
+        Measurement kinds it changes ("surface", "line_profile", "psf_image").
     parameters : tuple of Parameter
         Its parameters; for ``per_blank`` effects a template whose name gets ``_<blank>``.
     per_blank : bool
@@ -136,10 +136,10 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
            (Parameter("astig_0_um", 0.0, -1.0, 1.0, floor=0.02), Parameter("astig_45_um", 0.0, -1.0, 1.0, floor=0.02)),
            description="mount-induced surface astigmatism (Zernike (2,2) and (2,-2), RMS-normalised over the aperture)",
            vector=True),
-    Effect("amplitude_scale", ("surface", "line_profile"),
+    Effect("amplitude_scale", ("surface", "line_profile", "psf_image"),
            (Parameter("scale", 1.0, 0.3, 3.0, floor=0.05),), per_blank=True,
            description="deformation amplitude differs (NiP thickness or polish; e.g. a re-polished blank)"),
-    Effect("temperature", ("surface", "line_profile"),
+    Effect("temperature", ("surface", "line_profile", "psf_image"),
            (Parameter("temperature_offset_K", 0.0, -60.0, 80.0, floor=5.0),),
            description="true cold temperature = stated + offset (exact rescaling by the mismatch strain)"),
     Effect("registration", ("surface",),
@@ -147,12 +147,12 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
             Parameter("reg_dy_mm", 0.0, -10.0, 10.0, (-5.0, 0.0, 5.0), floor=0.5),
             Parameter("reg_rot_deg", 0.0, -5.0, 5.0, floor=0.3)),
            description="measured map shifted/rotated against the model (model feature at p appears at R p + d)"),
-    Effect("pupil_shift", ("line_profile",),
+    Effect("pupil_shift", ("line_profile", "psf_image"),
            (Parameter("pupil_x_mm", 0.0, -10.0, 10.0, (-7.0, -3.5, 0.0, 3.5, 7.0), floor=1.0),
             Parameter("pupil_y_mm", 0.0, -10.0, 10.0, (0.0, 4.5), floor=3.0)),
            description="beam footprint offset on the grating (x dispersion, y ruling), common to all profiles",
            vector=True),
-    Effect("collimator_wfe", ("line_profile",),
+    Effect("collimator_wfe", ("line_profile", "psf_image"),
            (Parameter("coll_coma_um", 0.0, -0.4, 0.4, floor=0.04), Parameter("coll_defocus_um", 0.0, -0.4, 0.4, floor=0.04),
             Parameter("coll_astig45_um", 0.0, -0.4, 0.4, floor=0.06)),
            description="extra low-order spectrograph WFE (RMS-normalised Zernike over the 110 mm pupil)",
@@ -160,12 +160,12 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
     Effect("slit_width", ("line_profile",),
            (Parameter("slit_image_width_um", NOMINAL_SLIT_UM, 15.0, 45.0, floor=1.0),),
            description="geometric slit image width differs from 27 µm (29 µm for HK, scaled alike)"),
-    Effect("plating_gradient", ("surface", "line_profile"),
+    Effect("plating_gradient", ("surface", "line_profile", "psf_image"),
            (Parameter("plating_grad_x", 0.0, -0.1, 0.1, floor=0.01), Parameter("plating_grad_y", 0.0, -0.1, 0.1, floor=0.01)),
            description="NiP thickness gradient across the blank: deformation x (1 + gx x/70 mm + gy y/70 mm) "
                        "(blank coordinates; gx, gy = relative amplitude change at the blank's half-width)",
            vector=True, companion=True),
-    Effect("blank_bow", ("surface", "line_profile"),
+    Effect("blank_bow", ("surface", "line_profile", "psf_image"),
            (Parameter("bow_defocus_um", 0.0, -0.2, 0.2, floor=0.01), Parameter("bow_spherical_um", 0.0, -0.2, 0.2, floor=0.01)),
            description="rotationally symmetric figure change of the cold blank: Zernike (2,0) and (4,0), "
                        "RMS-normalised over a 70 mm radius disc in blank coordinates, at the simulation's cold_K "

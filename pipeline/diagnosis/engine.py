@@ -55,9 +55,10 @@ import numpy as np
 from .effects import LIBRARY, applicable_effects, effect_parameters
 from .fitting import FitOutcome, Problem, effective_samples, estimate_noise, fit
 from .forward import ProfileForward, SurfaceForward
+from .psf_image import PsfImageForward
 from .manifest import Manifest, load_data, load_manifest
 from .nominal import nominal_sag_map
-from .where import measurement_parts, profile_parts, satellite_spacing_um, surface_parts
+from .where import measurement_parts, profile_parts, psf_image_parts, satellite_spacing_um, surface_parts
 
 __all__ = ["Criteria", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects", "all_effects", "parameters_of"]
 
@@ -148,13 +149,13 @@ class Diagnosis:
 def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, FitOutcome]:
     """Forward models, the nominal (nuisance-only) fit, noise, n_eff and weights."""
     sim = manifest.simulation
-    fws = [SurfaceForward(d, nominal, sim.cold_K, sim.warm_K) if d.measurement.kind == "surface"
-           else ProfileForward(d, nominal, sim.cold_K, sim.warm_K) for d in data]
+    kinds = {"surface": SurfaceForward, "line_profile": ProfileForward, "psf_image": PsfImageForward}
+    fws = [kinds[d.measurement.kind](d, nominal, sim.cold_K, sim.warm_K) for d in data]
     prob = Problem(fws, {f.name: 1.0 for f in fws}, {f.name: float(f.n) for f in fws})
     nom = fit(prob, ())
     for f in fws:
-        r = f.residual({}, nom.deltas_um.get(f.name, 0.0))
-        if f.kind == "surface":
+        r = f.residual({}, nom.deltas_um.get(f.name, getattr(f, "delta0_um", 0.0)))
+        if f.kind != "line_profile":  # maps and images: noise along rows, correlation on both axes
             sigma = f.noise_known or estimate_noise(f.x, f.data, rows=f.y)
             prob.n_eff[f.name] = effective_samples(r, f.x, f.y)
         else:
@@ -167,7 +168,7 @@ def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, Fi
 
 
 def _predictions(prob: Problem, fo: FitOutcome) -> dict:
-    return {f.name: f.fitted(fo.parameters, fo.deltas_um.get(f.name, 0.0)) if f.kind == "line_profile"
+    return {f.name: f.fitted(fo.parameters, fo.deltas_um.get(f.name, f.delta0_um)) if f.n_shift
             else f.fitted(fo.parameters) for f in prob.forwards}
 
 
@@ -208,7 +209,9 @@ def _noise_cost(prob: Problem, n: dict) -> float:
     out = 0.0
     for f in prob.forwards:
         if f.name in n:
-            k = 3  # nuisances: piston + 2 tilts (map) | offset shift + flux + background (profile)
+            # nuisances: piston + 2 tilts (map) | offset shift + flux + background (profile) |
+            # position (2) + flux + background (PSF image)
+            k = f.nuisance_count + (1 if f.kind == "line_profile" else 0)
             sigma = prob.noise[f.name]
             if not f.noise_known:
                 sigma *= max(1.0 - NOISE_ESTIMATE_REL_SD_SQRT_N / math.sqrt(max(f.n, 1)), 0.5)
@@ -483,11 +486,13 @@ def _where(prob: Problem, fo: FitOutcome) -> list[dict]:
     out = []
     wr = {}
     for f in prob.forwards:
-        d = fo.deltas_um.get(f.name, 0.0)
+        d = fo.deltas_um.get(f.name, getattr(f, "delta0_um", 0.0))
         r = f.residual(fo.parameters, d)
         wr[f.name] = prob.weights[f.name] ** 2 * float(np.sum(r**2))
         if f.kind == "surface":
             out += surface_parts(f.name, f.x, f.y, r, f.radius_mm, prob.noise[f.name])
+        elif f.kind == "psf_image":
+            out += psf_image_parts(f.name, f.x, f.y, r, d)
         else:
             sp = satellite_spacing_um(f.m.grating, f.m.wavelength_um, f.m.order)
             out += profile_parts(f.name, f.x, r, d, sp)
@@ -582,7 +587,8 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
                 "temperature_K": m.temperature_K} for m in manifest.measurements)
     curves = {}
     if keep_curves:
-        curves = {"nominal": _predictions(prob, nom), "data": {f.name: (f.x, getattr(f, "y", None), f.data) for f in prob.forwards}}
+        curves = {"nominal": _predictions(prob, nom), "data": {f.name: (f.x, getattr(f, "y", None), f.data) for f in prob.forwards},
+                  "kinds": {f.name: f.kind for f in prob.forwards}}
         if best:
             curves["best"] = _predictions(prob, fits[best.effect])
     t["total_s"] = time.perf_counter() - t.pop("start")

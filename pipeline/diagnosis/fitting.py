@@ -139,7 +139,8 @@ def _long_run_s2(problem, fws, masks: dict, resid: dict, k: int) -> float:
             continue
         m = masks.get(f.name)
         x = f.x if m is None else f.x[m]
-        y = None if f.kind != "surface" else (f.y if m is None else f.y[m])
+        y = getattr(f, "y", None)  # maps and images: correlation along rows and columns
+        y = y if m is None or y is None else y[m]
         L = r.size / effective_samples(r, x, y)
         tot += problem.weights[f.name] ** 2 * float(np.sum(r**2)) * L
         n_all += r.size
@@ -182,14 +183,22 @@ class FitOutcome:
         return float(neff * math.log(max(cost, 1e-300) / neff) + self.k * math.log(neff))
 
 
-def _unpack(z, params, profiles, fixed=None):
+def _shift_slots(fws) -> list:
+    """(forward, component) of every position nuisance that is a fit parameter: a line
+    profile's offset shift (1), a PSF image's position (2)."""
+    return [(f, k) for f in fws for k in range(getattr(f, "n_shift", 0))]
+
+
+def _unpack(z, params, slots, fixed=None):
     p = dict(fixed or {})
     p.update({q.name: q.null + zi * q.width for q, zi in zip(params, z)})
-    d = {f.name: zi * _DELTA_SCALE_UM for f, zi in zip(profiles, z[len(params):])}
-    return p, d
+    d = {}
+    for (f, _), zi in zip(slots, z[len(params):]):
+        d.setdefault(f.name, []).append(zi * _DELTA_SCALE_UM)
+    return p, {k: (v[0] if len(v) == 1 else tuple(v)) for k, v in d.items()}
 
 
-def _best_starts(starts, z0, n_par, params, profiles, fixed, problem, masks, fws, n_local):
+def _best_starts(starts, z0, n_par, params, slots, fixed, problem, masks, fws, n_local):
     """The ``n_local`` grid points with the lowest cost, each profile's offset shift
     profiled by a 0.5-µm grid search within ±15 µm of its nominal value (the profile
     model is memoised on the physical parameters, so each shift costs an interpolation)."""
@@ -198,18 +207,18 @@ def _best_starts(starts, z0, n_par, params, profiles, fixed, problem, masks, fws
     for s in starts:
         z = z0.copy()
         z[:n_par] = s
-        p, d = _unpack(z, params, profiles, fixed)
+        p, d = _unpack(z, params, slots, fixed)
         cost = 0.0
         for f in fws:
             m = masks.get(f.name)
             if f.kind == "line_profile":
                 c = [float(np.sum(f.residual(p, d[f.name] + ds, m) ** 2)) for ds in shifts]
                 j = int(np.argmin(c))
-                z[n_par + profiles.index(f)] = np.clip((d[f.name] + shifts[j]) / _DELTA_SCALE_UM,
+                z[n_par + slots.index((f, 0))] = np.clip((d[f.name] + shifts[j]) / _DELTA_SCALE_UM,
                                                        -_DELTA_BOUND_UM / _DELTA_SCALE_UM, _DELTA_BOUND_UM / _DELTA_SCALE_UM)
                 cost += problem.weights[f.name] ** 2 * c[j]
             else:
-                cost += problem.weights[f.name] ** 2 * float(np.sum(f.residual(p, 0.0, m) ** 2))
+                cost += problem.weights[f.name] ** 2 * float(np.sum(f.residual(p, d.get(f.name, 0.0), m) ** 2))
         ranked.append((cost, z))
     ranked.sort(key=lambda t: t[0])
     return [z for _, z in ranked[:max(n_local, 1)]]
@@ -245,13 +254,13 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
     """
     masks = masks or {}
     fws = [f for f in problem.forwards if f.name not in masks or masks[f.name].any()]
-    profiles = [f for f in fws if f.kind == "line_profile"]
-    z0 = np.concatenate([np.zeros(len(params)), [f.delta0_um / _DELTA_SCALE_UM for f in profiles]])
-    lo = np.concatenate([[(q.lo - q.null) / q.width for q in params], np.full(len(profiles), -_DELTA_BOUND_UM / _DELTA_SCALE_UM)])
-    hi = np.concatenate([[(q.hi - q.null) / q.width for q in params], np.full(len(profiles), _DELTA_BOUND_UM / _DELTA_SCALE_UM)])
+    slots = _shift_slots(fws)
+    z0 = np.concatenate([np.zeros(len(params)), [np.ravel(f.delta0_um)[k] / _DELTA_SCALE_UM for f, k in slots]])
+    lo = np.concatenate([[(q.lo - q.null) / q.width for q in params], np.full(len(slots), -_DELTA_BOUND_UM / _DELTA_SCALE_UM)])
+    hi = np.concatenate([[(q.hi - q.null) / q.width for q in params], np.full(len(slots), _DELTA_BOUND_UM / _DELTA_SCALE_UM)])
 
     def residuals(z):
-        p, d = _unpack(z, params, profiles, fixed)
+        p, d = _unpack(z, params, slots, fixed)
         out = [problem.weights[f.name] * f.residual(p, d.get(f.name, 0.0), masks.get(f.name)) for f in fws]
         return np.concatenate(out)
 
@@ -263,7 +272,7 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
             if q.name in start:
                 z0[i] = np.clip((start[q.name] - q.null) / q.width, lo[i], hi[i])
     elif len(starts) > 1:
-        inits = _best_starts(starts[:max_starts], z0, len(params), params, profiles, fixed, problem, masks, fws,
+        inits = _best_starts(starts[:max_starts], z0, len(params), params, slots, fixed, problem, masks, fws,
                              n_local)
     nfree = z0.size
     if nfree == 0:
@@ -277,7 +286,7 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
             if best is None or sol.cost < best.cost:
                 best = sol
         z, jac, success, nfev, res_vec = best.x, best.jac, bool(best.success), int(best.nfev), best.fun
-    p, d = _unpack(z, params, profiles, fixed)
+    p, d = _unpack(z, params, slots, fixed)
     rss, n, neff, resid = {}, {}, {}, {}
     for f in fws:
         m = masks.get(f.name)
@@ -285,8 +294,8 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
         rss[f.name], n[f.name] = float(np.sum(r**2)), int(r.size)
         neff[f.name] = problem.n_eff[f.name] * r.size / f.n
         resid[f.name] = r
-    n_lin = sum(3 if f.kind == "surface" else 2 for f in fws)
-    k = len(params) + len(profiles) + n_lin
+    n_lin = sum(f.nuisance_count for f in fws)
+    k = len(params) + len(slots) + n_lin
     errors = {}
     if params:
         cost_w = float(np.sum(res_vec**2))

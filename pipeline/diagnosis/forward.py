@@ -33,7 +33,7 @@ from .effects import BOW_REF_RADIUS_MM, NOMINAL_SLIT_UM, PLATING_GRADIENT_REF_MM
 from .manifest import ProfileData, SurfaceData
 from .nominal import thermal_factor
 
-__all__ = ["FIT_LSF_SETTINGS", "SurfaceForward", "ProfileForward", "profile_curve", "plating_gradient_map", "bow_um",
+__all__ = ["FIT_LSF_SETTINGS", "PROFILE_KEYS", "SurfaceForward", "ProfileForward", "profile_curve", "collimator_terms", "plating_gradient_map", "bow_um",
            "blank_bow_map", "blank_shape_um"]
 
 #: Line-profile sampling used while fitting (measured: 0.1-0.45 % L1 from the defaults).
@@ -95,6 +95,8 @@ class SurfaceForward:
     """
 
     kind = "surface"
+    #: nuisances solved inside :meth:`residual` (piston, x and y tilt); no position nuisance
+    nuisance_count, n_shift = 3, 0
 
     def __init__(self, data: SurfaceData, nominal: SagMap, cold_K: float, warm_K: float = 293.0):
         m = data.measurement
@@ -154,6 +156,21 @@ class SurfaceForward:
         return m + self.nuisance @ c
 
 
+#: Parameters that change the spectrograph image (profiles and PSF images) beyond the
+#: deformation's overall factor: the memo key of the image models.
+PROFILE_KEYS = ("pupil_x_mm", "pupil_y_mm", "coll_coma_um", "coll_defocus_um", "coll_astig45_um", "slit_image_width_um",
+                "plating_grad_x", "plating_grad_y", "bow_defocus_um", "bow_spherical_um")
+
+
+def collimator_terms(p: dict) -> dict:
+    """The spectrograph's collimator Zernike terms {(n, m): µm}: the default collimator
+    plus the ``collimator_wfe`` effect's coma Z(3,1), defocus Z(2,0), oblique astigmatism Z(2,-2)."""
+    coll = dict(DEFAULT_COLLIMATOR_ZERNIKE_UM)
+    for key, nm in (("coll_coma_um", (3, 1)), ("coll_defocus_um", (2, 0)), ("coll_astig45_um", (2, -2))):
+        coll[nm] = coll.get(nm, 0.0) + p.get(key, 0.0)
+    return coll
+
+
 def profile_curve(grating: str, wavelength_um: float, order: int, pixel_scale_mas: int, sag: SagMap | None,
                   p: dict, slit_position: float = 0.0, settings: LsfSettings = FIT_LSF_SETTINGS):
     """Detected line profile (offset_um, unit-area intensity) for effect parameters ``p``.
@@ -167,12 +184,9 @@ def profile_curve(grating: str, wavelength_um: float, order: int, pixel_scale_ma
     w = p.get("slit_image_width_um", NOMINAL_SLIT_UM)
     if w != NOMINAL_SLIT_UM:
         g = replace(g, slit_image_width_um=g.slit_image_width_um * w / NOMINAL_SLIT_UM)
-    coll = dict(DEFAULT_COLLIMATOR_ZERNIKE_UM)
-    for key, nm in (("coll_coma_um", (3, 1)), ("coll_defocus_um", (2, 0)), ("coll_astig45_um", (2, -2))):
-        coll[nm] = coll.get(nm, 0.0) + p.get(key, 0.0)
     r = line_profile(g, wavelength_um, pixel_scale_mas, sag, order=order,
                      pupil_shift_mm=(p.get("pupil_x_mm", 0.0), p.get("pupil_y_mm", 0.0)),
-                     slit_position=slit_position, collimator_zernike_um=coll, settings=settings)
+                     slit_position=slit_position, collimator_zernike_um=collimator_terms(p), settings=settings)
     return r.detected.offset_um, r.detected.intensity
 
 
@@ -180,8 +194,10 @@ class ProfileForward:
     """Line-profile model: ``flux * P(u - delta_um; params) + background``."""
 
     kind = "line_profile"
-    _KEYS = ("pupil_x_mm", "pupil_y_mm", "coll_coma_um", "coll_defocus_um", "coll_astig45_um", "slit_image_width_um",
-             "plating_grad_x", "plating_grad_y", "bow_defocus_um", "bow_spherical_um")
+    #: nuisances solved inside :meth:`residual` (flux, background) and position nuisances
+    #: that are fit parameters (the offset shift ``delta_um``)
+    nuisance_count, n_shift = 2, 1
+    _KEYS = PROFILE_KEYS
 
     def __init__(self, data: ProfileData, nominal: SagMap, cold_K: float, warm_K: float = 293.0,
                  settings: LsfSettings = FIT_LSF_SETTINGS, cache_size: int = 512):

@@ -69,10 +69,10 @@ def _prediction_spread(prob: Problem, params, tr, test: dict) -> tuple[float, fl
         m = test.get(f.name)
         if m is None or not m.any():
             continue
-        d = tr.deltas_um.get(f.name, f.delta0_um if f.kind == "line_profile" else 0.0)
+        d = tr.deltas_um.get(f.name, getattr(f, "delta0_um", 0.0))
 
         def pred(q):
-            return f.predict(q, d)[m] if f.kind == "line_profile" else f.predict(q)[m]
+            return f.predict(q, d)[m] if f.n_shift else f.predict(q)[m]
 
         base = pred(p)
         sig2 += float(np.sum((base - pred(null)) ** 2))

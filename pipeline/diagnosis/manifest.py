@@ -25,9 +25,20 @@ A manifest names the nominal simulation and the measurements it is compared with
     pixel_scale_mas = 250
     slit_position = 0.0
 
+    [[measurement]]
+    kind = "psf_image"        # image of a point source (pinhole at the slit centre)
+    file = "J_1p25_psf.csv"   # CSV x_um,y_um,intensity (x dispersion, y along the slit) or .npz
+    grating = "J"
+    order = -2
+    wavelength_um = 1.25
+    pixel_um = 18             # optional: detector pixel the image is integrated over (default 18)
+
 Optional per measurement: ``name`` (default: file stem), ``blank`` (which grating blank
 the data see; default the grating for profiles, ``grating`` or "spare" for surfaces),
-``noise_um`` (surface) / ``noise_rel`` (profile, fraction of the peak) when known.
+``noise_um`` (surface) / ``noise_rel`` (profile or PSF image, fraction of the peak) when
+known. A PSF image is a dithered (sub-pixel sampled) image of the pixel-integrated PSF;
+its white noise is estimated along the image rows, so an image that is not on rows of
+>= 5 samples needs ``noise_rel``.
 Relative paths are relative to the manifest. Every error names the measurement and
 the field.
 """
@@ -40,12 +51,12 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Simulation", "Measurement", "Manifest", "SurfaceData", "ProfileData",
+__all__ = ["Simulation", "Measurement", "Manifest", "SurfaceData", "ProfileData", "PsfImageData",
            "load_manifest", "parse_manifest", "load_data"]
 
 _COVERAGES = ("all", "holes", "surfaces")
 _MESHES = ("coarse", "default", "refined")
-_KINDS = ("surface", "line_profile")
+_KINDS = ("surface", "line_profile", "psf_image")
 _PIXEL_SCALES = (25, 100, 250)
 
 
@@ -92,6 +103,7 @@ class Measurement:
     slit_position: float = 0.0
     noise_um: float | None = None
     noise_rel: float | None = None
+    pixel_um: float | None = None
 
 
 @dataclass(frozen=True)
@@ -121,6 +133,17 @@ class ProfileData:
 
     measurement: Measurement
     offset_um: np.ndarray
+    intensity: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class PsfImageData:
+    """A measured point-source image (detector µm, x dispersion, y along the slit),
+    intensity scaled to unit peak."""
+
+    measurement: Measurement
+    x_um: np.ndarray
+    y_um: np.ndarray
     intensity: np.ndarray
 
 
@@ -180,6 +203,12 @@ def _measurement(entry: dict, index: int, base: Path) -> Measurement:
         GRATINGS[key].beta_deg(wl, order)
     except ValueError as exc:
         raise _err(name, "wavelength_um", wl, f"cannot be diffracted by grating {key} in order {order}: {exc}") from None
+    if kind == "psf_image":
+        pix = _number(entry, "pixel_um", name, 18.0)
+        if not 0 <= pix <= 100:
+            raise _err(name, "pixel_um", pix, "must be in [0, 100] µm (0: the PSF itself)")
+        return Measurement(name, kind, path, str(entry.get("blank", key)), grating=key, order=int(order),
+                           wavelength_um=float(wl), noise_rel=noise_rel, pixel_um=float(pix))
     ps = entry.get("pixel_scale_mas")
     if ps not in _PIXEL_SCALES:
         raise _err(name, "pixel_scale_mas", ps, f"is unknown; valid: {list(_PIXEL_SCALES)}")
@@ -263,6 +292,24 @@ def _read_profile(m: Measurement) -> ProfileData:
     return ProfileData(m, np.asarray(u, float), np.asarray(y, float) / y.max())
 
 
+def _read_psf_image(m: Measurement) -> PsfImageData:
+    from pipeline.interchange import read_psf_image
+
+    try:
+        x, y, v = read_psf_image(m.file)
+    except ValueError as exc:
+        raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
+    if m.noise_rel is None:
+        _, counts = np.unique(np.round(y, 6), return_counts=True)
+        if (counts >= 5).sum() < 5:
+            raise _err(m.name, "noise_rel", None, f"is required: the {x.size} samples of {m.file.name} are not on "
+                       "rows of >= 5 points, so the noise cannot be estimated from the image")
+    return PsfImageData(m, x, y, v / v.max())
+
+
+_READERS = {"surface": _read_surface, "line_profile": _read_profile, "psf_image": _read_psf_image}
+
+
 def load_data(manifest: Manifest) -> tuple:
-    """Read every measurement's file; returns SurfaceData / ProfileData in manifest order."""
-    return tuple(_read_surface(m) if m.kind == "surface" else _read_profile(m) for m in manifest.measurements)
+    """Read every measurement's file; returns SurfaceData / ProfileData / PsfImageData in manifest order."""
+    return tuple(_READERS[m.kind](m) for m in manifest.measurements)

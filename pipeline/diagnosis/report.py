@@ -25,24 +25,26 @@ def _png(fig) -> str:
     return f'<img src="data:image/png;base64,{base64.b64encode(buf.getvalue()).decode()}"/>'
 
 
-def _measurement_figure(name, data, nominal, best, best_label):
+def _measurement_figure(name, data, nominal, best, best_label, kind="surface"):
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     x, y, d = data
-    if y is not None:  # surface: residual maps before/after
+    if y is not None:  # surface map or PSF image: residual maps before/after
+        image = kind == "psf_image"
+        unit, axis = ("peak = 1", "µm") if image else ("µm", "mm")
         fig, axs = plt.subplots(1, 2 if best is not None else 1, figsize=(9, 4), squeeze=False)
         panels = [("data - nominal", d - nominal)] + ([(f"data - ({best_label})", d - best)] if best is not None else [])
         lim = float(np.nanpercentile(np.abs(d - nominal), 99))
         for ax, (t, r) in zip(axs[0], panels):
             sc = ax.scatter(x, y, c=r - np.mean(r), s=3, cmap="RdBu_r", vmin=-lim, vmax=lim, marker="s")
-            ax.set_title(f"{name}: {t}\nRMS {np.std(r):.4f} µm", fontsize=9)
+            ax.set_title(f"{name}: {t}\nRMS {np.std(r):.4f} ({unit})", fontsize=9)
             ax.set_aspect("equal")
-            ax.set_xlabel("x (mm, dispersion)")
-            ax.set_ylabel("y (mm)")
-        fig.colorbar(sc, ax=axs[0].tolist(), label="µm")
+            ax.set_xlabel(f"x ({axis}, dispersion)")
+            ax.set_ylabel(f"y ({axis}{', along the slit' if image else ''})")
+        fig.colorbar(sc, ax=axs[0].tolist(), label=unit)
         return fig
     fig, (a0, a1) = plt.subplots(2, 1, figsize=(7, 5), sharex=True, gridspec_kw={"height_ratios": [2, 1]})
     a0.plot(x, d, ".", ms=3, color="k", label="data")
@@ -135,7 +137,8 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
         parts.append("<h2>Residuals before / after</h2>")
         for name, data in d.curves["data"].items():
             best = d.curves.get("best", {}).get(name)
-            parts.append(_png(_measurement_figure(name, data, d.curves["nominal"][name], best, d.best.effect if d.best else "")))
+            parts.append(_png(_measurement_figure(name, data, d.curves["nominal"][name], best, d.best.effect if d.best else "",
+                                                  d.curves.get("kinds", {}).get(name, "surface"))))
     if d.best:
         parts.append("<h2>Per measurement (best finding)</h2>" + _table(
             [{k: _fmt(v) for k, v in p.items()} for p in d.best.per_measurement],

@@ -4,7 +4,8 @@ A synthetic measurement is what an instrument would deliver from a *truth* that 
 different model from the one diagnosed: the truth map comes from another FEA mesh
 (and/or case) with a small smooth shape discrepancy; it is sampled on the
 measurement's own grid, with piston/tilt (maps) or an offset shift, flux scale and
-background (profiles), white noise, dropouts and sparse sampling.
+background (profiles), an image position, flux and background (PSF images), white
+noise, dropouts and sparse sampling.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from optics.zernike import zernike_xy
 
 from .forward import profile_curve
 
-__all__ = ["shape_discrepancy", "synthetic_surface", "synthetic_profile", "write_profile_csv"]
+__all__ = ["shape_discrepancy", "synthetic_surface", "synthetic_profile", "synthetic_psf_image", "write_profile_csv"]
 
 
 def shape_discrepancy(sag: SagMap, rng: np.random.Generator, gradient: float = 0.03, bow_um: float = 0.01) -> SagMap:
@@ -85,3 +86,34 @@ def write_profile_csv(path, offset_um: np.ndarray, intensity: np.ndarray) -> Non
         fh.write("offset_um,intensity\n")
         for a, b in zip(offset_um, intensity):
             fh.write(f"{a:.3f},{b:.6g}\n")
+
+
+def synthetic_psf_image(grating: str, wavelength_um: float, order: int, truth: SagMap, rng: np.random.Generator, *,
+                        params: dict | None = None, noise_rel: float = 0.01, half_range_um: float = 40.0,
+                        step_um: float = 2.0, max_shift_um: float = 5.0, background: float = 0.03,
+                        pixel_um: float = 18.0, dropout: float = 0.03) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """A measured point-source image: a dithered image of the pixel-integrated PSF on a
+    ``step_um`` lattice over ±``half_range_um`` (x dispersion, y along the slit), shifted,
+    scaled, with background, white noise (fraction ``noise_rel`` of the peak) and a
+    fraction ``dropout`` of missing samples (bad pixels).
+
+    Computed with the default (finer) :class:`~pipeline.diagnosis.psf_image.PsfImageSettings`,
+    not the fit's. ``params``: pupil shift and collimator WFE of the truth. Returns
+    (x_um, y_um, intensity, truth info).
+    """
+    from scipy.interpolate import RectBivariateSpline
+
+    from .psf_image import psf_image_model
+
+    ux, uy, img = psf_image_model(grating, wavelength_um, order, truth, params or {}, pixel_um)
+    spl = RectBivariateSpline(uy, ux, img)
+    g = np.arange(-half_range_um, half_range_um + 1e-9, step_um)
+    X, Y = np.meshgrid(g, g)
+    keep = rng.random(X.size) >= dropout
+    x, y = X.ravel()[keep], Y.ravel()[keep]
+    sx, sy = rng.uniform(-max_shift_um, max_shift_um, 2)
+    flux = 10 ** rng.uniform(2, 4)
+    model = spl.ev(y - sy, x - sx)
+    peak = float(img.max())
+    meas = flux * (model + background * peak + rng.normal(0.0, noise_rel * peak, x.size))
+    return x, y, np.clip(meas, 0.0, None), {"shift_um": (float(sx), float(sy)), "flux": flux}

@@ -13,6 +13,12 @@ within one ``decomposition``):
 * profile ``profile_region``: core (|u - u0| <= 20 µm), shoulders/satellites (out to
   20 µm + 2.5 satellite spacings ``f_cam lambda / (Dx cos beta)``), wings beyond;
 * profile ``symmetry``: odd (left/right asymmetric) vs even part about the line centre;
+* PSF image ``image_region``: core (within 15 µm of the image centre), halo (15-40 µm:
+  the first quilt satellites and the Airy rings), outer;
+* PSF image ``image_symmetry``: parity about the image centre on the samples whose three
+  mirror images are also sampled — even, odd in x (left/right: coma, footprint shift
+  along the dispersion), odd in y (up/down: footprint shift along the rulings), odd in
+  both (oblique: astigmatism at 45°, the term a line profile cannot see);
 * ``measurements``: each measurement's share of the weighted total (across gratings,
   wavelengths and pixel scales).
 """
@@ -25,7 +31,7 @@ import numpy as np
 
 from optics.zernike import zernike_xy
 
-__all__ = ["ZERNIKE_GROUPS", "surface_parts", "profile_parts", "measurement_parts", "satellite_spacing_um"]
+__all__ = ["ZERNIKE_GROUPS", "surface_parts", "profile_parts", "psf_image_parts", "measurement_parts", "satellite_spacing_um"]
 
 ZERNIKE_GROUPS = (
     ("defocus", ((2, 0),)), ("astigmatism", ((2, 2), (2, -2))), ("coma", ((3, 1), (3, -1))),
@@ -112,6 +118,41 @@ def profile_parts(name: str, u: np.ndarray, r: np.ndarray, centre_um: float, spa
     if tot_ok > 0:
         f = float(np.sum(odd**2)) / tot_ok
         out += [_entry(name, "asymmetric_left_right", f, "symmetry"), _entry(name, "symmetric", 1 - f, "symmetry")]
+    return out
+
+
+def psf_image_parts(name: str, x: np.ndarray, y: np.ndarray, r: np.ndarray, centre_um: tuple[float, float]) -> list[dict]:
+    """Partitions of a PSF-image residual ``r`` at detector points ``x, y`` (µm) about the
+    image centre ``centre_um`` (snapped to the sample lattice, so mirror images are samples)."""
+    r = np.asarray(r, float)
+    total = float(np.sum(r**2))
+    if total <= 0:
+        return []
+    rho = np.hypot(x - centre_um[0], y - centre_um[1])
+    core, halo = rho <= 15.0, (rho > 15.0) & (rho <= 40.0)
+    out = [_entry(name, "core", np.sum(r[core] ** 2) / total, "image_region"),
+           _entry(name, "halo", np.sum(r[halo] ** 2) / total, "image_region"),
+           _entry(name, "outer", np.sum(r[~core & ~halo] ** 2) / total, "image_region")]
+    steps = [np.min(np.diff(np.unique(np.round(v, 6)))) if np.unique(np.round(v, 6)).size > 1 else 0.0 for v in (x, y)]
+    if not min(steps) > 0:
+        return out
+    # mirror about a lattice point or a half-step point, whichever is nearest the centre
+    c = [round((c - v.min()) / (0.5 * h)) * 0.5 * h + v.min() for c, v, h in zip(centre_um, (x, y), steps)]
+    key = {(round(a / steps[0] * 2), round(b / steps[1] * 2)): i for i, (a, b) in enumerate(zip(x, y))}
+
+    def at(a, b):
+        return np.array([key.get((round(u / steps[0] * 2), round(v / steps[1] * 2)), -1) for u, v in zip(a, b)])
+
+    ix, iy, ixy = at(2 * c[0] - x, y), at(x, 2 * c[1] - y), at(2 * c[0] - x, 2 * c[1] - y)
+    ok = (ix >= 0) & (iy >= 0) & (ixy >= 0)
+    if ok.sum() < 16:
+        return out
+    a, bx, by, bxy = r[ok], r[ix[ok]], r[iy[ok]], r[ixy[ok]]
+    parts = {"even": a + bx + by + bxy, "odd_x_left_right": a - bx + by - bxy,
+             "odd_y_up_down": a + bx - by - bxy, "odd_xy_oblique": a - bx - by + bxy}
+    tot_ok = float(np.sum(a**2))
+    for label, v in parts.items():
+        out.append(_entry(name, label, float(np.sum((v / 4) ** 2)) / tot_ok if tot_ok > 0 else 0.0, "image_symmetry"))
     return out
 
 

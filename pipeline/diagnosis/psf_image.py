@@ -1,0 +1,184 @@
+"""Forward model of a PSF image: a point source (a pinhole at the slit centre) imaged
+through the spectrograph and one grating, integrated over the detector pixel.
+
+Why a second kind of spectrograph measurement: a line profile is the image integrated
+along the slit, and the blank and the pupil are mirror-symmetric in y (along the
+rulings), so terms that are odd in y — the collimator's oblique astigmatism Z(2,-2),
+the sign of a footprint shift along the rulings — reach a profile only through their
+square (the marginal of ``|FT(P e^{i a xy})|^2`` along y is even in ``a``). On the
+campaign's J-band profiles the oblique astigmatism is therefore known to ±0.04-0.11 µm
+only, and six of its eleven collimator misses are that term
+(``benchmarks/results_diagnosis.md``). A 2-D image sees these terms at first order
+(an oblique astigmatism tilts the PSF's elongation; its sign is the tilt's sign).
+
+Units: detector µm (x along the dispersion, y along the slit), intensity as a fraction
+of the data's peak. Nuisances: the image position (dx, dy) µm — nonlinear, two fit
+parameters like a profile's offset shift (an inner solve per residual evaluation was
+measured 4x slower) — and a flux and a constant background (linear, projected out).
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import RectBivariateSpline
+
+from optics.imaging import box_convolve
+from optics.lineprofile import point_psf
+from optics.sagmap import SagMap
+
+from .forward import PROFILE_KEYS, blank_shape_um, collimator_terms
+from .manifest import PsfImageData
+from .nominal import thermal_factor
+
+__all__ = ["PsfImageSettings", "FIT_PSF_SETTINGS", "FIT_PSF_SETTINGS_FINE", "psf_image_model", "PsfImageForward"]
+
+
+@dataclass(frozen=True)
+class PsfImageSettings:
+    """Sampling of the model image: FFT step (µm) and length, half window (µm)."""
+
+    detector_step_um: float = 0.5
+    n_fft: int = 1024
+    window_um: float = 100.0
+
+    def __post_init__(self) -> None:
+        if not self.detector_step_um > 0 or not self.window_um > 0 or int(self.n_fft) != self.n_fft or self.n_fft < 64:
+            raise ValueError(f"PsfImageSettings: detector_step_um={self.detector_step_um} (> 0), n_fft={self.n_fft} "
+                             f"(integer >= 64), window_um={self.window_um} (> 0)")
+        if self.window_um > 0.5 * self.n_fft * self.detector_step_um:
+            raise ValueError(f"PsfImageSettings.window_um={self.window_um} exceeds half the detector period "
+                             f"{0.5 * self.n_fft * self.detector_step_um} um")
+
+
+#: Sampling while fitting a pixel-integrated image (1.5 µm over a 384 µm period: the
+#: 18 µm pixel smooths the ~4 µm diffraction core).
+FIT_PSF_SETTINGS = PsfImageSettings(detector_step_um=1.5, n_fft=256, window_um=90.0)
+#: ... and an image that resolves the diffraction core (``pixel_um`` below 6 µm, e.g. a
+#: microscope-relayed focal-plane image): 0.5 µm steps.
+FIT_PSF_SETTINGS_FINE = PsfImageSettings(detector_step_um=0.5, n_fft=512, window_um=60.0)
+
+
+def _pixel_box(u: np.ndarray, img: np.ndarray, width_um: float, axis: int) -> np.ndarray:
+    return np.apply_along_axis(lambda r: box_convolve(u, r, width_um), axis, img)
+
+
+def psf_image_model(grating: str, wavelength_um: float, order: int, sag: SagMap | None, p: dict,
+                    pixel_um: float = 18.0, settings: PsfImageSettings = PsfImageSettings()):
+    """Pixel-integrated point-source image for effect parameters ``p``.
+
+    Parameters
+    ----------
+    grating, wavelength_um, order
+        As :func:`optics.lineprofile.point_psf`.
+    sag : SagMap or None
+        Grating sag (µm), already scaled (amplitude, temperature, gradient, bow).
+    p : dict
+        ``pupil_x_mm``, ``pupil_y_mm``, ``coll_coma_um``, ``coll_defocus_um``,
+        ``coll_astig45_um`` (missing = 0).
+    pixel_um : float
+        Detector pixel (µm) the image is integrated over on both axes (0: none).
+
+    Returns
+    -------
+    x_um, y_um : ndarray
+        Detector axes (µm; x dispersion, y along the slit).
+    image : ndarray, shape (y, x)
+        Unit-volume intensity before the pixel; after it, same normalisation.
+    """
+    ps = point_psf(grating, wavelength_um, sag, order=order,
+                   pupil_shift_mm=(p.get("pupil_x_mm", 0.0), p.get("pupil_y_mm", 0.0)),
+                   collimator_zernike_um=collimator_terms(p), detector_step_um=settings.detector_step_um,
+                   n_fft=settings.n_fft, window_um=settings.window_um, workers=1)
+    img = ps.intensity
+    if pixel_um > 0:
+        img = _pixel_box(ps.offset_y_um, _pixel_box(ps.offset_x_um, img, pixel_um, 1), pixel_um, 0)
+    return ps.offset_x_um, ps.offset_y_um, img
+
+
+class PsfImageForward:
+    """PSF-image model: ``flux * I(x - dx, y - dy; params) + background`` (module docstring)."""
+
+    kind = "psf_image"
+    #: nuisances solved inside :meth:`residual` (flux, background) and position nuisances
+    #: that are fit parameters (dx, dy: ``delta_um``)
+    nuisance_count, n_shift = 2, 2
+    _KEYS = PROFILE_KEYS
+
+    def __init__(self, data: PsfImageData, nominal: SagMap, cold_K: float, warm_K: float = 293.0,
+                 settings: PsfImageSettings | None = None, cache_size: int = 256):
+        m = data.measurement
+        self.m, self.name, self.blank = m, m.name, m.blank
+        self.x, self.y = np.asarray(data.x_um, float), np.asarray(data.y_um, float)
+        self.data = np.asarray(data.intensity, float)
+        self.n = self.data.size
+        if settings is None:
+            settings = FIT_PSF_SETTINGS if m.pixel_um >= 6.0 else FIT_PSF_SETTINGS_FINE
+        self.nominal, self.cold_K, self.warm_K, self.settings = nominal, cold_K, warm_K, settings
+        self._grid = nominal.grid()
+        self._cache: OrderedDict = OrderedDict()
+        self._cache_size = cache_size
+        self.noise_known = m.noise_rel
+        self.delta0_um = self._initial_shift()
+
+    def factor(self, p: dict) -> float:
+        k = thermal_factor(self.cold_K + p.get("temperature_offset_K", 0.0), self.cold_K, self.warm_K)
+        return k * p.get(f"scale_{self.blank}", 1.0)
+
+    def _key(self, p: dict) -> tuple:
+        return (round(self.factor(p), 12),) + tuple(round(float(p.get(q, 0.0)), 12) for q in self._KEYS)
+
+    def image(self, p: dict) -> RectBivariateSpline:
+        """Memoised cubic spline of the model image for the physical parameters."""
+        key = self._key(p)
+        hit = self._cache.get(key)
+        if hit is not None:
+            self._cache.move_to_end(key)
+            return hit
+        sag = self.nominal.with_sag(self.factor(p) * blank_shape_um(self.nominal.sag_um, *self._grid, p))
+        ux, uy, img = psf_image_model(self.m.grating, self.m.wavelength_um, self.m.order, sag, p,
+                                      self.m.pixel_um, self.settings)
+        spl = RectBivariateSpline(uy, ux, img, kx=3, ky=3)
+        self._cache[key] = spl
+        if len(self._cache) > self._cache_size:
+            self._cache.popitem(last=False)
+        return spl
+
+    def _model(self, spl, shift, sel):
+        return spl.ev(self.y[sel] - shift[1], self.x[sel] - shift[0])
+
+    @staticmethod
+    def _linear(model, d):
+        A = np.column_stack([model, np.ones_like(model)])
+        c, *_ = np.linalg.lstsq(A, d, rcond=None)
+        return d - A @ c, c
+
+    def residual(self, p: dict, delta_um=None, mask: np.ndarray | None = None) -> np.ndarray:
+        """Data minus model at position ``delta_um`` = (dx, dy) µm (None: the nominal's)
+        with flux and background fitted on ``mask`` (fraction of the data peak)."""
+        sel = slice(None) if mask is None else mask
+        s = self.delta0_um if delta_um is None else delta_um
+        return self._linear(self._model(self.image(p), s, sel), self.data[sel])[0]
+
+    def fitted(self, p: dict, delta_um=None, mask: np.ndarray | None = None) -> np.ndarray:
+        """Full model (position ``delta_um``, fitted flux and background) at all samples."""
+        sel = slice(None) if mask is None else mask
+        s = self.delta0_um if delta_um is None else delta_um
+        spl = self.image(p)
+        _, c = self._linear(self._model(spl, s, sel), self.data[sel])
+        return c[0] * self._model(spl, s, slice(None)) + c[1]
+
+    def predict(self, p: dict, delta_um=None) -> np.ndarray:
+        """Model image at the samples at position ``delta_um`` (before flux/background)."""
+        return self._model(self.image(p), self.delta0_um if delta_um is None else delta_um, slice(None))
+
+    def _initial_shift(self) -> np.ndarray:
+        """Position of the nominal model by a 2-µm grid search over ±20 µm (the fit's basin
+        is about the PSF core's half width)."""
+        spl = self.image({})
+        g = np.arange(-20.0, 20.5, 2.0)
+        best = min(((float(np.sum(self._linear(self._model(spl, (a, b), slice(None)), self.data)[0] ** 2)), a, b)
+                    for a in g for b in g))
+        return (float(best[1]), float(best[2]))
