@@ -112,3 +112,28 @@ def test_bad_psf_file(tmp_path, content, fragment):
     with pytest.raises(ValueError) as e:
         diagnose(p)
     assert "measurement 'psf'" in str(e.value) and fragment in str(e.value)
+
+
+def test_campaign_psf_image_beside_profiles(tmp_path):
+    """``psf_image``: a line-profile case also gets a point-source image, drawn last, so
+    the profiles are those of the case without it; ``only_types`` keeps case indices."""
+    from pipeline.diagnosis.campaign import PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, make_case, parse_types
+    from pipeline.diagnosis.manifest import parse_manifest
+
+    base = _nominal(tmp_path)
+    out = []
+    for spec in (None, PSF_IMAGE_SPEC):
+        cfg = CampaignConfig(profile_specs=PROFILE_SETS["minimal"][:1], psf_image=spec)
+        d = tmp_path / str(spec is not None)
+        d.mkdir()
+        man, truth = make_case("line_profile", "collimator_wfe", np.random.default_rng([1, 9]), base, d, cfg)
+        out.append((man, truth, (d / "p0.csv").read_text()))
+    (m0, t0, p0), (m1, t1, p1) = out
+    assert t0 == t1 and p0 == p1
+    assert [m["kind"] for m in m1["measurement"]] == ["line_profile", "psf_image"]
+    parse_manifest(m1, tmp_path / "True")  # a valid manifest
+    assert parse_types("line_profile:collimator_wfe") == (("line_profile", "collimator_wfe"),)
+    with pytest.raises(ValueError, match="'surface:pupil_shift' is not a case type"):
+        parse_types("surface:pupil_shift")
+    with pytest.raises(ValueError, match="psf_image="):
+        CampaignConfig(psf_image=("J", 1.25, -2, 500.0))

@@ -39,13 +39,14 @@ import numpy as np
 
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
+from pipeline.interchange import write_psf_image_csv
 
 from .effects import LIBRARY
 from .engine import Criteria, diagnose
 from .nominal import fea_sag_map, thermal_factor
-from .synth import shape_discrepancy, synthetic_profile, synthetic_surface, write_profile_csv
+from .synth import shape_discrepancy, synthetic_profile, synthetic_psf_image, synthetic_surface, write_profile_csv
 
-__all__ = ["CASE_TYPES", "PROFILE_SETS", "CampaignConfig", "recovery_errors", "make_case", "run_case", "run_campaign", "write_campaign"]
+__all__ = ["CASE_TYPES", "PROFILE_SETS", "PSF_IMAGE_SPEC", "parse_types", "CampaignConfig", "recovery_errors", "make_case", "run_case", "run_campaign", "write_campaign"]
 
 CASE_TYPES = (
     ("surface", "astigmatism"), ("surface", "amplitude_scale"), ("surface", "temperature"),
@@ -67,6 +68,10 @@ PROFILE_SETS = {
     "extended": (("J", 1.25, -2, 250), ("J", 1.25, -2, 100), ("J", 1.25, -2, 25),
                  ("J", 1.10, -2, 25), ("J", 1.175, -2, 25), ("J", 1.40, -2, 25)),
 }
+#: The campaign's optional point-source image (``--psf-image``): J grating, 1.25 µm,
+#: order -2, imaged in the focal plane (no pixel: a microscope-relayed image resolves
+#: the ~4 µm diffraction core, which the 18 µm detector pixel would smooth away).
+PSF_IMAGE_SPEC = ("J", 1.25, -2, 0.0)
 PROFILE_SPECS_MINIMAL = PROFILE_SETS["minimal"]
 PROFILE_SPECS = PROFILE_SETS["extended"]
 SURFACE_T_K = 128.0
@@ -89,12 +94,39 @@ class CampaignConfig:
     #: this temperature (K), as in the paper's data (a cryogenic interferogram beside the
     #: line profiles); None: profiles only.
     profile_map_K: float | None = None
+    #: If set, (grating, wavelength µm, order, pixel µm) of a point-source image that the
+    #: line-profile cases also get (:data:`PSF_IMAGE_SPEC`: a focal-plane image of the J
+    #: grating at 1.25 µm, 1 µm steps over ±30 µm); None: no image.
+    psf_image: tuple | None = None
+    #: Run only the cases of these (kind, effect) types, keeping every case's index (and so
+    #: its random draws): the same cases as the full campaign's, for comparisons.
+    only_types: tuple | None = None
     criteria: Criteria = Criteria(heldout_top=1, pair_from=2)
 
     def __post_init__(self) -> None:
         if self.profile_map_K is not None and not 20.0 <= self.profile_map_K <= 290.0:
             raise ValueError(f"CampaignConfig: profile_map_K={self.profile_map_K} K is outside the valid range "
                              "20 ... 290 K (or None: profiles only)")
+        if self.psf_image is not None and (len(self.psf_image) != 4 or not 0 <= self.psf_image[3] <= 100):
+            raise ValueError(f"CampaignConfig: psf_image={self.psf_image!r} must be (grating, wavelength_um, order, "
+                             "pixel_um) with pixel_um in [0, 100] (or None)")
+        unknown = set(self.only_types or ()) - set(self.case_types)
+        if unknown:
+            raise ValueError(f"CampaignConfig: only_types {sorted(unknown)} are not case types; valid: "
+                             f"{[f'{k}:{e}' for k, e in self.case_types]}")
+
+
+def parse_types(text: str | None) -> tuple | None:
+    """``"line_profile:collimator_wfe,surface:astigmatism"`` -> ((kind, effect), ...); None -> None."""
+    if not text:
+        return None
+    out = []
+    for item in text.split(","):
+        kind, sep, effect = item.strip().partition(":")
+        if not sep or (kind, effect) not in CASE_TYPES:
+            raise ValueError(f"--types: {item.strip()!r} is not a case type; valid: {[f'{k}:{e}' for k, e in CASE_TYPES]}")
+        out.append((kind, effect))
+    return tuple(out)
 
 
 def _signed(rng, lo, hi):
@@ -179,6 +211,14 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         m = synthetic_surface(t.scaled(thermal_factor(cfg.profile_map_K + dT, 80.0 + dT)), rng, noise_um=cfg.noise_um)
         np.savez(out / "map.npz", x_mm=m.x_mm, y_mm=m.y_mm, sag_um=m.sag_um)
         meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K, "aperture_diameter_mm": 137.0})
+    if cfg.psf_image is not None:
+        # Drawn last: the profiles (and map) are those of the campaign without the image.
+        g, wl, order, pix = cfg.psf_image
+        x, y, v, _ = synthetic_psf_image(g, wl, order, t, rng, params=params, noise_rel=cfg.noise_rel, pixel_um=pix,
+                                         step_um=1.0, half_range_um=30.0)
+        write_psf_image_csv(out / "psf.csv", x, y, v)
+        meas.append({"kind": "psf_image", "file": "psf.csv", "name": f"{g}_{wl}_psf", "grating": g, "order": order,
+                     "wavelength_um": wl, "pixel_um": pix})
     return {"simulation": sim, "measurement": meas}, truth
 
 
@@ -310,7 +350,8 @@ def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None, progres
     (in case order), so an interrupted campaign leaves its partial results."""
     t0 = time.perf_counter()
     nominal, base = campaign_maps(cfg, cache_dir)
-    tasks = [(i, cfg.case_types[i % len(cfg.case_types)], cfg, nominal, base) for i in range(cfg.n_cases)]
+    tasks = [(i, cfg.case_types[i % len(cfg.case_types)], cfg, nominal, base) for i in range(cfg.n_cases)
+             if cfg.only_types is None or cfg.case_types[i % len(cfg.case_types)] in cfg.only_types]
     t_maps = time.perf_counter() - t0
     if cfg.workers > 1:
         # One BLAS/FFT thread per worker: the workers already fill the cores.

@@ -16,10 +16,11 @@ __all__ = ["register", "main"]
 
 def _run(args) -> int:
     if args.validate:
-        from .campaign import PROFILE_SETS, CampaignConfig, run_campaign, write_campaign
+        from .campaign import PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, parse_types, run_campaign, write_campaign
 
         cfg = CampaignConfig(n_cases=args.cases, seed=args.seed, workers=args.workers,
-                             profile_specs=PROFILE_SETS[args.profiles], profile_map_K=args.profile_map_K)
+                             profile_specs=PROFILE_SETS[args.profiles], profile_map_K=args.profile_map_K,
+                             psf_image=PSF_IMAGE_SPEC if args.psf_image else None, only_types=parse_types(args.types))
         res = run_campaign(cfg, cache_dir=args.cache_dir)
         path = write_campaign(res, args.out)
         print(json.dumps(res["summary"], indent=1))
@@ -57,6 +58,12 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--profile-map-K", type=float, default=None, metavar="K",
                    help="campaign (with --validate): also a cold map of the same blank at this temperature beside "
                         "the line profiles, as in the paper's data (default: profiles only)")
+    p.add_argument("--psf-image", action="store_true",
+                   help="campaign (with --validate): also a focal-plane point-source image (J, 1.25 um) beside the "
+                        "line profiles")
+    p.add_argument("--types", default=None, metavar="KIND:EFFECT,...",
+                   help="campaign (with --validate): run only these case types, e.g. line_profile:collimator_wfe "
+                        "(cases keep their index and random draws)")
 
 
 def register(subparsers) -> argparse.ArgumentParser:
