@@ -33,7 +33,7 @@ from .effects import BOW_REF_RADIUS_MM, NOMINAL_SLIT_UM, PLATING_GRADIENT_REF_MM
 from .manifest import ProfileData, SurfaceData
 from .nominal import thermal_factor
 
-__all__ = ["FIT_LSF_SETTINGS", "PROFILE_KEYS", "SurfaceForward", "ProfileForward", "profile_curve", "collimator_terms", "plating_gradient_map", "bow_um",
+__all__ = ["FIT_LSF_SETTINGS", "PROFILE_KEYS", "SurfaceForward", "SpectrographImageModel", "ProfileForward", "profile_curve", "collimator_terms", "plating_gradient_map", "bow_um",
            "blank_bow_map", "blank_shape_um"]
 
 #: Line-profile sampling used while fitting (measured: 0.1-0.45 % L1 from the defaults).
@@ -190,35 +190,27 @@ def profile_curve(grating: str, wavelength_um: float, order: int, pixel_scale_ma
     return r.detected.offset_um, r.detected.intensity
 
 
-class ProfileForward:
-    """Line-profile model: ``flux * P(u - delta_um; params) + background``."""
+class SpectrographImageModel:
+    """What the spectrograph-image models (line profiles, PSF images) share: the
+    deformation's overall factor and a memo of the model per physical parameter set
+    (varying only the nuisances then costs an interpolation)."""
 
-    kind = "line_profile"
-    #: nuisances solved inside :meth:`residual` (flux, background) and position nuisances
-    #: that are fit parameters (the offset shift ``delta_um``)
-    nuisance_count, n_shift = 2, 1
     _KEYS = PROFILE_KEYS
 
-    def __init__(self, data: ProfileData, nominal: SagMap, cold_K: float, warm_K: float = 293.0,
-                 settings: LsfSettings = FIT_LSF_SETTINGS, cache_size: int = 512):
-        m = data.measurement
+    def _setup(self, m, nominal: SagMap, cold_K: float, warm_K: float, settings, cache_size: int) -> None:
         self.m, self.name, self.blank = m, m.name, m.blank
-        self.x = np.asarray(data.offset_um, float)
-        self.data = np.asarray(data.intensity, float)
-        self.n = self.data.size
         self.nominal, self.cold_K, self.warm_K, self.settings = nominal, cold_K, warm_K, settings
         self._grid = nominal.grid()
         self._cache: OrderedDict = OrderedDict()
         self._cache_size = cache_size
         self.noise_known = m.noise_rel
-        self.delta0_um = self._initial_shift()
 
     def factor(self, p: dict) -> float:
         k = thermal_factor(self.cold_K + p.get("temperature_offset_K", 0.0), self.cold_K, self.warm_K)
         return k * p.get(f"scale_{self.blank}", 1.0)
 
-    def curve(self, p: dict) -> CubicSpline:
-        """Memoised spline of the model profile (unit area) for the physical parameters."""
+    def _memo(self, p: dict, build):
+        """``build(sag, p)`` for the grating's deformed sag, memoised on the physical parameters."""
         k = self.factor(p)
         key = (round(k, 12),) + tuple(round(float(p.get(q, NOMINAL_SLIT_UM if q.startswith("slit") else 0.0)), 12)
                                       for q in self._KEYS)
@@ -226,14 +218,37 @@ class ProfileForward:
         if hit is not None:
             self._cache.move_to_end(key)
             return hit
-        sag = self.nominal.with_sag(k * blank_shape_um(self.nominal.sag_um, *self._grid, p))
-        u, y = profile_curve(self.m.grating, self.m.wavelength_um, self.m.order, self.m.pixel_scale_mas, sag, p,
-                             self.m.slit_position, self.settings)
-        spl = CubicSpline(u, y, extrapolate=False)
-        self._cache[key] = spl
+        out = build(self.nominal.with_sag(k * blank_shape_um(self.nominal.sag_um, *self._grid, p)), p)
+        self._cache[key] = out
         if len(self._cache) > self._cache_size:
             self._cache.popitem(last=False)
-        return spl
+        return out
+
+
+class ProfileForward(SpectrographImageModel):
+    """Line-profile model: ``flux * P(u - delta_um; params) + background``."""
+
+    kind = "line_profile"
+    #: nuisances solved inside :meth:`residual` (flux, background) and position nuisances
+    #: that are fit parameters (the offset shift ``delta_um``)
+    nuisance_count, n_shift = 2, 1
+
+    def __init__(self, data: ProfileData, nominal: SagMap, cold_K: float, warm_K: float = 293.0,
+                 settings: LsfSettings = FIT_LSF_SETTINGS, cache_size: int = 512):
+        self._setup(data.measurement, nominal, cold_K, warm_K, settings, cache_size)
+        self.x = np.asarray(data.offset_um, float)
+        self.data = np.asarray(data.intensity, float)
+        self.n = self.data.size
+        self.delta0_um = self._initial_shift()
+
+    def curve(self, p: dict) -> CubicSpline:
+        """Memoised spline of the model profile (unit area) for the physical parameters."""
+        def build(sag, p):
+            u, y = profile_curve(self.m.grating, self.m.wavelength_um, self.m.order, self.m.pixel_scale_mas, sag, p,
+                                 self.m.slit_position, self.settings)
+            return CubicSpline(u, y, extrapolate=False)
+
+        return self._memo(p, build)
 
     def predict(self, p: dict, delta_um: float = 0.0) -> np.ndarray:
         """Model profile at the measured offsets shifted by ``delta_um`` (before flux/background)."""

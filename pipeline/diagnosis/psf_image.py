@@ -19,7 +19,6 @@ measured 4x slower) — and a flux and a constant background (linear, projected 
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,9 +28,8 @@ from optics.imaging import box_convolve
 from optics.lineprofile import point_psf
 from optics.sagmap import SagMap
 
-from .forward import PROFILE_KEYS, blank_shape_um, collimator_terms
+from .forward import SpectrographImageModel, collimator_terms
 from .manifest import PsfImageData
-from .nominal import thermal_factor
 
 __all__ = ["PsfImageSettings", "FIT_PSF_SETTINGS", "FIT_PSF_SETTINGS_FINE", "psf_image_model", "PsfImageForward"]
 
@@ -98,53 +96,33 @@ def psf_image_model(grating: str, wavelength_um: float, order: int, sag: SagMap 
     return ps.offset_x_um, ps.offset_y_um, img
 
 
-class PsfImageForward:
+class PsfImageForward(SpectrographImageModel):
     """PSF-image model: ``flux * I(x - dx, y - dy; params) + background`` (module docstring)."""
 
     kind = "psf_image"
     #: nuisances solved inside :meth:`residual` (flux, background) and position nuisances
     #: that are fit parameters (dx, dy: ``delta_um``)
     nuisance_count, n_shift = 2, 2
-    _KEYS = PROFILE_KEYS
 
     def __init__(self, data: PsfImageData, nominal: SagMap, cold_K: float, warm_K: float = 293.0,
                  settings: PsfImageSettings | None = None, cache_size: int = 256):
         m = data.measurement
-        self.m, self.name, self.blank = m, m.name, m.blank
+        if settings is None:
+            settings = FIT_PSF_SETTINGS if m.pixel_um >= 6.0 else FIT_PSF_SETTINGS_FINE
+        self._setup(m, nominal, cold_K, warm_K, settings, cache_size)
         self.x, self.y = np.asarray(data.x_um, float), np.asarray(data.y_um, float)
         self.data = np.asarray(data.intensity, float)
         self.n = self.data.size
-        if settings is None:
-            settings = FIT_PSF_SETTINGS if m.pixel_um >= 6.0 else FIT_PSF_SETTINGS_FINE
-        self.nominal, self.cold_K, self.warm_K, self.settings = nominal, cold_K, warm_K, settings
-        self._grid = nominal.grid()
-        self._cache: OrderedDict = OrderedDict()
-        self._cache_size = cache_size
-        self.noise_known = m.noise_rel
         self.delta0_um = self._initial_shift()
-
-    def factor(self, p: dict) -> float:
-        k = thermal_factor(self.cold_K + p.get("temperature_offset_K", 0.0), self.cold_K, self.warm_K)
-        return k * p.get(f"scale_{self.blank}", 1.0)
-
-    def _key(self, p: dict) -> tuple:
-        return (round(self.factor(p), 12),) + tuple(round(float(p.get(q, 0.0)), 12) for q in self._KEYS)
 
     def image(self, p: dict) -> RectBivariateSpline:
         """Memoised cubic spline of the model image for the physical parameters."""
-        key = self._key(p)
-        hit = self._cache.get(key)
-        if hit is not None:
-            self._cache.move_to_end(key)
-            return hit
-        sag = self.nominal.with_sag(self.factor(p) * blank_shape_um(self.nominal.sag_um, *self._grid, p))
-        ux, uy, img = psf_image_model(self.m.grating, self.m.wavelength_um, self.m.order, sag, p,
-                                      self.m.pixel_um, self.settings)
-        spl = RectBivariateSpline(uy, ux, img, kx=3, ky=3)
-        self._cache[key] = spl
-        if len(self._cache) > self._cache_size:
-            self._cache.popitem(last=False)
-        return spl
+        def build(sag, p):
+            ux, uy, img = psf_image_model(self.m.grating, self.m.wavelength_um, self.m.order, sag, p,
+                                          self.m.pixel_um, self.settings)
+            return RectBivariateSpline(uy, ux, img, kx=3, ky=3)
+
+        return self._memo(p, build)
 
     def _model(self, spl, shift, sel):
         return spl.ev(self.y[sel] - shift[1], self.x[sel] - shift[0])
