@@ -24,6 +24,10 @@ Decision logic (thresholds in :class:`Criteria`, passed explicitly):
    companions alone by ``min_delta_bic``, and its ``excess_explained`` is measured from
    the companion-alone fit (what the finding adds beyond the gradient or bow), so a
    discrepancy present in the data cannot lend its evidence to another effect.
+   **Absorbed** (:func:`_absorbed`): effects the data cannot identify on their own
+   (``Effect.requires`` not met, never fitted) are tested against the top findings; a
+   finding whose parameters take one up lists it in ``degenerate_with`` and reports how
+   much of it they contain (``absorbs``).
 5. **Held out** (:mod:`.heldout`): the effect is refitted on part of the data and its
    shrinkage measured on the rest; ``overfit`` if the held-out shrink is below
    ``heldout_ratio`` times the in-sample shrink.
