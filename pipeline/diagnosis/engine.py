@@ -563,7 +563,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
                 if len(f.effects) == 1 and f.significant else f for f in findings]
     t0 = time.perf_counter()
     for i, f in enumerate(findings[:max(criteria.heldout_top, 1)]):
-        if len(f.effects) == 1 and f.significant:
+        if f.significant:  # pairs too: a pair can take up an unidentifiable effect as well
             ab, eff = _absorbed(prob, f, fits[f.effect], criteria, kinds)
             findings[i] = _replace(f, absorbs=ab, degenerate_with=tuple(dict.fromkeys(f.degenerate_with + eff)))
     t["absorb_s"] = time.perf_counter() - t0
