@@ -158,7 +158,7 @@ def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, Fi
     prob = Problem(fws, {f.name: 1.0 for f in fws}, {f.name: float(f.n) for f in fws})
     nom = fit(prob, ())
     for f in fws:
-        r = f.residual({}, nom.deltas_um.get(f.name, getattr(f, "delta0_um", 0.0)))
+        r = f.residual({}, nom.deltas_um.get(f.name, f.delta0_um))
         if f.kind != "line_profile":  # maps and images: noise along rows, correlation on both axes
             sigma = f.noise_known or estimate_noise(f.x, f.data, rows=f.y)
             prob.n_eff[f.name] = effective_samples(r, f.x, f.y)
@@ -490,7 +490,7 @@ def _where(prob: Problem, fo: FitOutcome) -> list[dict]:
     out = []
     wr = {}
     for f in prob.forwards:
-        d = fo.deltas_um.get(f.name, getattr(f, "delta0_um", 0.0))
+        d = fo.deltas_um.get(f.name, f.delta0_um)
         r = f.residual(fo.parameters, d)
         wr[f.name] = prob.weights[f.name] ** 2 * float(np.sum(r**2))
         if f.kind == "surface":

@@ -186,7 +186,7 @@ class FitOutcome:
 def _shift_slots(fws) -> list:
     """(forward, component) of every position nuisance that is a fit parameter: a line
     profile's offset shift (1), a PSF image's position (2)."""
-    return [(f, k) for f in fws for k in range(getattr(f, "n_shift", 0))]
+    return [(f, k) for f in fws for k in range(f.n_shift)]
 
 
 def _unpack(z, params, slots, fixed=None):
@@ -201,7 +201,8 @@ def _unpack(z, params, slots, fixed=None):
 def _best_starts(starts, z0, n_par, params, slots, fixed, problem, masks, fws, n_local):
     """The ``n_local`` grid points with the lowest cost, each profile's offset shift
     profiled by a 0.5-µm grid search within ±15 µm of its nominal value (the profile
-    model is memoised on the physical parameters, so each shift costs an interpolation)."""
+    model is memoised on the physical parameters, so each shift costs an interpolation).
+    A PSF image's position is not grid-searched: it is ranked at its nominal position."""
     shifts = np.arange(-15.0, 15.01, 0.5)
     ranked = []
     for s in starts:

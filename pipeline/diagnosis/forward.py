@@ -96,7 +96,7 @@ class SurfaceForward:
 
     kind = "surface"
     #: nuisances solved inside :meth:`residual` (piston, x and y tilt); no position nuisance
-    nuisance_count, n_shift = 3, 0
+    nuisance_count, n_shift, delta0_um = 3, 0, 0.0
 
     def __init__(self, data: SurfaceData, nominal: SagMap, cold_K: float, warm_K: float = 293.0):
         m = data.measurement

@@ -69,7 +69,7 @@ def _prediction_spread(prob: Problem, params, tr, test: dict) -> tuple[float, fl
         m = test.get(f.name)
         if m is None or not m.any():
             continue
-        d = tr.deltas_um.get(f.name, getattr(f, "delta0_um", 0.0))
+        d = tr.deltas_um.get(f.name, f.delta0_um)
 
         def pred(q):
             return f.predict(q, d)[m] if f.n_shift else f.predict(q)[m]
