@@ -177,8 +177,8 @@ def _predictions(prob: Problem, fo: FitOutcome) -> dict:
 
 
 def _stats(prob: Problem, nom: FitOutcome, fo: FitOutcome):
-    wb = sum(prob.weights[m] ** 2 * nom.rss[m] for m in nom.rss)
-    wa = sum(prob.weights[m] ** 2 * fo.rss[m] for m in fo.rss)
+    wb = nom.weighted_rss(prob.weights)
+    wa = fo.weighted_rss(prob.weights)
     ratio = math.sqrt(wa / wb) if wb > 0 else 1.0
     per = []
     for f in prob.forwards:
@@ -230,8 +230,8 @@ def all_effects(f: Finding) -> tuple:
 
 def excess_explained(prob: Problem, nom: FitOutcome, fo: FitOutcome) -> float:
     """Fraction of the nominal residual *beyond noise* that ``fo`` removes (module docstring)."""
-    wb = sum(prob.weights[m] ** 2 * nom.rss[m] for m in nom.rss)
-    wa = sum(prob.weights[m] ** 2 * fo.rss[m] for m in fo.rss)
+    wb = nom.weighted_rss(prob.weights)
+    wa = fo.weighted_rss(prob.weights)
     excess = wb - _noise_cost(prob, nom.n)
     if not excess > 0:
         return 0.0
@@ -353,7 +353,7 @@ def _degeneracies(findings, fits, prob, c: Criteria):
             if a is b or abs(a.score - b.score) > c.degenerate_bic:
                 continue
             num = sum(prob.weights[m] ** 2 * np.sum((preds[a.effect][m] - preds[b.effect][m]) ** 2) for m in preds[a.effect])
-            den = sum(prob.weights[m] ** 2 * fits[a.effect].rss[m] for m in fits[a.effect].rss)
+            den = fits[a.effect].weighted_rss(prob.weights)
             if den > 0 and math.sqrt(num / den) < c.degenerate_prediction:
                 deg.append(b.effect)
         out.append(a if not deg else _replace(a, degenerate_with=tuple(deg)))
@@ -403,7 +403,7 @@ def _sign_test(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, eff
     out = []
     start = finding.parameters if start is None else start
     neff = max(sum(fo.n_eff.values()), 2.0)
-    cost = sum(prob.weights[m] ** 2 * fo.rss[m] for m in fo.rss)
+    cost = fo.weighted_rss(prob.weights)
     params = parameters_of(effects, prob.forwards)
     own = {q.name for q in parameters_of(finding.effects, prob.forwards)}
     for name in finding.parameters:
@@ -417,7 +417,7 @@ def _sign_test(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, eff
             continue  # consistent with zero: its sign is trivially unknown, nothing to report
         others = tuple(o for o in params if o.name != name)
         flip = fit(prob, others, fixed={name: -v}, start={o.name: start[o.name] for o in others if o.name in start})
-        cflip = sum(prob.weights[m] ** 2 * flip.rss[m] for m in flip.rss)
+        cflip = flip.weighted_rss(prob.weights)
         if cost > 0 and neff * math.log(max(cflip, 1e-300) / cost) < c.degenerate_bic:
             out.append(name)
     return tuple(out)
@@ -450,14 +450,14 @@ def _absorbed(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, kind
     untried = [e for e in LIBRARY.values() if set(e.kinds) & kinds and not set(e.requires) <= kinds]
     neff = max(sum(fo.n_eff.values()), 2.0)
     w = prob.weights
-    cost0 = sum(w[m] ** 2 * fo.rss[m] for m in fo.rss)
+    cost0 = fo.weighted_rss(w)
     if not cost0 > 0:
         return {}, ()
     base = {**fo.parameters}
     start = {q.name: base[q.name] for q in own if q.name in base}
 
     def dbic(o):
-        return neff * math.log(max(sum(w[m] ** 2 * o.rss[m] for m in o.rss), 1e-300) / cost0)
+        return neff * math.log(max(o.weighted_rss(w), 1e-300) / cost0)
 
     out, effects = {}, []
     for e in untried:

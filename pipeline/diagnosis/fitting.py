@@ -176,10 +176,14 @@ class FitOutcome:
     nfev: int
     weighted_cost: float
 
+    def weighted_rss(self, weights: dict) -> float:
+        """``sum_i w_i^2 RSS_i``: the objective the fit minimises, over the measurements fitted."""
+        return float(sum(weights[m] ** 2 * self.rss[m] for m in self.rss))
+
     def bic(self, weights: dict) -> float:
         """``N_eff log(sum_i w_i^2 RSS_i / N_eff) + k log N_eff`` (consistent with the fit's objective)."""
         neff = max(sum(self.n_eff.values()), 2.0)
-        cost = sum(weights[m] ** 2 * self.rss[m] for m in self.rss)
+        cost = self.weighted_rss(weights)
         return float(neff * math.log(max(cost, 1e-300) / neff) + self.k * math.log(neff))
 
 

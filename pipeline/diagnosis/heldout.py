@@ -99,8 +99,8 @@ def heldout_check(prob: Problem, finding, criteria) -> tuple[float | None, str]:
             continue
         b = fit(prob, (), masks=test)
         a = fit(prob, (), masks=test, fixed=tr.parameters)
-        wb = sum(prob.weights[m] ** 2 * b.rss[m] for m in b.rss)
-        wa = sum(prob.weights[m] ** 2 * a.rss[m] for m in a.rss)
+        wb = b.weighted_rss(prob.weights)
+        wa = a.weighted_rss(prob.weights)
         before, after, used = before + wb, after + wa, used + 1
         notes.append(f"{label}: shrink {1 - math.sqrt(wa / wb) if wb > 0 else 0.0:+.2f}")
     if not used or before <= 0:
