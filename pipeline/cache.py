@@ -10,7 +10,7 @@ One case is two files in ``<out_dir>/cases/``:
     the outputs (kind and, for labelled arrays, dimension names).
 
 The ``.npz`` is written first and the ``.json`` last, each through a temporary file
-in the same directory and :func:`os.replace`, so the ``.json`` is the commit marker:
+in the same directory and :func:`os.replace` (:func:`pipeline.io_common.atomic_write`), so the ``.json`` is the commit marker:
 a case counts as done only when both files exist, load cleanly and agree with the
 requested params.
 """
@@ -19,21 +19,18 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import uuid
 from collections.abc import Mapping
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+
+from pipeline.io_common import atomic_write
 
 __all__ = [
     "canonical_token",
     "canonical_json",
     "case_key",
     "normalise_result",
-    "atomic_write",
-    "atomic_path",
     "save_case",
     "load_case",
     "CacheMiss",
@@ -150,32 +147,6 @@ def _check_array(name: str, arr: np.ndarray) -> np.ndarray:
     return arr
 
 
-@contextmanager
-def atomic_path(path: Path):
-    """Yield a temporary path next to ``path``; on success rename it onto ``path``.
-
-    The temporary file lives in the same directory so :func:`os.replace` is an atomic
-    rename: readers see the old file or the complete new one, never a partial one.
-    No fsync: the failure we guard against is a killed process, after which the page
-    cache still holds the data; after a power cut :func:`load_case` detects a
-    truncated file and the case is recomputed.
-    """
-    path = Path(path)
-    tmp = path.parent / f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp"
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
-def atomic_write(path: Path, write) -> None:
-    """Write ``path`` atomically by calling ``write(fileobj)`` on a temporary binary file."""
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as f:
-            write(f)
-
-
 def save_case(cases_dir: Path, key: str, namespace: str, params: dict, result: dict, elapsed_s: float,
               version: str) -> None:
     """Store one normalised ``result`` as ``<key>.npz`` then ``<key>.json`` (the commit marker).
@@ -191,7 +162,8 @@ def save_case(cases_dir: Path, key: str, namespace: str, params: dict, result: d
         else:
             arrays[name] = np.asarray(value)
             manifest[name] = {"kind": "array" if isinstance(value, np.ndarray) else "scalar"}
-    atomic_write(cases_dir / f"{key}.npz", lambda f: np.savez(f, **arrays))
+    with atomic_write(cases_dir / f"{key}.npz", "wb") as fh:
+        np.savez(fh, **arrays)
     meta = {
         "format": FORMAT_VERSION,
         "key": key,
@@ -202,7 +174,8 @@ def save_case(cases_dir: Path, key: str, namespace: str, params: dict, result: d
         "outputs": manifest,
     }
     text = json.dumps(meta, indent=1, ensure_ascii=False).encode()
-    atomic_write(cases_dir / f"{key}.json", lambda f: f.write(text))
+    with atomic_write(cases_dir / f"{key}.json", "wb") as fh:
+        fh.write(text)
 
 
 def load_case(cases_dir: Path, key: str, namespace: str, params: dict) -> tuple[dict, dict]:

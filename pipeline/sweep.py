@@ -30,8 +30,6 @@ import numpy as np
 from pipeline.cache import (
     COORD_PREFIX,
     CacheMiss,
-    atomic_path,
-    atomic_write,
     canonical_token,
     case_key,
     library_version,
@@ -39,6 +37,7 @@ from pipeline.cache import (
     save_case,
 )
 from pipeline.executors import check_scheduler, iter_dask, iter_inline, iter_processes
+from pipeline.io_common import atomic_path, atomic_write
 
 __all__ = ["Case", "grid", "parse_range", "run_sweep", "SweepResult", "SweepError", "CacheWarning"]
 
@@ -381,7 +380,8 @@ class SweepResult(Sequence):
         writer = csv.DictWriter(buf, fieldnames=columns, lineterminator="\n")
         writer.writeheader()
         writer.writerows(rows)
-        atomic_write(Path(path), lambda f: f.write(buf.getvalue().encode()))
+        with atomic_write(Path(path)) as fh:
+            fh.write(buf.getvalue())
 
     def write_netcdf(self, path) -> None:
         """Write :meth:`to_dataset` as netCDF-4, atomically.

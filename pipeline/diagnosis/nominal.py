@@ -83,9 +83,11 @@ def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh:
     out = SagMap(sm.x_mm, sm.y_mm, sm.sag_um, label, dict(key))
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp.npz")
-        np.savez(tmp, x_mm=out.x_mm, y_mm=out.y_mm, sag_um=out.sag_um)
-        tmp.replace(path)  # atomic: parallel campaign workers may race on the same key
+        from pipeline.io_common import atomic_write
+
+        # a unique temporary name per writer: parallel campaign workers may race on one key
+        with atomic_write(path, "wb") as fh:
+            np.savez(fh, x_mm=out.x_mm, y_mm=out.y_mm, sag_um=out.sag_um)
     return out
 
 
