@@ -18,7 +18,7 @@ from optics.pupil import (DEFAULT_COLLIMATOR_ZERNIKE_UM, centred_axis, circular_
                           collimator_opd_um, grating_opd_um, pupil_field, pupil_shift_along_slit)
 from optics.sagmap import SagMap
 
-__all__ = ["LsfSettings", "LineProfileResult", "line_profile", "point_psf", "pupil_rows"]
+__all__ = ["LsfSettings", "LineProfileResult", "line_profile", "otf_cutoff_per_um", "point_psf", "pupil_rows"]
 
 
 @dataclass(frozen=True)
@@ -82,6 +82,27 @@ def _geometry(grating, wavelength_um, order, spectrograph):
     beta = float(g.beta_deg(wavelength_um, m))  # raises for evanescent orders
     anam = float(g.anamorphic_factor(wavelength_um, m))
     return g, m, beta, anam
+
+
+def otf_cutoff_per_um(grating: str | Grating, wavelength_um: float, order: int | None = None,
+                      spectrograph: Spectrograph = SPIFFI) -> tuple[float, float]:
+    """Incoherent cut-off frequencies (cycles/µm on the detector) along x and y.
+
+    The OTF is the autocorrelation of the circular pupil of diameter D, and a pupil
+    separation ``d_xi`` maps to ``d_xi / (wavelength f_cam anamorphic)`` on the detector
+    x axis (``d_eta / (wavelength f_cam)`` on y), so the image of a point source has no
+    power outside the ellipse with these semi-axes, whatever the aberrations, pupil
+    shift or pixel integration (they only multiply the OTF).
+
+    Returns
+    -------
+    (fx, fy) : float
+        ``D / (wavelength f_cam anamorphic)`` and ``D / (wavelength f_cam)`` in 1/µm.
+    """
+    g, m, _, anam = _geometry(grating, wavelength_um, order, spectrograph)
+    lam_f_um2 = wavelength_um * spectrograph.camera_focal_mm * 1e3  # µm * µm
+    d_um = spectrograph.pupil_diameter_mm * 1e3
+    return float(d_um / (lam_f_um2 * anam)), float(d_um / lam_f_um2)
 
 
 def pupil_rows(grating: Grating, wavelength_um: float, xi_mm: np.ndarray, eta_mm: np.ndarray, beta_deg: float,

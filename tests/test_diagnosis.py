@@ -14,7 +14,7 @@ from optics.sagmap import quilt_sag_map
 from optics.zernike import zernike_xy
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.cli import main
-from pipeline.diagnosis.fitting import effective_samples, estimate_noise
+from pipeline.diagnosis.noise import effective_samples, estimate_noise
 from pipeline.diagnosis.nominal import thermal_factor
 from pipeline.diagnosis.synth import synthetic_surface, write_profile_csv
 from pipeline.interchange import write_sag_map

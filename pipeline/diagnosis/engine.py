@@ -57,7 +57,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .effects import LIBRARY, applicable_effects, effect_parameters
-from .fitting import FitOutcome, Problem, effective_samples, estimate_noise, fit
+from .fitting import FitOutcome, Problem, fit
+from .noise import effective_samples
 from .forward import ProfileForward, SurfaceForward
 from .psf_image import PsfImageForward
 from .manifest import Manifest, load_data, load_manifest
@@ -159,12 +160,9 @@ def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, Fi
     nom = fit(prob, ())
     for f in fws:
         r = f.residual({}, nom.deltas_um.get(f.name, f.delta0_um))
-        if f.kind != "line_profile":  # maps and images: noise along rows, correlation on both axes
-            sigma = f.noise_known or estimate_noise(f.x, f.data, rows=f.y)
-            prob.n_eff[f.name] = effective_samples(r, f.x, f.y)
-        else:
-            sigma = f.noise_known or estimate_noise(f.x, f.data)
-            prob.n_eff[f.name] = effective_samples(r, f.x)
+        sigma = f.noise_known or f.estimate_noise(r)
+        # maps and images: correlation along both axes
+        prob.n_eff[f.name] = effective_samples(r, f.x, f.y if f.kind != "line_profile" else None)
         prob.noise[f.name] = float(sigma)
         s = max(math.sqrt(nom.rss[f.name] / f.n), 1e-12)
         prob.weights[f.name] = math.sqrt(prob.n_eff[f.name] / f.n) / s

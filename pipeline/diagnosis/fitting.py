@@ -3,11 +3,10 @@
 Noise model. Measured residuals are rarely white: besides the measurement noise they
 carry smooth model discrepancy. Each measurement ``i`` therefore gets
 
-* ``sigma_i``: the noise estimated from the data alone (robust scatter about a local
-  cubic through the 4 neighbours, :func:`estimate_noise`), unless given;
+* ``sigma_i``: the noise estimated from the data alone (:mod:`.noise`), unless given;
 * ``n_eff_i``: the number of effectively independent samples of the *nominal*
   residual, ``n / L`` with ``L`` the integral correlation length in samples (per axis
-  for maps, :func:`effective_samples`);
+  for maps, :func:`.noise.effective_samples`);
 * weight ``w_i = sqrt(n_eff_i / n_i) / s_i`` with ``s_i`` the nominal residual RMS, so
   every measurement contributes ~``n_eff_i`` to the objective whatever its units.
 
@@ -42,89 +41,12 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .effects import Parameter
+from .noise import effective_samples
 
-__all__ = ["estimate_noise", "effective_samples", "Problem", "FitOutcome", "fit"]
+__all__ = ["FitOutcome", "Problem", "fit"]
 
 _DELTA_SCALE_UM = 10.0  # normalisation of the profile offset-shift nuisance
 _DELTA_BOUND_UM = 45.0
-
-
-def _standardised_errors(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    if x.size < 5:
-        return np.empty(0)
-    i = np.arange(2, x.size - 2)
-    nb = np.stack([i - 2, i - 1, i + 1, i + 2])
-    xs, x0 = x[nb], x[i]
-    L = np.ones_like(xs)
-    for a in range(4):
-        for b in range(4):
-            if a != b:
-                L[a] *= (x0 - xs[b]) / (xs[a] - xs[b])
-    return (y[i] - np.sum(L * y[nb], axis=0)) / np.sqrt(1.0 + np.sum(L**2, axis=0))
-
-
-def estimate_noise(x: np.ndarray, y: np.ndarray, rows: np.ndarray | None = None) -> float:
-    """White-noise sigma of samples ``y(x)`` (same unit as y), from the data alone.
-
-    Each interior sample is predicted by the cubic through its two neighbours on each
-    side; prediction errors are standardised by ``sqrt(1 + sum L_j^2)`` and their
-    MAD gives sigma. Smooth signal leaks in only at fourth order in the sample spacing.
-    For a map pass ``rows`` (e.g. the y coordinate): the cubic runs along each row.
-    """
-    x, y = np.asarray(x, float), np.asarray(y, float)
-    if rows is None:
-        o = np.argsort(x)
-        e = _standardised_errors(x[o], y[o])
-    else:
-        rq = np.round(np.asarray(rows, float), 6)
-        parts = []
-        for v in np.unique(rq):
-            sel = np.flatnonzero(rq == v)
-            sel = sel[np.argsort(x[sel])]
-            parts.append(_standardised_errors(x[sel], y[sel]))
-        e = np.concatenate(parts) if parts else np.empty(0)
-    if e.size < 5:
-        return float("nan")
-    return float(1.4826 * np.median(np.abs(e - np.median(e))))
-
-
-def _integral_scale(rows: list[np.ndarray], max_lag: int = 200) -> float:
-    """1 + 2 sum of the autocorrelation up to its first non-positive value, in samples."""
-    den = sum(float(np.sum(r * r)) for r in rows)
-    if den <= 0:
-        return 1.0
-    total = 1.0
-    for k in range(1, max_lag):
-        num, cnt, cnt0 = 0.0, 0, 0
-        for r in rows:
-            if r.size > k:
-                num += float(np.sum(r[:-k] * r[k:]))
-                cnt += r.size - k
-                cnt0 += r.size
-        if cnt < 10:
-            break
-        rho = (num / cnt) / (den / max(cnt0, 1))
-        if rho <= 0:
-            break
-        total += 2 * rho
-    return total
-
-
-def effective_samples(residual: np.ndarray, x: np.ndarray, y: np.ndarray | None = None) -> float:
-    """Effective number of independent samples of a residual on points ``x`` (profile)
-    or ``x, y`` (map on a regular grid; correlation taken along rows and columns)."""
-    r = np.asarray(residual, float) - np.mean(residual)
-    if y is None:
-        L = _integral_scale([r[np.argsort(x)]])
-        return float(np.clip(r.size / L, min(10.0, r.size), r.size))
-    rows, cols = [], []
-    for key, other, bucket in ((y, x, rows), (x, y, cols)):
-        kq = np.round(key, 6)
-        for v in np.unique(kq):
-            sel = np.flatnonzero(kq == v)
-            bucket.append(r[sel[np.argsort(other[sel])]])
-    L = _integral_scale(rows) * _integral_scale(cols)
-    return float(np.clip(r.size / L, min(10.0, r.size), r.size))
 
 
 def _long_run_s2(problem, fws, masks: dict, resid: dict, k: int) -> float:

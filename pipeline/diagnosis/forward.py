@@ -31,6 +31,7 @@ from optics.zernike import zernike_xy
 
 from .effects import BOW_REF_RADIUS_MM, NOMINAL_SLIT_UM, PLATING_GRADIENT_REF_MM
 from .manifest import ProfileData, SurfaceData
+from .noise import estimate_noise
 from .nominal import thermal_factor
 
 __all__ = ["FIT_LSF_SETTINGS", "PROFILE_KEYS", "SurfaceForward", "SpectrographImageModel", "ProfileForward", "profile_curve", "collimator_terms", "plating_gradient_map", "bow_um",
@@ -148,6 +149,10 @@ class SurfaceForward:
         r, _ = _lstsq_residual(self.nuisance[sel], self.data[sel] - self.predict(p)[sel])
         return r
 
+    def estimate_noise(self, nominal_residual: np.ndarray) -> float:
+        """White-noise sigma (µm) from the map itself: cubic prediction along its rows."""
+        return estimate_noise(self.x, self.data, rows=self.y)
+
     def fitted(self, p: dict, mask: np.ndarray | None = None) -> np.ndarray:
         """Full model (with the fitted piston/tilt) at all points (µm)."""
         sel = slice(None) if mask is None else mask
@@ -257,6 +262,10 @@ class ProfileForward(SpectrographImageModel):
 
     def _design(self, p, delta_um):
         return np.column_stack([self.predict(p, delta_um), np.ones(self.n)])
+
+    def estimate_noise(self, nominal_residual: np.ndarray) -> float:
+        """White-noise sigma (fraction of the data peak) from the profile itself."""
+        return estimate_noise(self.x, self.data)
 
     def residual(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
         """Data minus model with flux and background fitted on ``mask`` (fraction of the data peak)."""

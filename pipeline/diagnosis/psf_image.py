@@ -25,11 +25,12 @@ import numpy as np
 from scipy.interpolate import RectBivariateSpline
 
 from optics.imaging import box_convolve
-from optics.lineprofile import point_psf
+from optics.lineprofile import otf_cutoff_per_um, point_psf
 from optics.sagmap import SagMap
 
 from .forward import SpectrographImageModel, collimator_terms
 from .manifest import PsfImageData
+from .noise import estimate_noise, estimate_noise_band_limited
 
 __all__ = ["PsfImageSettings", "FIT_PSF_SETTINGS", "FIT_PSF_SETTINGS_FINE", "psf_image_model", "PsfImageForward"]
 
@@ -114,6 +115,16 @@ class PsfImageForward(SpectrographImageModel):
         self.data = np.asarray(data.intensity, float)
         self.n = self.data.size
         self.delta0_um = self._initial_shift()
+        self.cutoff_per_um = otf_cutoff_per_um(m.grating, m.wavelength_um, m.order)
+
+    def estimate_noise(self, nominal_residual: np.ndarray) -> float:
+        """White-noise sigma (fraction of the data peak): the residual's power beyond the
+        OTF cut-off where the image is sampled finely enough to have any
+        (:func:`.noise.estimate_noise_band_limited`), else the cubic-prediction scatter
+        along rows, which overestimates the noise of an image whose Airy rings are not
+        smooth on the sample step (then give ``noise_rel`` in the manifest)."""
+        sigma = estimate_noise_band_limited(self.x, self.y, nominal_residual, self.cutoff_per_um)
+        return sigma if np.isfinite(sigma) else estimate_noise(self.x, self.data, rows=self.y)
 
     def image(self, p: dict) -> RectBivariateSpline:
         """Memoised cubic spline of the model image for the physical parameters."""
