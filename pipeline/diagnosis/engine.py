@@ -17,7 +17,7 @@ Decision logic (thresholds in :class:`Criteria`, passed explicitly):
    less than ``degenerate_bic``) are listed in ``sign_degenerate``.
    **Companions** (``Effect.companion``: ``plating_gradient``, ``blank_bow``): after the
    first ranking the ``companion_top`` best findings that are not companions themselves
-   are refitted jointly with each companion (and with all of them where more than one
+   (and every significant single where a companion alone is significant) are refitted jointly with each companion (and with all of them where more than one
    helps; warm start); the best joint fit replaces the finding (same name, the
    companions listed in ``Finding.companions``) iff its BIC is lower by at least
    ``companion_bic``. Such a finding is ``significant`` only if it also beats the
@@ -257,7 +257,8 @@ def fit_effects(prob: Problem, nom: FitOutcome, names: tuple, criteria: Criteria
 
 def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict, cands, c: Criteria,
                      joint_fits: dict | None = None) -> list:
-    """Refit the ``c.companion_top`` best findings jointly with the companion effects
+    """Refit the ``c.companion_top`` best findings (and every significant single where a
+    companion alone is significant) jointly with the companion effects
     (module docstring, step 4); ``findings`` ranked best first, ``fits`` updated in place;
     every joint fit (adopted or not) is appended to ``joint_fits[effect]`` as
     ``(names, fit)`` for the sign test.
@@ -271,11 +272,17 @@ def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict,
         return findings
     joint_fits = {} if joint_fits is None else joint_fits
     w = prob.weights
+    # A companion the data see on its own leaks into every other single's score (each
+    # mimics some of its signature), so the first ranking no longer says which effect
+    # explains what the companion leaves: then every significant single is refitted too
+    # (campaign case 23, map + PSF image: slit_width ranked below pupil_shift and
+    # collimator_wfe, which took up part of the bow, and was never refitted with it).
+    seen = any(f.significant and set(f.effects) <= set(comp) for f in findings)
     out, done = list(findings), 0
     for i, f in enumerate(findings):
-        if done >= c.companion_top:
-            break
         if set(f.effects) & set(comp):
+            continue
+        if done >= c.companion_top and not (seen and f.significant and len(f.effects) == 1):
             continue
         done += 1
         tried = []  # (joint finding, fit, companion subset)
