@@ -37,8 +37,10 @@ Optional per measurement: ``name`` (default: file stem), ``blank`` (which gratin
 the data see; default the grating for profiles, ``grating`` or "spare" for surfaces),
 ``noise_um`` (surface) / ``noise_rel`` (profile or PSF image, fraction of the peak) when
 known. A PSF image is a dithered (sub-pixel sampled) image of the pixel-integrated PSF;
-its white noise is estimated along the image rows, so an image that is not on rows of
->= 5 samples needs ``noise_rel``.
+its white noise is estimated from the power beyond the optical cut-off when it lies on a
+regular grid finer than ``wavelength f_cam / (2 D)`` (≈ 2 µm in J), else along the image
+rows (biased high where the Airy rings are not smooth on the sample step), so a coarser
+image, or one that is not on rows of >= 5 samples, should give ``noise_rel``.
 Relative paths are relative to the manifest. Every error names the measurement and
 the field.
 """

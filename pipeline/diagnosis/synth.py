@@ -24,7 +24,11 @@ __all__ = ["shape_discrepancy", "synthetic_surface", "synthetic_profile", "synth
 def shape_discrepancy(sag: SagMap, rng: np.random.Generator, gradient: float = 0.03, bow_um: float = 0.01) -> SagMap:
     """``sag`` times a random linear amplitude gradient (±``gradient`` across ±70 mm:
     plating thickness varies over the blank) plus a random low-order bow of RMS
-    ~``bow_um`` (defocus/spherical-like; not in the effect library)."""
+    ~``bow_um`` (Zernike (2,0) and (4,0) over an 80 mm disc). Both are in the effect
+    library as companions (``plating_gradient``, ``blank_bow``, over a 70 mm disc), so
+    wherever the data resolve them they are found, not left as unmodelled mismatch: on
+    line profiles alone they are below what the data identify; a map or a focal-plane
+    PSF image sees the bow at delta BIC -200 … -500."""
     X, Y = sag.grid()
     ang = rng.uniform(0, 2 * np.pi)
     g = gradient * rng.uniform(0.5, 1.0)
