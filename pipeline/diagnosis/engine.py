@@ -17,8 +17,9 @@ Decision logic (thresholds in :class:`Criteria`, passed explicitly):
    less than ``degenerate_bic``) are listed in ``sign_degenerate``.
    **Companions** (``Effect.companion``: ``plating_gradient``, ``blank_bow``): after the
    first ranking the ``companion_top`` best findings that are not companions themselves
-   (and every significant single where a companion alone is significant) are refitted jointly with each companion (and with all of them where more than one
-   helps; warm start); the best joint fit replaces the finding (same name, the
+   (and every significant single where a companion alone is significant) are refitted
+   jointly with each companion (and with all of them where more than one helps; warm
+   start); the best joint fit replaces the finding (same name, the
    companions listed in ``Finding.companions``) iff its BIC is lower by at least
    ``companion_bic``. Such a finding is ``significant`` only if it also beats the
    companions alone by ``min_delta_bic``, and its ``excess_explained`` is measured from
