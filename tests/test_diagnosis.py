@@ -110,6 +110,29 @@ def test_no_gap_when_model_matches(tmp_path):
     assert diagnose(_manifest(tmp_path)).verdict == "no_gap"
 
 
+def test_weak_gap_over_many_samples_is_a_gap(tmp_path):
+    """A 0.006 µm RMS astigmatism under 0.01 µm noise: the residual RMS is only ~1.17x the
+    noise (below ``no_gap_ratio``), but over the ~14 000 samples of the map its chi^2 excess
+    is ~11 standard deviations — a gap, diagnosed as the astigmatism it is."""
+    from optics.zernike import zernike_xy
+    from pipeline.diagnosis.engine import Criteria, build_problem, has_gap
+    from pipeline.diagnosis.manifest import load_data, load_manifest
+
+    nom = _nominal(tmp_path)
+    rng = np.random.default_rng(4)
+    m = synthetic_surface(nom.scaled(thermal_factor(128, 80)), rng, noise_um=0.01,
+                          extra_um=lambda x, y: 0.006 * zernike_xy(2, 2, x, y, 68.5))
+    write_sag_map(m, tmp_path / "map.npz")
+    man = load_manifest(_manifest(tmp_path))
+    prob, nom_fit = build_problem(man, load_data(man), nom)
+    (name,) = prob.noise
+    assert 1.1 < np.sqrt(nom_fit.rss[name] / nom_fit.n[name]) / prob.noise[name] < Criteria().no_gap_ratio
+    assert has_gap(prob, nom_fit, Criteria()) and not has_gap(prob, nom_fit, Criteria(no_gap_z=np.inf))
+    d = diagnose(man, nominal=nom)
+    assert d.verdict == "explained" and d.best.effect == "astigmatism"
+    assert d.best.parameters["astig_0_um"] == pytest.approx(0.006, rel=0.2)
+
+
 @pytest.mark.parametrize("edit, fragment", [
     (lambda t: t.replace('file = "map.npz"', 'file = "missing.npz"'), "file='missing.npz' does not exist"),
     (lambda t: t.replace("temperature_K = 128", "temperature_K = 400"), "temperature_K=400"),
