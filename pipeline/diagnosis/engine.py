@@ -216,7 +216,7 @@ def _noise_cost(prob: Problem, n: dict) -> float:
         if f.name in n:
             # nuisances: piston + 2 tilts (map) | offset shift + flux + background (profile) |
             # position (2) + flux + background (PSF image)
-            k = f.nuisance_count + (1 if f.kind == "line_profile" else 0)
+            k = f.nuisance_count + f.n_shift
             sigma = prob.noise[f.name]
             if not f.noise_known:
                 sigma *= max(1.0 - NOISE_ESTIMATE_REL_SD_SQRT_N / math.sqrt(max(f.n, 1)), 0.5)
