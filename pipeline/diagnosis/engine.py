@@ -198,11 +198,22 @@ def _stats(prob: Problem, nom: FitOutcome, fo: FitOutcome):
     return before, after, ratio, tuple(per)
 
 
-#: Relative standard deviation of :func:`.fitting.estimate_noise` times sqrt(n): measured by
+#: Relative standard deviation of :func:`.noise.estimate_noise` times sqrt(n): measured by
 #: Monte Carlo on white noise at the campaign's sparse random sampling (n = 80/160/320:
 #: 1.79/1.69/1.64; larger than i.i.d. MAD's 1.17 because neighbouring prediction errors
 #: share samples).
 NOISE_ESTIMATE_REL_SD_SQRT_N = 1.7
+
+
+def _nuisances(f) -> int:
+    """Nuisance parameters of one measurement's fit: piston + 2 tilts (map) | offset shift +
+    flux + background (profile) | position (2) + flux + background (PSF image)."""
+    return f.nuisance_count + f.n_shift
+
+
+def _noise_rel_sd(f) -> float:
+    """Relative standard deviation of a measurement's noise: 0 if the manifest gives it."""
+    return 0.0 if f.noise_known else NOISE_ESTIMATE_REL_SD_SQRT_N / math.sqrt(max(f.n, 1))
 
 
 def _noise_cost(prob: Problem, n: dict) -> float:
@@ -214,13 +225,8 @@ def _noise_cost(prob: Problem, n: dict) -> float:
     out = 0.0
     for f in prob.forwards:
         if f.name in n:
-            # nuisances: piston + 2 tilts (map) | offset shift + flux + background (profile) |
-            # position (2) + flux + background (PSF image)
-            k = f.nuisance_count + f.n_shift
-            sigma = prob.noise[f.name]
-            if not f.noise_known:
-                sigma *= max(1.0 - NOISE_ESTIMATE_REL_SD_SQRT_N / math.sqrt(max(f.n, 1)), 0.5)
-            out += prob.weights[f.name] ** 2 * max(n[f.name] - k, 0) * sigma**2
+            sigma = prob.noise[f.name] * max(1.0 - _noise_rel_sd(f), 0.5)
+            out += prob.weights[f.name] ** 2 * max(n[f.name] - _nuisances(f), 0) * sigma**2
     return out
 
 
@@ -229,8 +235,8 @@ def has_gap(prob: Problem, nom: FitOutcome, c: Criteria) -> bool:
 
     Either its RMS exceeds ``no_gap_ratio`` times the noise, or its reduced chi^2 exceeds 1
     by more than ``no_gap_z`` standard deviations: ``sd^2 = 2 / dof + (2 r)^2`` with ``r``
-    the relative standard deviation of an estimated noise (``NOISE_ESTIMATE_REL_SD_SQRT_N /
-    sqrt(n)``; 0 when the manifest gives it). The RMS ratio alone misses a gap spread over
+    the relative standard deviation of an estimated noise (:func:`_noise_rel_sd`: 0 when
+    the manifest gives it). The RMS ratio alone misses a gap spread over
     many samples: a map's residual at 1.18 x its noise over 14 295 samples is a chi^2
     excess of 12 such standard deviations (campaign case 11, map + PSF image: delta BIC of
     the best finding -214, called ``no_gap`` by the ratio alone).
@@ -242,9 +248,8 @@ def has_gap(prob: Problem, nom: FitOutcome, c: Criteria) -> bool:
             return True
         if math.sqrt(nom.rss[m] / nom.n[m]) > c.no_gap_ratio * sigma:
             return True
-        dof = max(nom.n[m] - f.nuisance_count - f.n_shift, 1)
-        rel = 0.0 if f.noise_known else NOISE_ESTIMATE_REL_SD_SQRT_N / math.sqrt(max(nom.n[m], 1))
-        if (nom.rss[m] / (dof * sigma**2) - 1.0) / math.sqrt(2.0 / dof + (2.0 * rel) ** 2) > c.no_gap_z:
+        dof = max(nom.n[m] - _nuisances(f), 1)
+        if (nom.rss[m] / (dof * sigma**2) - 1.0) / math.sqrt(2.0 / dof + (2.0 * _noise_rel_sd(f)) ** 2) > c.no_gap_z:
             return True
     return False
 
