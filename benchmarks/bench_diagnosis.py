@@ -4,7 +4,7 @@ numbers in results_diagnosis.md were pasted from its output.
 
     .venv/bin/python benchmarks/bench_diagnosis.py [--cases 208] [--workers 2] [--seed 1] [--cache-dir DIR]
         [--profiles extended|minimal] [--no-scenarios] [--out FILE] [--progress FILE.jsonl] [--profile-map-K K]
-        [--psf-image] [--types KIND:EFFECT,...]
+        [--psf-image] [--types KIND:EFFECT,...] [--discrepancy unmodelled|companions]
 
 ``--progress``: every finished case is appended there as a JSON line (partial results
 survive an interrupted run). ``--profiles``: the campaign's line-profile measurement set
@@ -40,6 +40,8 @@ def main(argv=None):
                     help="also a cold map at this temperature beside the line profiles (the paper's data set)")
     ap.add_argument("--psf-image", action="store_true", help="also a focal-plane point-source image beside the profiles")
     ap.add_argument("--types", default=None, help="only these case types (kind:effect,...), same case indices")
+    ap.add_argument("--discrepancy", default="unmodelled", choices=("unmodelled", "companions"),
+                    help="the truth's model discrepancy (CampaignConfig.discrepancy)")
     a = ap.parse_args(argv)
     out = {"scenarios": {}}
     for name in () if a.no_scenarios else ("cryo_astigmatism", "j_repolished", "hk_amplitude"):
@@ -54,7 +56,7 @@ def main(argv=None):
         print(name, json.dumps(out["scenarios"][name], default=float))
     cfg = CampaignConfig(n_cases=a.cases, seed=a.seed, workers=a.workers, profile_specs=PROFILE_SETS[a.profiles],
                          profile_map_K=a.profile_map_K, psf_image=PSF_IMAGE_SPEC if a.psf_image else None,
-                         only_types=parse_types(a.types))
+                         only_types=parse_types(a.types), discrepancy=a.discrepancy)
     res = run_campaign(cfg, cache_dir=a.cache_dir, progress=a.progress)
     res["profile_set"] = a.profiles
     out["campaign"] = res

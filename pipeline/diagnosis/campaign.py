@@ -2,7 +2,7 @@
 
 Each case draws one effect (library or out-of-library) at a random magnitude, makes
 synthetic measurements from a truth that is a different model from the one diagnosed
-(refined-mesh FEA map + random shape discrepancy, converged LSF sampling, noise,
+(refined-mesh FEA map + a random model discrepancy, converged LSF sampling, noise,
 piston/tilt or shift/flux/background, dropouts, sparse sampling), withholds the effect
 from the model (default-mesh nominal) and runs :func:`~pipeline.diagnosis.diagnose`.
 
@@ -19,6 +19,15 @@ displacement), ``||fit - true|| <= 0.2 ||true||``, and whether the truth lies wi
 2 sigma of the fit (honest error bars). The line-profile measurement set is
 ``CampaignConfig.profile_specs`` (:data:`PROFILE_SETS`).
 Out-of-library cases should end ``unexplained`` (or ``no_gap``).
+
+The model discrepancy (``CampaignConfig.discrepancy``): ``"unmodelled"`` (default) is a
+0.01 µm RMS trefoil/tetrafoil/pentafoil surface error (:func:`~.synth.unmodelled_shape`),
+outside the library, so that it stays in every case's residual; ``"companions"`` is the
+first campaigns' bow and plating gradient (:func:`~.synth.shape_discrepancy`). Those are
+library companions: a map or a focal-plane image finds them (delta BIC -165 … -512), so
+with them every out-of-library case also carries a library effect, and a companion-only
+``explained`` verdict on it is a correct finding counted as a false attribution
+(results_diagnosis.md, session 6).
 
 Cases are independent and seeded by ``(seed, index)``; they run in worker processes.
 The nominal and truth FEA maps are computed once (disk cache) before the pool starts.
@@ -44,9 +53,9 @@ from pipeline.interchange import write_psf_image_csv
 from .effects import LIBRARY
 from .engine import Criteria, diagnose
 from .nominal import fea_sag_map, thermal_factor
-from .synth import shape_discrepancy, synthetic_profile, synthetic_psf_image, synthetic_surface, write_profile_csv
+from .synth import shape_discrepancy, synthetic_profile, unmodelled_shape, synthetic_psf_image, synthetic_surface, write_profile_csv
 
-__all__ = ["CASE_TYPES", "PROFILE_SETS", "PSF_IMAGE_SPEC", "parse_types", "CampaignConfig", "recovery_errors", "make_case", "run_case", "run_campaign", "write_campaign"]
+__all__ = ["CASE_TYPES", "DISCREPANCIES", "PROFILE_SETS", "PSF_IMAGE_SPEC", "parse_types", "CampaignConfig", "recovery_errors", "make_case", "run_case", "run_campaign", "write_campaign"]
 
 CASE_TYPES = (
     ("surface", "astigmatism"), ("surface", "amplitude_scale"), ("surface", "temperature"),
@@ -75,6 +84,8 @@ PSF_IMAGE_SPEC = ("J", 1.25, -2, 0.0)
 PROFILE_SPECS_MINIMAL = PROFILE_SETS["minimal"]
 PROFILE_SPECS = PROFILE_SETS["extended"]
 SURFACE_T_K = 128.0
+#: CampaignConfig.discrepancy -> the truth's model discrepancy (see the module docstring).
+DISCREPANCIES = {"unmodelled": unmodelled_shape, "companions": shape_discrepancy}
 
 
 @dataclass(frozen=True)
@@ -101,6 +112,8 @@ class CampaignConfig:
     #: Run only the cases of these (kind, effect) types, keeping every case's index (and so
     #: its random draws): the same cases as the full campaign's, for comparisons.
     only_types: tuple | None = None
+    #: The truth's model discrepancy, a key of :data:`DISCREPANCIES`.
+    discrepancy: str = "unmodelled"
     criteria: Criteria = Criteria(heldout_top=1, pair_from=2)
 
     def __post_init__(self) -> None:
@@ -110,6 +123,8 @@ class CampaignConfig:
         if self.psf_image is not None and (len(self.psf_image) != 4 or not 0 <= self.psf_image[3] <= 100):
             raise ValueError(f"CampaignConfig: psf_image={self.psf_image!r} must be (grating, wavelength_um, order, "
                              "pixel_um) with pixel_um in [0, 100] (or None)")
+        if self.discrepancy not in DISCREPANCIES:
+            raise ValueError(f"CampaignConfig: discrepancy={self.discrepancy!r} is not one of {sorted(DISCREPANCIES)}")
         unknown = set(self.only_types or ()) - set(self.case_types)
         if unknown:
             raise ValueError(f"CampaignConfig: only_types {sorted(unknown)} are not case types; valid: "
@@ -146,7 +161,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         elif effect == "temperature":
             dT = _signed(rng, 20.0, 50.0)
             T, truth = SURFACE_T_K + dT, {"temperature_offset_K": dT}
-        t = shape_discrepancy(base.scaled(scale * thermal_factor(T, 80.0)), rng)
+        t = DISCREPANCIES[cfg.discrepancy](base.scaled(scale * thermal_factor(T, 80.0)), rng)
         extra = None
         if effect == "astigmatism":
             a, th = rng.uniform(0.04, 0.15), rng.uniform(0, 2 * np.pi)
@@ -196,7 +211,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         a = _signed(rng, 0.1, 0.25)
         truth = {"tilt_rel": a}
         distortion = lambda u, y: y * (1.0 + a * np.tanh(u / 30.0))
-    t = shape_discrepancy(base.scaled(scale), rng)
+    t = DISCREPANCIES[cfg.discrepancy](base.scaled(scale), rng)
     meas = []
     for i, (g, wl, order, ps) in enumerate(cfg.profile_specs):
         u, y, _ = synthetic_profile(g, wl, order, ps, t, rng, params=params, noise_rel=cfg.noise_rel, distortion=distortion)

@@ -20,7 +20,8 @@ def _run(args) -> int:
 
         cfg = CampaignConfig(n_cases=args.cases, seed=args.seed, workers=args.workers,
                              profile_specs=PROFILE_SETS[args.profiles], profile_map_K=args.profile_map_K,
-                             psf_image=PSF_IMAGE_SPEC if args.psf_image else None, only_types=parse_types(args.types))
+                             psf_image=PSF_IMAGE_SPEC if args.psf_image else None, only_types=parse_types(args.types),
+                             discrepancy=args.discrepancy)
         res = run_campaign(cfg, cache_dir=args.cache_dir)
         path = write_campaign(res, args.out)
         print(json.dumps(res["summary"], indent=1))
@@ -64,6 +65,10 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--types", default=None, metavar="KIND:EFFECT,...",
                    help="campaign (with --validate): run only these case types, e.g. line_profile:collimator_wfe "
                         "(cases keep their index and random draws)")
+    p.add_argument("--discrepancy", default="unmodelled", choices=("unmodelled", "companions"),
+                   help="campaign (with --validate): the truth's model discrepancy: unmodelled = 0.01 um RMS "
+                        "trefoil/tetrafoil/pentafoil (outside the library, default); companions = bow + plating "
+                        "gradient (library companions, the first campaigns')")
 
 
 def register(subparsers) -> argparse.ArgumentParser:

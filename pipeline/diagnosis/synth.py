@@ -2,7 +2,9 @@
 
 A synthetic measurement is what an instrument would deliver from a *truth* that is a
 different model from the one diagnosed: the truth map comes from another FEA mesh
-(and/or case) with a small smooth shape discrepancy; it is sampled on the
+(and/or case) with a small smooth shape discrepancy (:func:`unmodelled_shape`, which no
+library effect describes, or :func:`shape_discrepancy`, the library's companions
+bow and plating gradient); it is sampled on the
 measurement's own grid, with piston/tilt (maps) or an offset shift, flux scale and
 background (profiles), an image position, flux and background (PSF images), white
 noise, dropouts and sparse sampling.
@@ -18,7 +20,7 @@ from optics.zernike import zernike_xy
 
 from .forward import profile_curve
 
-__all__ = ["shape_discrepancy", "synthetic_surface", "synthetic_profile", "synthetic_psf_image", "write_profile_csv"]
+__all__ = ["shape_discrepancy", "unmodelled_shape", "FOIL_TERMS", "synthetic_surface", "synthetic_profile", "synthetic_psf_image", "write_profile_csv"]
 
 
 def shape_discrepancy(sag: SagMap, rng: np.random.Generator, gradient: float = 0.03, bow_um: float = 0.01) -> SagMap:
@@ -35,6 +37,28 @@ def shape_discrepancy(sag: SagMap, rng: np.random.Generator, gradient: float = 0
     factor = 1.0 + g * (np.cos(ang) * X + np.sin(ang) * Y) / 70.0
     bow = bow_um * (rng.normal() * zernike_xy(2, 0, X, Y, 80.0) + rng.normal() * zernike_xy(4, 0, X, Y, 80.0))
     return sag.with_sag(sag.sag_um * factor + bow, label=f"{sag.label} + discrepancy")
+
+
+#: Zernike terms of :func:`unmodelled_shape`: trefoil, tetrafoil, pentafoil. Their
+#: azimuthal orders (3-5) are orthogonal on any centred disc to every surface term of the
+#: library (piston, tilt, bow and the registration's rigid motion: m = 0, 1; astigmatism:
+#: m = 2), and the odd ones to anything with the blank's mirror symmetries (the nominal
+#: deformation, hence amplitude_scale and temperature).
+FOIL_TERMS = ((3, 3), (3, -3), (4, 4), (4, -4), (5, 5), (5, -5))
+
+
+def unmodelled_shape(sag: SagMap, rng: np.random.Generator, rms_um: float = 0.01,
+                     radius_mm: float = 68.5) -> SagMap:
+    """``sag`` plus a random smooth surface error that no library effect describes: the
+    :data:`FOIL_TERMS` with independent normal coefficients, so that its mean-square over
+    the ``radius_mm`` disc is ``rms_um**2`` (µm). Stands for the part of the model
+    discrepancy a diagnosis must tolerate, not explain (the campaign's default); the
+    bow and plating gradient of :func:`shape_discrepancy` are library companions, and
+    a diagnosis that finds them is right, not fooled."""
+    X, Y = sag.grid()
+    c = rng.normal(size=len(FOIL_TERMS)) * rms_um / np.sqrt(len(FOIL_TERMS))
+    extra = sum(ci * zernike_xy(n, m, X, Y, radius_mm) for ci, (n, m) in zip(c, FOIL_TERMS))
+    return sag.with_sag(sag.sag_um + extra, label=f"{sag.label} + unmodelled shape")
 
 
 def synthetic_surface(truth: SagMap, rng: np.random.Generator, *, aperture_diameter_mm: float = 137.0,
