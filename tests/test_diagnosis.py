@@ -239,3 +239,19 @@ def test_campaign_recovery_rules():
     fit = {"reg_dx_mm": 3.1, "reg_dy_mm": 0.2, "reg_rot_deg": 1.0}
     r = recovery_errors(_FakeDiagnosis("registration", _FakeFinding(fit, dict.fromkeys(fit, 0.1))), "registration", truth)
     assert r["vector"] == r["per_parameter"] == pytest.approx(0.2 / 0.5)
+
+
+@pytest.mark.parametrize("kw, fragment", [
+    ({"min_variance_explained": 1.5}, "min_variance_explained=1.5 must be a number in [0.0, 1.0]"),
+    ({"no_gap_ratio": 0.9}, "no_gap_ratio=0.9 must be a number in [1.0, inf]"),
+    ({"pair_from": 2.5}, "pair_from=2.5 must be an integer in [0, 20]"),
+    ({"min_delta_bic": float("nan")}, "min_delta_bic=nan must be a number"),
+    ({"heldout_top": "3"}, "heldout_top='3' must be an integer"),
+])
+def test_criteria_checked(kw, fragment):
+    from pipeline.diagnosis.engine import Criteria
+
+    with pytest.raises(ValueError) as e:
+        Criteria(**kw)
+    assert fragment in str(e.value)
+    Criteria(pair_from=2, heldout_top=1, no_gap_z=5)  # the campaign's

@@ -88,6 +88,20 @@ class Criteria:
     companion_bic: float = 6.0
     absorb_test_bic: float = 25.0
 
+    def __post_init__(self) -> None:
+        ranges = {"min_delta_bic": (0.0, math.inf), "min_variance_explained": (0.0, 1.0),
+                  "heldout_ratio": (0.0, 1.0), "pair_extra_bic": (0.0, math.inf), "pair_from": (0, 20),
+                  "degenerate_bic": (0.0, math.inf), "degenerate_prediction": (0.0, 1.0),
+                  "no_gap_ratio": (1.0, math.inf), "no_gap_z": (0.0, math.inf), "heldout_top": (0, 20),
+                  "companion_top": (0, 20), "companion_bic": (0.0, math.inf), "absorb_test_bic": (0.0, math.inf)}
+        for name, (lo, hi) in ranges.items():
+            v = getattr(self, name)
+            integer = isinstance(lo, int)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()) \
+                    or not lo <= v <= hi:
+                kind = "an integer" if integer else "a number"
+                raise ValueError(f"Criteria: {name}={v!r} must be {kind} in [{lo}, {hi}]")
+
 
 @dataclass(frozen=True)
 class Finding:
