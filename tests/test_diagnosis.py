@@ -255,3 +255,17 @@ def test_criteria_checked(kw, fragment):
         Criteria(**kw)
     assert fragment in str(e.value)
     Criteria(pair_from=2, heldout_top=1, no_gap_z=5)  # the campaign's
+
+
+def test_unconstrained_parameters_flagged():
+    """A parameter whose 1-sigma exceeds half its prior range is listed (inf and nan too);
+    one the data pin down is not; parameters without a prior (none) are left alone."""
+    from pipeline.diagnosis.engine import Finding, unconstrained
+    from pipeline.diagnosis.effects import LIBRARY
+
+    half = {q.name: 0.5 * q.width for q in LIBRARY["collimator_wfe"].parameters}
+    assert half["coll_astig45_um"] == pytest.approx(0.4)
+    f = Finding("collimator_wfe", ("collimator_wfe",), {"coll_coma_um": -0.15, "coll_astig45_um": -0.22, "x": 1.0},
+                {"coll_coma_um": 0.002, "coll_astig45_um": 85.4, "coll_defocus_um": float("nan"), "x": 1e9},
+                0.0, -200.0, 1.0, 0.8, 0.2, 0.36)
+    assert unconstrained(f, half) == ("coll_astig45_um", "coll_defocus_um")

@@ -39,7 +39,8 @@ jointly with the best-ranked other candidates (:class:`~pipeline.diagnosis.engin
 ``companion_top``); the joint fit replaces a finding only where the data support it
 (BIC lower by ``companion_bic``). The finding keeps its own name and lists the companion in
 ``Finding.companions``. Reason: a plating-thickness gradient is present at some level on
-every real blank (the campaign's truths carry a random ±1.5–3 % one), so it is a
+every real blank (the scenarios' truths, and the campaign's with ``discrepancy="companions"``,
+carry a random ±1.5–3 % one), so it is a
 nuisance-like discrepancy that biases the other effects' parameters (collimator defocus,
 the sign of pupil_y) unless it is fitted alongside them; it is not a nuisance of the
 forward model (piston/tilt, offset shift, flux, background), because those are removed

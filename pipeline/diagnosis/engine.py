@@ -67,7 +67,7 @@ from .manifest import Manifest, load_data, load_manifest
 from .nominal import nominal_sag_map
 from .where import measurement_parts, profile_parts, psf_image_parts, satellite_spacing_um, surface_parts
 
-__all__ = ["Criteria", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects", "all_effects", "parameters_of"]
+__all__ = ["Criteria", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects", "all_effects", "parameters_of", "unconstrained"]
 
 
 @dataclass(frozen=True)
@@ -128,6 +128,7 @@ class Finding:
     significant: bool = False
     companions: tuple = ()
     absorbs: dict = field(default_factory=dict)
+    unconstrained: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -271,6 +272,16 @@ def has_gap(prob: Problem, nom: FitOutcome, c: Criteria) -> bool:
 def all_effects(f: Finding) -> tuple:
     """The effects whose parameters a finding holds: its own plus its companions."""
     return tuple(f.effects) + tuple(f.companions)
+
+
+def unconstrained(f: Finding, half_widths: dict) -> tuple:
+    """Parameters of ``f`` whose 1-sigma uncertainty exceeds half their prior range
+    (``half_widths``: name -> half width): the data leave them free within the prior, so
+    their values are an arbitrary point of a flat valley, not a measurement (campaign,
+    collimator WFE on line profiles alone: the oblique astigmatism, which the profiles see
+    only through its square, came with 1-sigma 27-650 µm against a prior of ±0.4 µm)."""
+    return tuple(k for k, v in f.uncertainties.items()
+                 if k in half_widths and not v <= half_widths[k])
 
 
 def excess_explained(prob: Problem, nom: FitOutcome, fo: FitOutcome) -> float:
@@ -609,6 +620,8 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     findings = _with_companions(prob, nom, findings, fits, cands, criteria, joint_fits)
     t["fit_s"] = time.perf_counter() - t["start"] - t["load_s"]
     findings.sort(key=lambda f: _rank_key(f, criteria))
+    half = {q.name: 0.5 * q.width for q in parameters_of(tuple(e.name for e in cands), prob.forwards)}
+    findings = [_replace(f, unconstrained=unconstrained(f, half)) for f in findings]
     findings = _degeneracies(findings, fits, prob, criteria)
     findings = [_replace(f, sign_degenerate=_sign_degeneracies(prob, f, fits[f.effect], criteria,
                                                                joint_fits.get(f.effect)))

@@ -110,7 +110,9 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
                      f"held-out shrink {b.heldout_shrink_fraction if b.heldout_shrink_fraction is None else round(b.heldout_shrink_fraction, 2)})"
                      + (f"; degenerate with {', '.join(b.degenerate_with)}" if b.degenerate_with else "")
                      + (f"; fitted together with {', '.join(b.companions)}" if b.companions else "")
-                     + (f"; sign undetermined: {', '.join(b.sign_degenerate)}" if b.sign_degenerate else "") + "</p>")
+                     + (f"; sign undetermined: {', '.join(b.sign_degenerate)}" if b.sign_degenerate else "")
+                     + (f"; not constrained by these data (1σ beyond half the prior range): {', '.join(b.unconstrained)}"
+                        if b.unconstrained else "") + "</p>")
         if b.absorbs:
             parts.append("<p>These data cannot identify some effects on their own; the parameters above contain them: "
                          + "; ".join(html.escape(_absorbs_text(k, v)) for k, v in b.absorbs.items())
@@ -121,7 +123,7 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
              "held-out shrink": _fmt(f.heldout_shrink_fraction) if f.heldout_shrink_fraction is not None else "—",
              "overfit": f.overfit, "degenerate with": ", ".join(f.degenerate_with),
              "fitted with": ", ".join(f.companions), "sign undetermined": ", ".join(f.sign_degenerate),
-             "absorbs": ", ".join(f.absorbs),
+             "unconstrained": ", ".join(f.unconstrained), "absorbs": ", ".join(f.absorbs),
              "parameters": ", ".join(f"{k}={v:.4g}±{f.uncertainties.get(k, float('nan')):.2g}" for k, v in f.parameters.items())}
             for f in d.findings]
     parts += ["<h2>Ranking</h2>", _png(_ranking_figure(d.findings)) if d.findings else "",
