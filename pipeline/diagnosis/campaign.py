@@ -304,6 +304,10 @@ def run_case(args) -> dict:
             "companions": list(d.finding(effect).companions) if in_lib and d.finding(effect) else [],
             "top_companions": list(best.companions) if best else [],
             "top_absorbs": best.absorbs if best else {},
+            "top_excess_explained": best.excess_explained if best else None,
+            "top_excess_explained_overall": best.excess_explained_overall if best else None,
+            "top_unconstrained": list(best.unconstrained) if best else [],
+            "unexplained_in": [g["measurement"] for g in d.unexplained_in],
             "seconds": time.perf_counter() - t0}
 
 

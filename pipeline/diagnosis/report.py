@@ -117,9 +117,14 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
             parts.append("<p>These data cannot identify some effects on their own; the parameters above contain them: "
                          + "; ".join(html.escape(_absorbs_text(k, v)) for k, v in b.absorbs.items())
                          + ". A measurement that can (e.g. a surface map for a blank bow) separates them.</p>")
+    if d.unexplained_in:
+        parts.append("<p>Residual still beyond noise (unexplained) in: " + "; ".join(
+            html.escape(f"{g['measurement']} (RMS {g['rms_ratio']:.2f} × noise, χ² excess {g['z']:.1f} σ)")
+            for g in d.unexplained_in) + "</p>")
     rows = [{"effect": f.effect, "ΔBIC": _fmt(f.delta_bic), "shrink": _fmt(f.shrink_fraction),
              "variance explained": _fmt(f.variance_explained),
-             "excess over noise explained": _fmt(f.excess_explained),
+             "excess over noise explained (where it acts)": _fmt(f.excess_explained),
+             "excess explained (all data)": _fmt(f.excess_explained_overall),
              "held-out shrink": _fmt(f.heldout_shrink_fraction) if f.heldout_shrink_fraction is not None else "—",
              "overfit": f.overfit, "degenerate with": ", ".join(f.degenerate_with),
              "fitted with": ", ".join(f.companions), "sign undetermined": ", ".join(f.sign_degenerate),
