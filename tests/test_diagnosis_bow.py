@@ -1,5 +1,7 @@
 """The blank_bow effect (alone, as a companion, only with a map in the data), the
-model-choice term of the uncertainties and the campaign's map beside the profiles. Nominal: the analytic sum quilt (no FEA)."""
+model-choice term of the uncertainties, the campaign's map beside the profiles and its
+model discrepancy, and the verdict beside an unexplained measurement. Nominal: the
+analytic sum quilt (no FEA)."""
 
 from __future__ import annotations
 
