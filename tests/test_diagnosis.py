@@ -269,3 +269,25 @@ def test_unconstrained_parameters_flagged():
                 {"coll_coma_um": 0.002, "coll_astig45_um": 85.4, "coll_defocus_um": float("nan"), "x": 1e9},
                 0.0, -200.0, 1.0, 0.8, 0.2, 0.36)
     assert unconstrained(f, half) == ("coll_astig45_um", "coll_defocus_um")
+
+
+def test_pair_gives_way_to_a_member_that_explains():
+    """A pair on top that explains too little where it acts gives way to a member that
+    explains alone (significant, half the excess where it acts, not overfit); otherwise the
+    ranking stands."""
+    from pipeline.diagnosis.engine import Criteria, Finding, _explains, _member_explains
+
+    def f(name, dbic, ex, sig=True, overfit=False):
+        return Finding(name, tuple(name.split("+")), {}, {}, dbic, dbic, 1.0, 0.5, 0.5, 0.75, ex,
+                       significant=sig, overfit=overfit, heldout_note="checked")
+
+    c = Criteria()
+    pair, slit, coll = f("collimator_wfe+slit_width", -229.0, 0.49), f("slit_width", -198.7, 0.92), f("collimator_wfe", -28.4, 0.1)
+    assert not _explains(pair, c) and _explains(slit, c)
+    out, note = _member_explains(None, [pair, coll, slit], c, heldout=False)
+    assert [x.effect for x in out] == ["slit_width", "collimator_wfe+slit_width", "collimator_wfe"]
+    assert "slit_width alone explains 0.92" in note and "only 0.49" in note
+    for member in (f("slit_width", -198.7, 0.92, sig=False), f("slit_width", -198.7, 0.42),
+                   f("slit_width", -198.7, 0.92, overfit=True), f("temperature", -198.7, 0.92)):
+        out, note = _member_explains(None, [pair, member], c, heldout=False)
+        assert out[0] is pair and note == ""

@@ -117,6 +117,8 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
             parts.append("<p>These data cannot identify some effects on their own; the parameters above contain them: "
                          + "; ".join(html.escape(_absorbs_text(k, v)) for k, v in b.absorbs.items())
                          + ". A measurement that can (e.g. a surface map for a blank bow) separates them.</p>")
+    if d.ranking_note:
+        parts.append(f"<p>{html.escape(d.ranking_note)}.</p>")
     if d.unexplained_in:
         parts.append("<p>Residual still beyond noise (unexplained) in: " + "; ".join(
             html.escape(f"{g['measurement']} (RMS {g['rms_ratio']:.2f} × noise, χ² excess {g['z']:.1f} σ)")
