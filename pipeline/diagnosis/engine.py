@@ -596,6 +596,15 @@ def _absorbed(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, kind
     return out, tuple(dict.fromkeys(effects))
 
 
+def _with_heldout(prob: Problem, f: Finding, c: Criteria) -> Finding:
+    """``f`` with its held-out shrink and ``overfit`` flag (module docstring, step 5)."""
+    from .heldout import heldout_check
+
+    h, note = heldout_check(prob, f, c)
+    over = h is not None and f.shrink_fraction > 0.05 and h < c.heldout_ratio * f.shrink_fraction
+    return _replace(f, heldout_shrink_fraction=h, heldout_note=note, overfit=bool(over))
+
+
 def _explains(f: Finding, c: Criteria) -> bool:
     """The verdict's test of a finding (module docstring, step 6)."""
     return f.significant and f.excess_explained >= c.min_variance_explained and not f.overfit
@@ -614,18 +623,13 @@ def _member_explains(prob: Problem, findings: list, c: Criteria, heldout: bool) 
     collimator_wfe, pupil_shift or temperature beside it took up part of the trefoil in the
     image or map (delta BIC ~30 better) and the pair explained only 0.35-0.49 where it acts,
     so 6 of 22 slit-width cases ended ``unexplained``."""
-    from .heldout import heldout_check
-
     pair = findings[0]
     for i, f in enumerate(findings[1:], start=1):
         if len(f.effects) != 1 or f.effects[0] not in pair.effects or not f.significant \
                 or f.excess_explained < c.min_variance_explained:
             continue
         if heldout and f.heldout_shrink_fraction is None and not f.heldout_note:
-            h, hn = heldout_check(prob, f, c)
-            over = h is not None and f.shrink_fraction > 0.05 and h < c.heldout_ratio * f.shrink_fraction
-            f = _replace(f, heldout_shrink_fraction=h, heldout_note=hn, overfit=bool(over))
-            findings[i] = f
+            f = findings[i] = _with_heldout(prob, f, c)
         if f.overfit:
             continue
         note = (f"{pair.effect} ranks higher (delta BIC {pair.delta_bic:.1f} against {f.delta_bic:.1f}) but explains "
@@ -683,8 +687,6 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     -------
     Diagnosis
     """
-    from .heldout import heldout_check
-
     t = {"start": time.perf_counter()}
     manifest = load_manifest(manifest_path_or_obj)
     data = load_data(manifest)
@@ -726,9 +728,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     t["absorb_s"] = time.perf_counter() - t0
     if heldout:
         for i, f in enumerate(findings[:criteria.heldout_top]):
-            h, note = heldout_check(prob, f, criteria)
-            over = h is not None and f.shrink_fraction > 0.05 and h < criteria.heldout_ratio * f.shrink_fraction
-            findings[i] = _replace(f, heldout_shrink_fraction=h, heldout_note=note, overfit=bool(over))
+            findings[i] = _with_heldout(prob, f, criteria)
     t["heldout_s"] = time.perf_counter() - t["start"] - t["load_s"] - t["fit_s"] - t["absorb_s"]
     gap = has_gap(prob, nom, criteria)
     note = ""
