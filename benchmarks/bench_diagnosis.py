@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 from pipeline.diagnosis import diagnose
-from pipeline.diagnosis.campaign import PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, parse_types, run_campaign
+from pipeline.diagnosis.campaign import DISCREPANCIES, PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, parse_types, run_campaign
 
 HERE = Path(__file__).parent
 SCEN = HERE.parent / "pipeline" / "scenarios"
@@ -40,7 +40,7 @@ def main(argv=None):
                     help="also a cold map at this temperature beside the line profiles (the paper's data set)")
     ap.add_argument("--psf-image", action="store_true", help="also a focal-plane point-source image beside the profiles")
     ap.add_argument("--types", default=None, help="only these case types (kind:effect,...), same case indices")
-    ap.add_argument("--discrepancy", default="unmodelled", choices=("unmodelled", "companions"),
+    ap.add_argument("--discrepancy", default="unmodelled", choices=sorted(DISCREPANCIES),
                     help="the truth's model discrepancy (CampaignConfig.discrepancy)")
     a = ap.parse_args(argv)
     out = {"scenarios": {}}
