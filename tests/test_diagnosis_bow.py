@@ -216,6 +216,14 @@ def test_campaign_discrepancy_checked():
     assert CampaignConfig().discrepancy == "unmodelled"
     with pytest.raises(ValueError, match=r"discrepancy='bow' is not one of \['companions', 'unmodelled'\]"):
         CampaignConfig(discrepancy="bow")
+    # the CLI spells the choices out (it imports the campaign only when it runs): same set
+    import argparse
+
+    from pipeline.diagnosis.cli import register
+
+    p = register(argparse.ArgumentParser().add_subparsers())
+    choices = next(a.choices for a in p._actions if a.dest == "discrepancy")
+    assert set(choices) == set(DISCREPANCIES)
 
 
 @pytest.mark.slow
