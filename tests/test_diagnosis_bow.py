@@ -194,6 +194,10 @@ def test_unmodelled_discrepancy_is_outside_the_surface_library():
         assert np.max(np.abs(coef)) < 0.01 * rms
         ms.append(rms**2)
     assert np.mean(ms) == pytest.approx(0.02**2, rel=0.25)  # 40 draws of a 6-term chi-square
+    with pytest.raises(ValueError, match=r"rms_um=-0.01 must be a finite number >= 0 µm"):
+        unmodelled_shape(flat, np.random.default_rng(0), rms_um=-0.01)
+    with pytest.raises(ValueError, match=r"radius_mm=0.0 must be a finite number > 0 mm"):
+        unmodelled_shape(flat, np.random.default_rng(0), radius_mm=0.0)
 
 
 def test_unmodelled_discrepancy_stays_unexplained(tmp_path):

@@ -12,6 +12,8 @@ noise, dropouts and sparse sampling.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from optics.lineprofile import LsfSettings
@@ -55,6 +57,10 @@ def unmodelled_shape(sag: SagMap, rng: np.random.Generator, rms_um: float = 0.01
     discrepancy a diagnosis must tolerate, not explain (the campaign's default); the
     bow and plating gradient of :func:`shape_discrepancy` are library companions, and
     a diagnosis that finds them is right, not fooled."""
+    if not (math.isfinite(rms_um) and rms_um >= 0.0):
+        raise ValueError(f"unmodelled_shape: rms_um={rms_um} must be a finite number >= 0 µm")
+    if not (math.isfinite(radius_mm) and radius_mm > 0.0):
+        raise ValueError(f"unmodelled_shape: radius_mm={radius_mm} must be a finite number > 0 mm")
     X, Y = sag.grid()
     c = rng.normal(size=len(FOIL_TERMS)) * rms_um / np.sqrt(len(FOIL_TERMS))
     extra = sum(ci * zernike_xy(n, m, X, Y, radius_mm) for ci, (n, m) in zip(c, FOIL_TERMS))
