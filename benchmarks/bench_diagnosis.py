@@ -5,6 +5,7 @@ numbers in results_diagnosis.md were pasted from its output.
     .venv/bin/python benchmarks/bench_diagnosis.py [--cases 208] [--workers 2] [--seed 1] [--cache-dir DIR]
         [--profiles extended|minimal] [--no-scenarios] [--out FILE] [--progress FILE.jsonl] [--profile-map-K K]
         [--psf-image] [--types KIND:EFFECT,...] [--discrepancy unmodelled|companions]
+        [--n-eff-from nominal|best_fit]
 
 ``--progress``: every finished case is appended there as a JSON line (partial results
 survive an interrupted run). ``--profiles``: the campaign's line-profile measurement set
@@ -15,11 +16,13 @@ cases also get a 128 K map of the same blank (``CampaignConfig.profile_map_K``).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
 
 from pipeline.diagnosis import diagnose
+from pipeline.diagnosis.engine import N_EFF_SOURCES, Criteria
 from pipeline.diagnosis.campaign import DISCREPANCIES, PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, parse_types, run_campaign
 
 HERE = Path(__file__).parent
@@ -42,11 +45,15 @@ def main(argv=None):
     ap.add_argument("--types", default=None, help="only these case types (kind:effect,...), same case indices")
     ap.add_argument("--discrepancy", default="unmodelled", choices=sorted(DISCREPANCIES),
                     help="the truth's model discrepancy (CampaignConfig.discrepancy)")
+    ap.add_argument("--n-eff-from", default="nominal", choices=N_EFF_SOURCES,
+                    help="residual the effective sample counts come from (Criteria.n_eff_from)")
     a = ap.parse_args(argv)
+    criteria = dataclasses.replace(CampaignConfig.criteria, n_eff_from=a.n_eff_from)
     out = {"scenarios": {}}
     for name in () if a.no_scenarios else ("cryo_astigmatism", "j_repolished", "hk_amplitude"):
         t = time.perf_counter()
-        d = diagnose(SCEN / name / "manifest.toml", cache_dir=a.cache_dir)
+        d = diagnose(SCEN / name / "manifest.toml", cache_dir=a.cache_dir,
+                     criteria=dataclasses.replace(Criteria(), n_eff_from=a.n_eff_from))
         b = d.best
         out["scenarios"][name] = {"verdict": d.verdict, "best": b.effect, "parameters": b.parameters,
                                   "uncertainties": b.uncertainties, "shrink": b.shrink_fraction,
@@ -56,7 +63,7 @@ def main(argv=None):
         print(name, json.dumps(out["scenarios"][name], default=float))
     cfg = CampaignConfig(n_cases=a.cases, seed=a.seed, workers=a.workers, profile_specs=PROFILE_SETS[a.profiles],
                          profile_map_K=a.profile_map_K, psf_image=PSF_IMAGE_SPEC if a.psf_image else None,
-                         only_types=parse_types(a.types), discrepancy=a.discrepancy)
+                         only_types=parse_types(a.types), discrepancy=a.discrepancy, criteria=criteria)
     res = run_campaign(cfg, cache_dir=a.cache_dir, progress=a.progress)
     res["profile_set"] = a.profiles
     out["campaign"] = res

@@ -291,3 +291,30 @@ def test_pair_gives_way_to_a_member_that_explains():
                    f("slit_width", -198.7, 0.92, overfit=True), f("temperature", -198.7, 0.92)):
         out, note = _member_explains(None, [pair, member], c, heldout=False)
         assert out[0] is pair and note == ""
+
+
+def test_evidence_counts_the_residual_after_the_best_fit(tmp_path):
+    # A smooth astigmatism dominates the nominal residual, so its correlation length is the
+    # effect's: counted from the nominal residual the map is worth few samples. Counted
+    # from the residual the best fit leaves (noise + model mismatch), the evidence grows;
+    # the fits and error bars stay the same (only the score's sample count changes).
+    from pipeline.diagnosis.engine import Criteria
+
+    p = _map(tmp_path, lambda x, y: 0.05 * zernike_xy(2, -2, x, y, 68.5))
+    nominal = diagnose(p, criteria=Criteria(), heldout=False)
+    post = diagnose(p, criteria=Criteria(n_eff_from="best_fit"), heldout=False)
+    assert post.baseline["n_eff_from"] == "best_fit" and nominal.baseline["n_eff_from"] == "nominal"
+    assert post.baseline["n_count"]["map"] > 2 * nominal.baseline["n_count"]["map"]
+    assert post.baseline["n_eff"] == nominal.baseline["n_eff"]
+    a, b = nominal.finding("astigmatism"), post.finding("astigmatism")
+    assert b.parameters == pytest.approx(a.parameters, rel=1e-6)
+    assert b.uncertainties == pytest.approx(a.uncertainties, rel=1e-6)
+    ratio = post.baseline["n_count"]["map"] / nominal.baseline["n_count"]["map"]
+    assert b.delta_bic < 0.9 * ratio * a.delta_bic < 0
+
+
+def test_n_eff_source_checked():
+    from pipeline.diagnosis.engine import Criteria
+
+    with pytest.raises(ValueError, match=r"n_eff_from='residual' must be one of \('nominal', 'best_fit'\)"):
+        Criteria(n_eff_from="residual")

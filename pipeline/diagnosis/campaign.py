@@ -309,6 +309,7 @@ def run_case(args) -> dict:
             "top_excess_explained_overall": best.excess_explained_overall if best else None,
             "top_unconstrained": list(best.unconstrained) if best else [],
             "unexplained_in": [g["measurement"] for g in d.unexplained_in],
+            "ranking_note": d.ranking_note, "n_eff": d.baseline["n_eff"], "n_count": d.baseline["n_count"],
             "seconds": time.perf_counter() - t0}
 
 

@@ -77,6 +77,7 @@ class Problem:
     weights: dict = field(default_factory=dict)
     n_eff: dict = field(default_factory=dict)
     noise: dict = field(default_factory=dict)
+    n_count: dict | None = None  # samples counted by the score, if not n_eff (engine.post_fit_n_eff)
 
     @property
     def names(self) -> list[str]:
@@ -97,6 +98,12 @@ class FitOutcome:
     success: bool
     nfev: int
     weighted_cost: float
+    n_count: dict | None = None
+
+    @property
+    def counts(self) -> dict:
+        """Effective samples per measurement that the score counts (``n_count``, else ``n_eff``)."""
+        return self.n_eff if self.n_count is None else self.n_count
 
     def weighted_rss(self, weights: dict) -> float:
         """``sum_i w_i^2 RSS_i``: the objective the fit minimises, over the measurements fitted."""
@@ -104,7 +111,7 @@ class FitOutcome:
 
     def bic(self, weights: dict) -> float:
         """``N_eff log(sum_i w_i^2 RSS_i / N_eff) + k log N_eff`` (consistent with the fit's objective)."""
-        neff = max(sum(self.n_eff.values()), 2.0)
+        neff = max(sum(self.counts.values()), 2.0)
         cost = self.weighted_rss(weights)
         return float(neff * math.log(max(cost, 1e-300) / neff) + self.k * math.log(neff))
 
@@ -243,5 +250,7 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
             cov[np.ix_(ok, ok)] = cov_ok
         for i, q in enumerate(params):
             errors[q.name] = float(math.sqrt(max(cov[i, i], 0.0)) * q.width) if np.isfinite(cov[i, i]) else float("inf")
+    count = None if problem.n_count is None else {m: problem.n_count[m] * n[m] / neff_n for m, neff_n in
+                                                   ((f.name, f.n) for f in fws)}
     return FitOutcome({q.name: float(p[q.name]) for q in params}, errors, d, rss, n, neff, k, success, nfev,
-                      float(np.sum(res_vec**2)))
+                      float(np.sum(res_vec**2)), count)
