@@ -313,8 +313,20 @@ def test_evidence_counts_the_residual_after_the_best_fit(tmp_path):
     assert b.delta_bic < 0.9 * ratio * a.delta_bic < 0
 
 
-def test_n_eff_source_checked():
-    from pipeline.diagnosis.engine import Criteria
+def test_n_eff_source_checked(tmp_path, capsys):
+    import argparse
+
+    from pipeline.diagnosis.cli import register
+    from pipeline.diagnosis.engine import N_EFF_SOURCES, Criteria
 
     with pytest.raises(ValueError, match=r"n_eff_from='residual' must be one of \('nominal', 'best_fit'\)"):
         Criteria(n_eff_from="residual")
+    # the CLI spells the choices out (start-up without the engine import): same set, same default
+    p = register(argparse.ArgumentParser().add_subparsers())
+    action = next(a for a in p._actions if a.dest == "n_eff_from")
+    assert tuple(action.choices) == N_EFF_SOURCES and action.default == Criteria().n_eff_from
+    assert main(["diagnose", str(_map(tmp_path)), "--out", str(tmp_path / "o"), "--no-heldout", "--n-eff-from", "best_fit"]) == 0
+    assert json.loads((tmp_path / "o" / "diagnosis.json").read_text())["baseline"]["n_eff_from"] == "best_fit"
+    with pytest.raises(SystemExit):
+        main(["diagnose", str(_map(tmp_path)), "--out", str(tmp_path / "o"), "--n-eff-from", "post"])
+    assert "--n-eff-from: invalid choice: 'post'" in capsys.readouterr().err

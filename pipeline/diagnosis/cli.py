@@ -14,14 +14,25 @@ from pathlib import Path
 __all__ = ["register", "main"]
 
 
+def _criteria(args, base=None):
+    from dataclasses import replace
+
+    from .engine import Criteria
+
+    return replace(Criteria() if base is None else base, n_eff_from=args.n_eff_from)
+
+
 def _run(args) -> int:
     if args.validate:
+        from dataclasses import replace
+
         from .campaign import PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, parse_types, run_campaign, write_campaign
 
         cfg = CampaignConfig(n_cases=args.cases, seed=args.seed, workers=args.workers,
                              profile_specs=PROFILE_SETS[args.profiles], profile_map_K=args.profile_map_K,
                              psf_image=PSF_IMAGE_SPEC if args.psf_image else None, only_types=parse_types(args.types),
                              discrepancy=args.discrepancy)
+        cfg = replace(cfg, criteria=_criteria(args, cfg.criteria))
         res = run_campaign(cfg, cache_dir=args.cache_dir)
         path = write_campaign(res, args.out)
         print(json.dumps(res["summary"], indent=1))
@@ -34,7 +45,8 @@ def _run(args) -> int:
     from .report import write_report
 
     effects = tuple(args.effects.split(",")) if args.effects else None
-    d = diagnose(args.manifest, effects=effects, cache_dir=args.cache_dir, heldout=not args.no_heldout)
+    d = diagnose(args.manifest, effects=effects, cache_dir=args.cache_dir, heldout=not args.no_heldout,
+                 criteria=_criteria(args))
     j, h = write_report(d, args.out)
     best = d.best
     print(f"verdict: {d.verdict}" + (f"; best: {best.effect} {best.parameters} shrink {best.shrink_fraction:.2f}" if best else ""))
@@ -49,6 +61,10 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                    help="cache of nominal FEA maps (default: ~/.cache/cryograting/diagnosis)")
     p.add_argument("--effects", default=None, help="comma-separated library effects to try (default: all)")
     p.add_argument("--no-heldout", action="store_true", help="skip the held-out validation")
+    p.add_argument("--n-eff-from", default="nominal", choices=("nominal", "best_fit"),
+                   help="residual whose correlation sets the effective samples the score counts: nominal "
+                        "(conservative, default) or best_fit (the best finding's residual: an optimistic bound on "
+                        "the evidence; fits and error bars unchanged)")
     p.add_argument("--validate", action="store_true", help="run the injection-recovery campaign instead")
     p.add_argument("--cases", type=int, default=200, help="campaign cases (with --validate)")
     p.add_argument("--seed", type=int, default=1, help="campaign seed (with --validate)")
