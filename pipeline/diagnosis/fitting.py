@@ -14,8 +14,9 @@ Score: ``BIC = N_eff log(sum_i w_i^2 RSS_i / N_eff) + k log N_eff`` with
 ``N_eff = sum_i n_eff_i``: a Gaussian likelihood whose per-measurement variances are
 proportional to the nominal residual variances (one common factor profiled out),
 counted over effective samples — the same weighted sum of squares the fit minimises,
-so the score ranks what the fit optimises. Lower is better; ``delta_bic`` below -10 is
-"very strong" evidence (Kass & Raftery 1995).
+so the score ranks what the fit optimises (``Problem.n_count``, if set, replaces the
+``n_eff_i`` the score counts, not the weights: see ``Criteria.n_eff_from``). Lower is
+better; ``delta_bic`` below -10 is "very strong" evidence (Kass & Raftery 1995).
 Uncertainties: ``s^2 (J^T J)^-1`` at the optimum with ``s^2`` the weighted residual per
 effective degree of freedom — i.e. inflated by the residual correlation. Because the
 weights are normalised by the nominal residual, not by the noise, ``s^2`` is already the
@@ -250,7 +251,6 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
             cov[np.ix_(ok, ok)] = cov_ok
         for i, q in enumerate(params):
             errors[q.name] = float(math.sqrt(max(cov[i, i], 0.0)) * q.width) if np.isfinite(cov[i, i]) else float("inf")
-    count = None if problem.n_count is None else {m: problem.n_count[m] * n[m] / neff_n for m, neff_n in
-                                                   ((f.name, f.n) for f in fws)}
+    count = None if problem.n_count is None else {f.name: problem.n_count[f.name] * n[f.name] / f.n for f in fws}
     return FitOutcome({q.name: float(p[q.name]) for q in params}, errors, d, rss, n, neff, k, success, nfev,
                       float(np.sum(res_vec**2)), count)
