@@ -9,14 +9,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 __all__ = ["register", "main"]
 
 
 def _criteria(args, base=None):
-    from dataclasses import replace
-
     from .engine import Criteria
 
     return replace(Criteria() if base is None else base, n_eff_from=args.n_eff_from)
@@ -24,8 +23,6 @@ def _criteria(args, base=None):
 
 def _run(args) -> int:
     if args.validate:
-        from dataclasses import replace
-
         from .campaign import PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, parse_types, run_campaign, write_campaign
 
         cfg = CampaignConfig(n_cases=args.cases, seed=args.seed, workers=args.workers,

@@ -220,12 +220,17 @@ def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, Fi
     for f in fws:
         r = f.residual({}, nom.deltas_um.get(f.name, f.delta0_um))
         sigma = f.noise_known or f.estimate_noise(r)
-        # maps and images: correlation along both axes
-        prob.n_eff[f.name] = effective_samples(r, f.x, f.y if f.kind != "line_profile" else None)
+        prob.n_eff[f.name] = _residual_n_eff(f, r)
         prob.noise[f.name] = float(sigma)
         s = max(math.sqrt(nom.rss[f.name] / f.n), 1e-12)
         prob.weights[f.name] = math.sqrt(prob.n_eff[f.name] / f.n) / s
     return prob, fit(prob, ())
+
+
+def _residual_n_eff(f, r) -> float:
+    """Effective samples of measurement ``f``'s residual ``r`` (maps and images: correlation
+    along both axes)."""
+    return effective_samples(r, f.x, f.y if f.kind != "line_profile" else None)
 
 
 _N_EFF_PASSES = 2  # re-counts (Criteria.n_eff_from = "best_fit")
@@ -244,11 +249,8 @@ def post_fit_n_eff(prob: Problem, fo: FitOutcome) -> dict:
     40-60 (four temperatures recovered within 3-14 % were at delta BIC -7.6 … -9.4);
     line profiles 10-20 -> 100-160 after a good fit; a map of an out-of-library bump,
     which no candidate takes up, 10 -> 12-23."""
-    out = {}
-    for f in prob.forwards:
-        r = f.residual(fo.parameters, fo.deltas_um.get(f.name, f.delta0_um))
-        out[f.name] = effective_samples(r, f.x, f.y if f.kind != "line_profile" else None)
-    return out
+    return {f.name: _residual_n_eff(f, f.residual(fo.parameters, fo.deltas_um.get(f.name, f.delta0_um)))
+            for f in prob.forwards}
 
 
 def recounted(prob: Problem, n_count: dict) -> Problem:
@@ -259,12 +261,10 @@ def recounted(prob: Problem, n_count: dict) -> Problem:
 
 
 def _recount(prob: Problem, fo: FitOutcome) -> FitOutcome:
+    """``fo`` (a fit of ``prob``'s weights) scored with ``prob``'s counts."""
     from dataclasses import replace
 
-    if prob.n_count is None:
-        return fo
-    sizes = {f.name: f.n for f in prob.forwards}
-    return replace(fo, n_count={m: prob.n_count[m] * fo.n[m] / sizes[m] for m in fo.n})
+    return replace(fo, n_count=prob.counts_for(fo.n))
 
 
 def _rank(prob: Problem, nom: FitOutcome, cands, criteria: Criteria, memo: dict) -> tuple[list, dict, dict]:

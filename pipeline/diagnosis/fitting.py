@@ -84,6 +84,14 @@ class Problem:
     def names(self) -> list[str]:
         return [f.name for f in self.forwards]
 
+    def counts_for(self, n: dict) -> dict | None:
+        """The score's counts of a fit that used ``n[m]`` samples of measurement m (``None``
+        when the score counts ``n_eff``)."""
+        if self.n_count is None:
+            return None
+        size = {f.name: f.n for f in self.forwards}
+        return {m: self.n_count[m] * n[m] / size[m] for m in n}
+
 
 @dataclass(frozen=True, eq=False)
 class FitOutcome:
@@ -251,6 +259,5 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
             cov[np.ix_(ok, ok)] = cov_ok
         for i, q in enumerate(params):
             errors[q.name] = float(math.sqrt(max(cov[i, i], 0.0)) * q.width) if np.isfinite(cov[i, i]) else float("inf")
-    count = None if problem.n_count is None else {f.name: problem.n_count[f.name] * n[f.name] / f.n for f in fws}
     return FitOutcome({q.name: float(p[q.name]) for q in params}, errors, d, rss, n, neff, k, success, nfev,
-                      float(np.sum(res_vec**2)), count)
+                      float(np.sum(res_vec**2)), problem.counts_for(n))
