@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = [
+    "MAX_GRATING_TURN_DEG",
     "Grating",
     "GRATINGS",
     "PixelScale",
@@ -67,6 +68,12 @@ class Spectrograph:
 
 #: The instrument as modelled in the paper.
 SPIFFI = Spectrograph()
+
+#: Largest grating rotation (deg) from the design angle for which the fixed-incidence
+#: optical model is used. The paper measured off-band lines on other gratings turning
+#: them "by no more than a few degrees" (appendix A): 1.25 µm needs 1.9 deg on the H
+#: grating (order -3) and 2.0 deg on the K grating (order -4), a band edge 1.7 deg.
+MAX_GRATING_TURN_DEG = 5.0
 
 
 @dataclass(frozen=True)
@@ -156,6 +163,63 @@ class Grating:
                 f"order {m} (|sin beta| > 1); valid range for order {m} is {lo:.4f}..{hi:.4f} um"
             )
         return np.degrees(np.arcsin(s))
+
+    def turn_deg(self, wavelength_um: float, order: int | None = None) -> float:
+        """Grating rotation (deg) that brings ``wavelength_um`` in ``order`` onto the camera
+        axis, i.e. diffracts it at the blaze-order band centre's deviation angle.
+
+        The spectrograph fixes the deviation ``Delta = beta_c - alpha`` between collimator
+        and camera; turned by ``t`` the grating sees ``alpha + t`` and must diffract at
+        ``alpha + t + Delta``, so ``2 sin(alpha + t + Delta/2) cos(Delta/2) = m lambda / d``.
+        """
+        m = self._order(order)
+        self.beta_deg(wavelength_um, m)  # refuses an evanescent order with its valid range
+        alpha = self.incidence_deg
+        half = 0.5 * (float(self.beta_deg(self.centre_um, self.order)) - alpha)
+        s = m * float(wavelength_um) / (2 * self.groove_spacing_um * math.cos(math.radians(half)))
+        if abs(s) > 1:
+            return math.copysign(180.0, s)
+        return math.degrees(math.asin(s)) - alpha - half
+
+    def domain_um(self, order: int | None = None,
+                  max_turn_deg: float | None = None) -> tuple[float, float]:
+        """Wavelengths (µm) that ``order`` reaches with the grating turned by at most
+        ``max_turn_deg`` (default :data:`MAX_GRATING_TURN_DEG`)."""
+        m = self._order(order)
+        t = MAX_GRATING_TURN_DEG if max_turn_deg is None else max_turn_deg
+        alpha = self.incidence_deg
+        half = 0.5 * (float(self.beta_deg(self.centre_um, self.order)) - alpha)
+        c = 2 * self.groove_spacing_um * math.cos(math.radians(half)) / m
+        lo, hi = sorted(c * math.sin(math.radians(alpha + half + k * t)) for k in (-1, 1))
+        return max(lo, 0.0), hi
+
+    def check_in_domain(self, wavelength_um: float, order: int | None = None,
+                        max_turn_deg: float | None = None) -> None:
+        """Refuse a wavelength/order that the fixed-incidence optical model does not describe.
+
+        The optical model keeps the incidence angle of the blaze-order design (paper,
+        Table 3). The paper's off-band measurements turned the gratings by no more than
+        "a few degrees"; beyond ``max_turn_deg`` (default :data:`MAX_GRATING_TURN_DEG`)
+        the model's geometry (beam footprint, anamorphic factor, camera field) is that of
+        another instrument, so a number it gave (a resolving power, say) would be no
+        prediction.
+
+        Raises
+        ------
+        ValueError
+            Naming the wavelength, the order, the turn it needs and the valid wavelength
+            interval for that order.
+        """
+        m = self._order(order)
+        t = MAX_GRATING_TURN_DEG if max_turn_deg is None else max_turn_deg
+        turn = self.turn_deg(wavelength_um, m)
+        if abs(turn) <= t:
+            return
+        lo, hi = self.domain_um(m, t)
+        raise ValueError(
+            f"grating {self.name}: wavelength_um={float(wavelength_um):g} in order {m} needs the grating "
+            f"turned by {turn:+.1f} deg from its design angle; the optical model keeps the design "
+            f"incidence and is valid for turns up to {t:g} deg: {lo:.4f}..{hi:.4f} um in order {m}")
 
     def angular_dispersion_rad_per_um(self, wavelength_um, order: int | None = None) -> np.ndarray:
         """Signed ``d beta / d lambda = m / (d cos beta)`` in rad per µm of wavelength."""

@@ -79,7 +79,8 @@ class LineProfileResult:
 def _geometry(grating, wavelength_um, order, spectrograph):
     g = get_grating(grating)
     m = g.order if order is None else int(order)
-    beta = float(g.beta_deg(wavelength_um, m))  # raises for evanescent orders
+    g.check_in_domain(wavelength_um, m)  # also refuses evanescent orders
+    beta = float(g.beta_deg(wavelength_um, m))
     anam = float(g.anamorphic_factor(wavelength_um, m))
     return g, m, beta, anam
 
@@ -187,12 +188,46 @@ def line_profile(grating: str | Grating, wavelength_um: float, pixel_scale_mas: 
     return LineProfileResult(det, pc, info)
 
 
+def _check_psf_sampling(airy_um: float, detector_step_um: float, window_um: float | None, n_fft: int) -> None:
+    """Refuse a PSF sampling that the ``n_fft`` FFT cannot deliver, instead of cropping or
+    aliasing silently.
+
+    ``airy_um`` is ``lambda f_cam / D`` on the finer detector axis (µm). The pupil fits in
+    the FFT only if ``detector_step_um <= airy_um`` (Nyquist for the field); the image
+    spans ``n_fft * detector_step_um``, so ``window_um`` (the half width asked for) must
+    be at most half of that, and at least two ``airy_um`` so the image holds the core.
+    """
+    for name, v in (("detector_step_um", detector_step_um), ("window_um", window_um)):
+        if v is None and name == "window_um":
+            continue
+        if not (isinstance(v, (int, float, np.floating, np.integer)) and np.isfinite(v) and v > 0):
+            raise ValueError(f"{name}={v!r} must be a finite number > 0 (µm)")
+    if not (isinstance(n_fft, (int, np.integer)) and n_fft >= 64):
+        raise ValueError(f"n_fft={n_fft!r} must be an integer >= 64")
+    if detector_step_um > airy_um:
+        raise ValueError(f"detector_step_um={detector_step_um:g} is coarser than the PSF's Nyquist step "
+                         f"lambda f_cam / D = {airy_um:.3g} um; valid: 0 < detector_step_um <= {airy_um:.3g}")
+    lo, hi = 2 * airy_um, 0.5 * n_fft * detector_step_um
+    if hi < lo:
+        raise ValueError(f"detector_step_um={detector_step_um:g} is so fine that an {n_fft}-point image spans "
+                         f"only +-{hi:.3g} um, less than the PSF core; valid: {2 * lo / n_fft:.3g} <= "
+                         f"detector_step_um <= {airy_um:.3g}")
+    if window_um is not None and not lo <= window_um <= hi:
+        raise ValueError(
+            f"window_um={window_um:g} is outside {lo:.3g}..{hi:.3g} um: with detector_step_um="
+            f"{detector_step_um:g} an {n_fft}-point image spans +-{hi:.3g} um, and the window must hold "
+            f"the PSF core (2 lambda f_cam / D); change detector_step_um or window_um")
+
+
 def point_psf(grating: str | Grating, wavelength_um: float, sag: SagMap | None = None, *,
               order: int | None = None, pupil_shift_mm: tuple[float, float] = (0.0, 0.0),
               collimator_zernike_um: dict | None = DEFAULT_COLLIMATOR_ZERNIKE_UM,
               spectrograph: Spectrograph = SPIFFI, detector_step_um: float = 0.5, n_fft: int = 1024,
-              window_um: float = 150.0, workers: int = 2) -> PSF:
+              window_um: float | None = 150.0, workers: int = 2) -> PSF:
     """Point-source PSF (full 110 mm pupil) on the detector, intensity[y, x], unit volume.
+
+    ``window_um`` is the half width (µm) of the image returned, at most half the FFT
+    field ``n_fft * detector_step_um``; None returns the whole (periodic) FFT field.
 
     The pupil steps are chosen so the PSF is sampled at ``detector_step_um`` on both
     axes with an ``n_fft`` × ``n_fft`` FFT. ``offset_x_um`` is along dispersion
@@ -201,12 +236,10 @@ def point_psf(grating: str | Grating, wavelength_um: float, sag: SagMap | None =
     g, m, beta, anam = _geometry(grating, wavelength_um, order, spectrograph)
     R = 0.5 * spectrograph.pupil_diameter_mm
     f_cam = spectrograph.camera_focal_mm
+    _check_psf_sampling(wavelength_um * f_cam * min(anam, 1.0) / (2 * R), detector_step_um, window_um, n_fft)
     d_xi = wavelength_um * f_cam * anam / (n_fft * detector_step_um)
     d_eta = wavelength_um * f_cam / (n_fft * detector_step_um)
     xi, eta = centred_axis(d_xi, R), centred_axis(d_eta, R)
-    if max(xi.size, eta.size) > n_fft:
-        raise ValueError(f"n_fft={n_fft} is smaller than the pupil ({eta.size} x {xi.size} samples); "
-                         "increase n_fft or detector_step_um")
     field2d = pupil_rows(g, wavelength_um, xi, eta, beta, sag, tuple(pupil_shift_mm), collimator_zernike_um,
                          spectrograph, min(d_xi, d_eta))
     p = psf(field2d, xi, eta, wavelength_um, f_cam, anam, (n_fft, n_fft), window_um, workers)

@@ -202,7 +202,7 @@ def main(argv: list[str] | None = None) -> int:
     a = parser.parse_args(argv)
     try:
         return int(a.func(a) or 0)
-    except (ValueError, FileNotFoundError, NotADirectoryError, PermissionError) as exc:
+    except (ValueError, OSError) as exc:  # OSError: unwritable or full output, missing file
         print(f"cryograting {a.command}: error: {exc}", file=sys.stderr)
         return 2
 

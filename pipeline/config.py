@@ -355,7 +355,7 @@ class ProfileSpec:
             for o in self.order:
                 for wl in self.wavelengths_for(g):
                     try:
-                        get_grating(g).beta_deg(wl, o)
+                        get_grating(g).check_in_domain(wl, o)
                     except ValueError as exc:
                         raise ConfigError("wavelength_um", wl, str(exc)) from None
 
@@ -465,7 +465,7 @@ class PsfFigure:
             try:
                 g = parse_axis(f"lines[{i}].grating", line[0], "grating", PROFILE_KEYS["grating"])[0]
                 wl = float(parse_axis(f"lines[{i}].wavelength_um", line[1], "", PROFILE_KEYS["wavelength_um"])[0])
-                get_grating(g).beta_deg(wl)
+                get_grating(g).check_in_domain(wl)
             except ValueError as exc:
                 raise (exc if isinstance(exc, ConfigError) else ConfigError(f"lines[{i}]", line, str(exc))) from None
             lines.append((g, wl))

@@ -9,14 +9,14 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
 import numpy as np
 
 __all__ = ["register", "main", "load_sag_map"]
 
 
-from pipeline.interchange import load_sag_map  # noqa: E402  (moved; .npz/.nc/.int/.dat/.csv)
+from pipeline.interchange import load_sag_map  # noqa: E402  (.npz/.nc/.int/.dat/.csv)
+from pipeline.io_common import atomic_path, atomic_write, output_dir  # noqa: E402
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
@@ -26,7 +26,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     src.add_argument("--sag", metavar="FILE", help="sag map (.npz or .nc, µm, mm, grating frame)")
     src.add_argument("--quilt-pv-um", type=float, help="analytic quilt P/V (µm); 0 = perfect grating")
     p.add_argument("--quilt-form", choices=["product", "sum"], default="sum",
-                   help="analytic quilt form (default: sum, see optics/NOTES.md)")
+                   help="analytic quilt form (default: sum, see optics.sagmap.quilt_sag_map)")
     p.add_argument("--pupil-shift-mm", type=float, nargs=2, default=(0.0, 0.0), metavar=("X", "Y"),
                    help="footprint shift on the grating (mm)")
     p.add_argument("--no-collimator-wfe", action="store_true", help="omit the default collimator wavefront error")
@@ -57,19 +57,20 @@ def _run_lsf(a) -> int:
     from optics.lineprofile import line_profile
     from optics.metrics import profile_metrics
 
+    out = output_dir(a.out)
     sag = _sag_from_args(a)
     kw = dict(order=a.order, pupil_shift_mm=tuple(a.pupil_shift_mm), torsion_shift_x_mm=a.torsion_shift_x_mm,
               slit_position=a.slit_position, collimator_zernike_um=_wfe(a))
     res = line_profile(a.grating, a.wavelength_um, a.pixel_scale_mas, sag, **kw)
     perfect = line_profile(a.grating, a.wavelength_um, a.pixel_scale_mas, None, **kw)
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
     d = res.detected
-    np.savetxt(out / "lsf.csv", np.column_stack([d.offset_um, d.intensity]), delimiter=",",
-               header="offset_um,intensity", comments="", fmt="%.6g")
+    with atomic_write(out / "lsf.csv") as fh:
+        np.savetxt(fh, np.column_stack([d.offset_um, d.intensity]), delimiter=",",
+                   header="offset_um,intensity", comments="", fmt="%.6g")
     report = {"info": res.info, "metrics": profile_metrics(d), "perfect_metrics": profile_metrics(perfect.detected),
               "partially_coherent_metrics": profile_metrics(res.partially_coherent)}
-    (out / "metrics.json").write_text(json.dumps(report, indent=2, default=float))
+    with atomic_write(out / "metrics.json") as fh:
+        fh.write(json.dumps(report, indent=2, default=float))
     fig, ax = plt.subplots(figsize=(7, 4))
     ax.plot(perfect.detected.offset_um, perfect.detected.intensity, color="0.5", label="perfect grating")
     ax.plot(d.offset_um, d.intensity, color="C0", label=res.info["sag"] or "deformed")
@@ -80,7 +81,8 @@ def _run_lsf(a) -> int:
                  f"{res.info['pixel_scale_mas']} mas, shift {res.info['pupil_shift_mm']} mm")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out / "lsf.png", dpi=120)
+    with atomic_path(out / "lsf.png") as tmp:
+        fig.savefig(tmp, dpi=120)
     plt.close(fig)
     print(f"wrote {out / 'lsf.csv'}, metrics.json, lsf.png  (FWHM {report['metrics']['fwhm_um']:.1f} µm, "
           f"R {report['metrics'].get('resolving_power', float('nan')):.0f})")
@@ -95,13 +97,13 @@ def _run_psf(a) -> int:
 
     from optics.lineprofile import point_psf
 
+    out = output_dir(a.out)
     p = point_psf(a.grating, a.wavelength_um, _sag_from_args(a), order=a.order,
                   pupil_shift_mm=tuple(a.pupil_shift_mm), collimator_zernike_um=_wfe(a),
                   detector_step_um=a.detector_step_um, window_um=a.window_um)
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(out / "psf.npz", offset_x_um=p.offset_x_um, offset_y_um=p.offset_y_um,
-                        intensity=p.intensity, meta=json.dumps(p.meta, default=float))
+    with atomic_write(out / "psf.npz", "wb") as fh:
+        np.savez_compressed(fh, offset_x_um=p.offset_x_um, offset_y_um=p.offset_y_um,
+                            intensity=p.intensity, meta=json.dumps(p.meta, default=float))
     fig, ax = plt.subplots(figsize=(6, 5))
     ext = [p.offset_x_um[0], p.offset_x_um[-1], p.offset_y_um[0], p.offset_y_um[-1]]
     im = ax.imshow(np.log10(p.intensity / p.intensity.max() + 1e-6), origin="lower", extent=ext, vmin=-5,
@@ -110,7 +112,8 @@ def _run_psf(a) -> int:
     ax.set(xlabel="x: dispersion (µm)", ylabel="y: along slit (µm)",
            title=f"PSF {p.meta['grating']} {a.wavelength_um:g} µm order {p.meta['order']}")
     fig.tight_layout()
-    fig.savefig(out / "psf.png", dpi=120)
+    with atomic_path(out / "psf.png") as tmp:
+        fig.savefig(tmp, dpi=120)
     plt.close(fig)
     print(f"wrote {out / 'psf.npz'}, psf.png")
     return 0
@@ -139,5 +142,5 @@ def main(argv=None) -> int:
     a = parser.parse_args(argv)
     try:
         return a.func(a)
-    except ValueError as exc:
+    except (ValueError, OSError) as exc:  # OSError: unwritable or full output
         parser.exit(2, f"cryograting {a.command}: error: {exc}\n")

@@ -141,7 +141,7 @@ def test_otf_cutoff_bounds_the_image_spectrum():
 
     ps = point_psf("J", 1.25, None, order=-2, pupil_shift_mm=(3.0, -2.0),
                    collimator_zernike_um={(2, -2): 0.15, (3, 1): 0.1}, detector_step_um=0.5, n_fft=512,
-                   window_um=200.0, workers=1)
+                   window_um=None, workers=1)
     fx_c, fy_c = otf_cutoff_per_um("J", 1.25, -2)
     power = np.abs(np.fft.fft2(ps.intensity)) ** 2
     fy, fx = np.meshgrid(np.fft.fftfreq(ps.offset_y_um.size, 0.5), np.fft.fftfreq(ps.offset_x_um.size, 0.5),
