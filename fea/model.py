@@ -40,16 +40,25 @@ _SYM_COMPONENT = {"sym_x": 0, "sym_y": 1, "sym_z": 2}
 
 @dataclass(frozen=True)
 class ThermalLoad:
-    """Uniform cool-down from ``warm_K`` to ``cold_K`` (K)."""
+    """Uniform cool-down from ``warm_K`` to ``cold_K`` (K).
+
+    ``cold_K`` must lie below ``warm_K``: a "cold" temperature above the stress-free one
+    is a heating case, which the model solves just as well (linear in the strain) but
+    which is almost always a swapped pair of numbers, so it needs ``heating=True``.
+    """
 
     warm_K: float = 293.0
     cold_K: float = 80.0
+    heating: bool = False
 
     def __post_init__(self) -> None:
         for name in ("warm_K", "cold_K"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ValueError(f"{name}={v} must be a positive temperature in kelvin")
+        if not self.heating and not self.cold_K < self.warm_K:
+            raise ValueError(f"cold_K={self.cold_K:g} K must be below warm_K={self.warm_K:g} K (a cool-down); "
+                             "a warm-up is solved only through the API, with ThermalLoad(heating=True)")
 
 
 @dataclass(frozen=True)

@@ -278,8 +278,8 @@ def _expand_cases(groups) -> list[FEACase]:
     for g, full in rows:
         in_group = {k for k, v in g.axes if len(v) > 1}
         cases.append(FEACase(_label(full, g.name, varying, in_group), g.name, _case_params(full, extras), full))
-    labels = [c.label for c in cases]
-    dup = next((x for x in labels if labels.count(x) > 1), None)
+    labels: set[str] = set()
+    dup = next((c.label for c in cases if c.label in labels or labels.add(c.label)), None)
     if dup is not None:
         raise ConfigError("fea.cases", ..., f"two different cases get the label {dup!r}; "
                           "give the [[fea.cases]] tables distinct names")

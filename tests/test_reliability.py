@@ -103,3 +103,15 @@ def test_psf_npz_is_not_left_half_written(tmp_path, monkeypatch, capsys):
     assert "No space left on device" in capsys.readouterr().err
     assert not (out / "psf.npz").exists()
     assert not list(out.glob(".psf.npz*"))
+
+
+def test_cold_above_warm_is_refused_unless_heating_is_asked_for():
+    from fea.model import ThermalLoad
+    from pipeline.config import ConfigError, loads_study_config
+
+    with pytest.raises(ValueError, match=r"cold_K=300 K must be below warm_K=293 K"):
+        ThermalLoad(warm_K=293.0, cold_K=300.0)
+    assert ThermalLoad(warm_K=293.0, cold_K=300.0, heating=True).cold_K == 300.0
+    with pytest.raises(ConfigError, match=r"cold_K.*must be below warm_K"):
+        loads_study_config("[fea]\ncold_K = 295\n")
+
