@@ -116,10 +116,10 @@ def _check_case(combo: dict, full: dict) -> None:
     try:
         if full["stress_scale"] <= 0:
             raise ValueError(f"stress_scale={full['stress_scale']} must be > 0")
-        _split(_case_params(full, [k for k in full if k not in _CORE]))
-        for mat in ("substrate", "film"):
+        for mat in ("substrate", "film"):  # the material's data range first: the most specific message
             for t in ("cold_K", "warm_K"):
                 get_material(full[mat]).check_temperature(full[t], t)
+        _split(_case_params(full, [k for k in full if k not in _CORE]))
     except ValueError as exc:
         m = re.match(r"\s*(\w+)=", str(exc))
         key = _FIELD_TO_KEY.get(m.group(1), m.group(1)) if m else None
