@@ -1,6 +1,6 @@
 """Benchmark of the sim-to-real diagnosis: the three paper scenarios and the
-injection-recovery campaign. Writes benchmarks/results_diagnosis_raw.json; the
-numbers in results_diagnosis.md were pasted from its output.
+injection-recovery campaign. Writes the per-case rows and the summary as JSON (``--out``);
+``benchmarks/results_diagnosis.md`` gives the tables and the command behind each.
 
     .venv/bin/python benchmarks/bench_diagnosis.py [--cases 208] [--workers 2] [--seed 1] [--cache-dir DIR]
         [--profiles extended|minimal] [--no-scenarios] [--out FILE] [--progress FILE.jsonl] [--profile-map-K K]

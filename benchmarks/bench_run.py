@@ -5,7 +5,7 @@ Run on demand (not a test):  .venv/bin/python benchmarks/bench_run.py [OUT.md]
 Runs the CLI in a fresh output directory as a child process (so nothing is reused from an
 earlier study; the mesh and film-operator caches under meshes/cache are, as on any second
 run on a machine) and records wall time, peak memory of the child and the stage times it
-prints. Target (issue 4): <= 3 min on 2 cores.
+prints. Target: <= 3 min on 2 cores.
 """
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ Run on demand (not a test):
 
 Measures the greedy build (full solves), the 1000 evaluations (P/V and RMS over the
 centre and the whole face, as the sweep writes them) and the P/V error against full
-solves at random points. Target (issue 4): 1000 points <= 60 s on 2 cores, <= 1 % error.
+solves at random points. Target: 1000 points <= 60 s on 2 cores, <= 1 % error.
 """
 from __future__ import annotations
 

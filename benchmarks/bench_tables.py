@@ -8,7 +8,7 @@ Times ``prepare`` + ``PreparedBlank.solve_many`` over the 15 cases — what
 FEA runner solves them as one lockstep block) — or, with ``--sequential``, ``solve`` per case.
 The mesh comes from the mesh cache and the film operators from the operator cache when they
 are there (as on any second run on a machine; the first run builds both).
-Target (issue 2): <= 60 s wall, <= 4 GB peak.
+Target: <= 60 s wall, <= 4 GB peak.
 """
 from __future__ import annotations
 

@@ -101,7 +101,7 @@ def _set_pardiso_options(solver) -> None:
     solver.set_iparm(2, 2)    # nested-dissection (METIS) fill-in reducing ordering
     solver.set_iparm(10, 8)   # pivot perturbation 1e-8 (MKL's default for SPD)
     solver.set_iparm(18, -1)  # report the factor's non-zeros (diagnostics)
-    solver.set_iparm(24, 1)   # two-level parallel factorisation
+    solver.set_iparm(24, 1)   # two-level parallel factorisation (10, the improved variant, segfaults in this MKL)
     # iparm 8 = 0: no iterative refinement; a CG preconditioner does not need it and
     # direct solves check their own residual.
 

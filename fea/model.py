@@ -255,8 +255,8 @@ class PreparedBlank:
         rtol : float
             Relative residual the iterative solve must reach (large meshes). Measured on
             the default mesh (holes-only 200 µm, the slowest case): residual 1e-5 → P/V
-            within 1e-6 of the fully converged one, 4e-5 → 7e-6, 1e-3 → 2e-4 (session 2, CG then ran
-            to rtol/10); since session 3 CG stops at rtol/2: at 1e-5, P/V within 7e-7 relative
+            within 1e-6 of the fully converged one, 4e-5 → 7e-6, 1e-3 → 2e-4 (CG run to
+            rtol/10); CG stops at rtol/2: at 1e-5, P/V within 7e-7 relative
             on four table cases (holes-only 200 µm: 2e-8); so 1e-5
             keeps the solver error 1000x below the discretisation error.
 

@@ -26,7 +26,7 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     src.add_argument("--sag", metavar="FILE", help="sag map (.npz or .nc, µm, mm, grating frame)")
     src.add_argument("--quilt-pv-um", type=float, help="analytic quilt P/V (µm); 0 = perfect grating")
     p.add_argument("--quilt-form", choices=["product", "sum"], default="sum",
-                   help="analytic quilt form (default: sum, see optics.sagmap.quilt_sag_map)")
+                   help="analytic quilt form (default: sum, see docs/physics.md)")
     p.add_argument("--pupil-shift-mm", type=float, nargs=2, default=(0.0, 0.0), metavar=("X", "Y"),
                    help="footprint shift on the grating (mm)")
     p.add_argument("--no-collimator-wfe", action="store_true", help="omit the default collimator wavefront error")

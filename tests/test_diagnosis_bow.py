@@ -236,7 +236,7 @@ def test_slit_explained_beside_an_unexplained_map(tmp_path):
     slit: slit_width explains the profiles (excess where it acts: measured 0.95), the
     verdict is ``explained``, and the map, which a slit width does not change, is named in
     ``unexplained_in`` (chi^2 excess ~130 sd) instead of lowering the explained fraction
-    (over all data: measured 0.64; in campaign case 23 the map and a PSF image took it to
+    (over all data: measured 0.64; in a slit-width campaign case the map and a PSF image took it to
     0.31 and the verdict to ``unexplained``)."""
     from pipeline.diagnosis.synth import synthetic_profile, unmodelled_shape, write_profile_csv
 

@@ -66,9 +66,9 @@ def test_reduced_campaign(cache):
     250/100/25 mas + 1.10/1.175/1.40 um at 25 mas: library effects mostly recognised and
     recovered, out-of-library ones not attributed (full campaign, 208 cases:
     benchmarks/results_diagnosis.md). Types cycle surfaces first, so 19 cases = 2 per
-    surface type (the same 12 surface cases as the former 26-case test: cases are seeded by
-    (seed, index)) + 1 per profile type, keeping the CI cost of six profiles per case at
-    about that of the former 2 x 3 profiles."""
+    surface type (12 surface cases: fewer leave the surface check to one or two maps; cases are
+    seeded by (seed, index)) + 1 per profile type, so six profiles per case cost CI about what
+    2 x 3 profiles per type would."""
     cfg = CampaignConfig(n_cases=19, seed=7, workers=2, truth_mesh="default")
     assert cfg.profile_specs == PROFILE_SETS["extended"]
     res = run_campaign(cfg, cache_dir=cache)

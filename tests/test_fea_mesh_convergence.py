@@ -1,4 +1,4 @@
-"""Mesh convergence of P/V_center (issue 2, verification 4).
+"""Mesh convergence of P/V_center (verification against the converged mesh ladder).
 
 The ladder up to 858 k DOFs takes ~20 min and 9 GB, too much for CI, so it is recorded in
 ``tests/data/mesh_convergence.csv`` (by ``benchmarks/mesh_convergence.py``) and checked here;

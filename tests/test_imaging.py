@@ -200,8 +200,8 @@ def test_psf_matches_prysm():
 
 
 # ------------------------------------------------------------------ the paper's behaviour (analytic quilt)
-# FEA maps arrive later; the stand-in is quilt_sag_map(0.82, form="sum") (P/V of the paper's
-# 200/100 case; the separable form puts a clean +-1st order along x, see optics/NOTES.md).
+# The stand-in for an FEA map is quilt_sag_map(0.82, form="sum") (P/V of the paper's
+# 200/100 case; the separable form puts a clean +-1st order along x, see docs/physics.md).
 SUM_QUILT = quilt_sag_map(0.82, form="sum")
 
 

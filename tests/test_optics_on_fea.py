@@ -1,7 +1,7 @@
 """The optics stage on an FEA sag map (not an analytic quilt), and where it departs from the paper.
 
 The 200 µm / 50 % FEA map (coarse mesh) is rescaled to a chosen P/V_center (the sag is
-linear in the film stress). Measured when written (NOTES.md):
+linear in the film stress). Measured (docs/physics.md):
 
 * at the paper's P/V_center = 0.82 µm the J 1.25 µm profile is single and flat-topped at
   250/100/25 mas — the FEA quilt's 21 mm fundamental is 0.176 µm, against 0.205 µm for a

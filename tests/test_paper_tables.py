@@ -2,7 +2,7 @@
 
 Reference values: ``tests/data/paper_pv_center.csv`` (with their source). One global
 calibration constant (fea.calibration.STRESS_SCALE) is used unchanged for every row.
-Targets (issue 2): Table 1 within ±5 %, holes-only within ±15 %, Table 2 cases deform in
+Targets: Table 1 within ±5 %, holes-only within ±15 %, Table 2 cases deform in
 opposite directions, no film gives zero. The surfaces-only rows are a documented known
 discrepancy (README): tested for their sign and for the measured model/paper ratio.
 """
@@ -65,7 +65,7 @@ def test_every_row_deforms_in_the_paper_direction(rows):
 
 
 def test_surfaces_only_known_discrepancy(rows):
-    """Model/paper ratio for outer-surfaces-only: measured 0.645-0.661 (README, NOTES.md)."""
+    """Model/paper ratio for outer-surfaces-only: measured 0.645-0.661 (README, docs/physics.md)."""
     ratios = np.array([r.model_pv_um / r.paper_pv_um for r in rows if r.coverage == "surfaces"])
     assert len(ratios) == 3
     assert np.all((ratios > 0.60) & (ratios < 0.72)), ratios

@@ -1,4 +1,4 @@
-"""Sim-to-real diagnosis (issue 5): where the gap between measurements and the nominal
+"""Sim-to-real diagnosis: where the gap between measurements and the nominal
 simulation lies, which unmodelled effect explains it, how far it shrinks, checked on
 withheld data and by an injection-recovery campaign.
 

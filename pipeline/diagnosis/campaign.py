@@ -23,11 +23,10 @@ Out-of-library cases should end ``unexplained`` (or ``no_gap``).
 The model discrepancy (``CampaignConfig.discrepancy``): ``"unmodelled"`` (default) is a
 0.01 µm RMS trefoil/tetrafoil/pentafoil surface error (:func:`~.synth.unmodelled_shape`),
 outside the library, so that it stays in every case's residual; ``"companions"`` is the
-first campaigns' bow and plating gradient (:func:`~.synth.shape_discrepancy`). Those are
+bow and plating gradient of the paper scenarios (:func:`~.synth.shape_discrepancy`). Those are
 library companions: a map or a focal-plane image finds them (delta BIC -165 … -512), so
 with them every out-of-library case also carries a library effect, and a companion-only
-``explained`` verdict on it is a correct finding counted as a false attribution
-(results_diagnosis.md, session 6).
+``explained`` verdict on it is a correct finding counted as a false attribution.
 
 Cases are independent and seeded by ``(seed, index)``; they run in worker processes.
 The nominal and truth FEA maps are computed once (disk cache) before the pool starts.
@@ -70,7 +69,7 @@ CASE_TYPES = (
 #: team measures in a J-band line-profile test (the paper's set: all three pixel scales at
 #: 1.25 µm, lines at the band edges 1.10 / 1.40 µm and at 1.175 µm at 25 mas). With
 #: white noise alone the extra profiles shrink the collimator errors only 1.2-1.4x
-#: (Fisher matrix, results_diagnosis.md); what they buy is robustness against the model
+#: (Fisher matrix, benchmarks/results_diagnosis.md); what they buy is robustness against the model
 #: discrepancy: the truth's bow and plating gradient can no longer be absorbed by
 #: trading the collimator's defocus against its oblique astigmatism on one pixel scale.
 PROFILE_SETS = {

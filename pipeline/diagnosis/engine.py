@@ -17,7 +17,7 @@ Decision logic (thresholds in :class:`Criteria`, passed explicitly):
    residual the best-ranked finding leaves (:func:`post_fit_n_eff`) and re-ranks, fits and
    error bars unchanged: the evidence is then set mostly by the white noise, while a
    smooth effect competes with the smooth model mismatch, so it is an optimistic bound.
-   Measured (session 8): it turns four seed-1 campaign surface temperatures recovered
+   Measured: it turns four seed-1 campaign surface temperatures recovered
    within 3-14 % from delta BIC -7.6 … -9.4 into -39 … -53 (``explained``), but also
    attributes one more off-centre bump to ``blank_bow`` (reduced campaign, -9.8 -> -17.1)
    and lets ``temperature+registration`` beat ``registration`` on a map whose model
@@ -67,7 +67,7 @@ negligible noise the two coincide. Clipped to [0, 1].
 The sums run over the measurements of the kinds the finding's own effects change
 (:func:`acting_on`; companions excluded); ``excess_explained_overall`` runs over all.
 Over all, an unmodelled discrepancy in one measurement vetoes an effect that explains
-another completely: campaign case 23 (six line profiles, a 128 K map and a focal-plane
+another completely: a campaign case (six line profiles, a 128 K map and a focal-plane
 image, with the campaign's out-of-library trefoil/tetrafoil/pentafoil discrepancy): a
 35.3 µm slit takes the profiles from chi2_red 10-31 to 0.7-1.5, but the map (1.50 -> 1.46)
 and the image (1.35 -> 1.32), which a slit width does not change, carry most of the
@@ -357,7 +357,7 @@ def has_gap(prob: Problem, nom: FitOutcome, c: Criteria) -> bool:
     the relative standard deviation of an estimated noise (:func:`_noise_rel_sd`: 0 when
     the manifest gives it). The RMS ratio alone misses a gap spread over
     many samples: a map's residual at 1.18 x its noise over 14 295 samples is a chi^2
-    excess of 12 such standard deviations (campaign case 11, map + PSF image: delta BIC of
+    excess of 12 such standard deviations (a campaign ghost case, map + PSF image: delta BIC of
     the best finding -214, called ``no_gap`` by the ratio alone).
     """
     return bool(gaps(prob, nom, c))
@@ -475,7 +475,7 @@ def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict,
     # A companion the data see on its own leaks into every other single's score (each
     # mimics some of its signature), so the first ranking no longer says which effect
     # explains what the companion leaves: then every significant single is refitted too
-    # (campaign case 23, map + PSF image: slit_width ranked below pupil_shift and
+    # (a slit-width campaign case, map + PSF image: slit_width ranked below pupil_shift and
     # collimator_wfe, which took up part of the bow, and was never refitted with it).
     seen = any(f.significant and set(f.effects) <= set(comp) for f in findings)
     out, done = list(findings), 0
@@ -586,11 +586,11 @@ def _sign_degeneracies(prob: Problem, finding: Finding, fo: FitOutcome, c: Crite
     undetermined if either test says so. Reason: a plating gradient breaks the blank's
     y-mirror symmetry, so the asymmetry that picks pupil_y's sign may come from the
     blank rather than from the footprint; the sign is only claimed if it survives a
-    plausible gradient (measured: campaign case 203, truth pupil_y +1.47 mm, fitted
+    plausible gradient (measured on a campaign case: truth pupil_y +1.47 mm, fitted
     -1.61 and unflagged; without the truth's gradient the fit gives +1.57). The joint fits
     are tested also when a companion was adopted (with a map beside the profiles the bow
     is adopted, and the gradient must still be free in some test). Measured limit: with a
-    map in the data case 203 stays unflagged all the same — the map restrains the
+    map in the data that case stays unflagged all the same — the map restrains the
     gradient, so the mirror solution costs too much, yet the sign stays wrong."""
     out = set(_sign_test(prob, finding, fo, c, all_effects(finding)))
     for names, jfo in joint or ():
@@ -646,7 +646,7 @@ def _absorbed(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, kind
     collimator defocus in all but name — both curve the wavefront across the dispersion.
     On profiles alone the bow is therefore not fitted (``blank_bow.requires``), which
     left the collimator's defocus reported with a 0.01 µm error although the campaign's
-    0.01 µm RMS bow moves it by up to 0.09 µm (case 126: -0.295 +- 0.017 fitted,
+    0.01 µm RMS bow moves it by up to 0.09 µm (in one case -0.295 +- 0.017 fitted,
     -0.202 injected). The move is reported, not added to the error: the library's prior
     range of the bow is a search range, not a measured spread."""
     own = parameters_of(finding.effects + tuple(finding.companions), prob.forwards)

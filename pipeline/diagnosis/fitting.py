@@ -219,7 +219,7 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
         # fit to withheld data): the profiles' offset shifts are still grid-searched. The
         # effect held fixed can move a line by more than the local fit's basin (a coma
         # shifts it), and a shift stuck in the wrong basin made a held-out fold's
-        # "after" residual 19x its "before" (measured: campaign case 113 with map and
+        # "after" residual 19x its "before" (measured: a campaign case with a map and a
         # PSF image, fold "others -> J_1.175_25mas", shrink -3.41).
         inits = _best_starts(starts[:max_starts], z0, len(params), params, slots, fixed, problem, masks, fws,
                              n_local)
