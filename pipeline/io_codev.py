@@ -338,7 +338,7 @@ def _no_data_mask(path, body, counts, nda):
     return counts == nda
 
 
-def _read_grid(path, extent_mm, spacing_mm):
+def _read_grid(path):
     path = Path(path)
     lines = []
     for n, s in numbered_lines(read_text(path, "CODE V INT")):
@@ -358,17 +358,16 @@ def _read_grid(path, extent_mm, spacing_mm):
     values = counts.astype(float) / hdr["SSZ"] * hdr["WVL"]
     values[nodata] = np.nan
     values = values.reshape(ny, nx)[::-1]  # file is top row (+y) first
-    x, y, source = _grid_coordinates(path, nx, ny, title, extent_mm, spacing_mm)
     valid = counts[~nodata]
     meta = {"codev_type": hdr["type"], "wavelength_um": hdr["WVL"], "ssz": hdr["SSZ"],
             "nda": CODEV_NDA if nda is None else nda, "nda_declared": nda is not None,
             "counts_16bit": bool(valid.size == 0 or np.abs(valid).max() <= 32767),
-            "title": title, "grid_source": source, "format": "codev_int"}
+            "title": title, "format": "codev_int"}
     for key in ("XSC", "YSC", "NNB"):
         if key in hdr:
             meta[key.lower()] = hdr[key]
     label = _EXTENT_RE.sub("", title).strip() or path.stem
-    return x, y, values, label, meta
+    return values, label, meta
 
 
 def read_codev_int(
@@ -421,7 +420,7 @@ def read_codev_int(
             raise ValueError("wfr_to_sag_factor only applies with quantity='sag'")
         if not (np.isfinite(wfr_to_sag_factor) and wfr_to_sag_factor != 0):
             raise ValueError(f"wfr_to_sag_factor={wfr_to_sag_factor!r} must be a finite non-zero number")
-    x, y, values, label, meta = _read_grid(path, extent_mm, spacing_mm)
+    values, label, meta = _read_grid(path)
     kind = meta["codev_type"]
     if quantity == "wavefront" and kind != "WFR":
         raise ValueError(f"{path}: data type {kind} is surface sag, not a wavefront; read it with quantity='sag'")
@@ -436,4 +435,6 @@ def read_codev_int(
         values = values * wfr_to_sag_factor
         meta.update(wfr_to_sag_factor=float(wfr_to_sag_factor), converted_from="WFR")
     meta["quantity"] = quantity
+    ny, nx = values.shape
+    x, y, meta["grid_source"] = _grid_coordinates(path, nx, ny, meta["title"], extent_mm, spacing_mm)
     return SagMap(x, y, values, label, meta)

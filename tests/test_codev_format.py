@@ -244,3 +244,11 @@ def test_zemax_zernike_refusals(tmp_path):
         read_zemax_zernike(f, "standard", normalised=True)
     with pytest.raises(ValueError, match=r"convention='noll'.*\['fringe', 'standard'\]"):
         read_zemax_zernike(f, "noll", normalised=True)
+
+
+def test_cli_sag_option_refuses_wavefront_file():
+    """``--sag`` (and manifests, which use the same loader) never take a WFR file as sag."""
+    from pipeline.interchange import load_sag_map
+
+    with pytest.raises(ValueError, match=r"^--sag .*codev_grid_wfr_no_nda\.int.*data type WFR is a wavefront"):
+        load_sag_map(DATA / "codev_grid_wfr_no_nda.int")
