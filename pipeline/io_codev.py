@@ -349,6 +349,9 @@ def _read_grid(path):
         raise parse_error(path, lines[-1][0] if lines else None, "file ends before the GRD header line")
     title = lines[0][1].strip()
     hdr_line, hdr_text = lines[1]
+    if title.split()[0].upper() == "GRD" and hdr_text.split()[0].upper() != "GRD":
+        raise parse_error(path, lines[0][0], "the title line is missing: a CODE V INT file starts with a "
+                                             "title line, then the 'GRD nx ny ...' header")
     hdr = _parse_header(path, hdr_line, hdr_text)
     nx, ny = hdr["nx"], hdr["ny"]
     body = lines[2:]

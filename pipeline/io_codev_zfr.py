@@ -195,6 +195,9 @@ def read_codev_zernike(
     if len(lines) < 2:
         raise parse_error(path, lines[-1][0] if lines else None, "file ends before the ZFR header line")
     title = lines[0][1].strip()
+    if title.split()[0].upper() == "ZFR" and lines[1][1].split()[0].upper() != "ZFR":
+        raise parse_error(path, lines[0][0], "the title line is missing: a CODE V INT deck starts with a "
+                                             "title line, then the 'ZFR n ...' header")
     hdr = _parse_header(path, lines[1][0], lines[1][1])
     values: list[tuple[int, str]] = [(n, t) for n, s in lines[2:] for t in s.split()]
     if len(values) != hdr["n"]:

@@ -48,7 +48,9 @@ value per line, in the order of OpticStudio's Extra Data Editor for these surfac
 * Coefficients are sag in mm (lens units mm); the radius is the fit's radius.
 The order (terms, radius, coefficients) is the layout those surfaces list in the
 Extra Data Editor *(unverified against an OpticStudio installation: after import,
-check that "Number of Terms" and "Norm Radius" show the first two values)*.
+check that "Number of Terms" and "Norm Radius" show the first two values)*. A cross-check
+inside OpticStudio: its File > Convert File Formats > "INT Zernike to OpticStudio DAT"
+turns our CODE V ZFR deck (:mod:`pipeline.io_codev_zfr`) into its own Fringe list.
 """
 
 from __future__ import annotations

@@ -72,6 +72,7 @@ GRID_REFUSALS = [
     ("t EXTENT_MM 0 1 0 1\nGRD 2 2 FIL WVL 1 SSZ 1\n1 2 3 4\n", r"line 2: unknown header keyword 'FIL'"),
     ("t EXTENT_MM 0 1 0 1\nGRD 2 2 SUR WVL nan SSZ 1\n1 2 3 4\n", r"line 2: WVL=nan must be a finite number"),
     ("t\nZFR 4 SUR WVL 1 SSZ 1\n1 2 3 4\n", r"line 2: INT type 'ZFR' is not a grid.*read_codev_zernike"),
+    ("GRD 2 2 SUR WVL 1 SSZ 1\n1 2\n3 4\n", r"line 1: the title line is missing"),
 ]
 
 
@@ -177,6 +178,9 @@ def test_zfr_refusals(tmp_path):
         read_codev_zernike(f, normalised=False, radius_mm=1.0)
     f.write_text("deck\nZFR 3 WFR WVL 1 SSZ 1\n0.1\n0.2\n")
     with pytest.raises(ValueError, match=r"b\.int, line 4: ZFR 3 needs 3 coefficients, found 2"):
+        read_codev_zernike(f, normalised=False, radius_mm=1.0)
+    f.write_text("ZFR 2 SUR WVL 1 SSZ 1\n0.1\n0.2\n")
+    with pytest.raises(ValueError, match=r"b\.int, line 1: the title line is missing"):
         read_codev_zernike(f, normalised=False, radius_mm=1.0)
     f.write_text("deck\nZFR 2 WFR WVL 1 SSZ 1\n0.1\n0.2\n")
     with pytest.raises(ValueError, match="WFR is a wavefront"):
