@@ -425,6 +425,9 @@ def read_codev_int(
             raise ValueError(f"wfr_to_sag_factor={wfr_to_sag_factor!r} must be a finite non-zero number")
     values, label, meta = _read_grid(path)
     kind = meta["codev_type"]
+    if wfr_to_sag_factor is not None and kind != "WFR":
+        raise ValueError(f"{path}: wfr_to_sag_factor={wfr_to_sag_factor!r} given but the data type is {kind} "
+                         "(already surface sag); drop the factor")
     if quantity == "wavefront" and kind != "WFR":
         raise ValueError(f"{path}: data type {kind} is surface sag, not a wavefront; read it with quantity='sag'")
     if quantity == "sag" and kind == "WFR":

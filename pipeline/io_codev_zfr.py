@@ -226,6 +226,9 @@ def read_codev_zernike(
     kind = hdr["type"]
     info = {"codev_type": kind, "wavelength_um": hdr["WVL"], "ssz": hdr["SSZ"], "n_terms": hdr["n"],
             "radius_mm": float(radius_mm), "normalised": bool(normalised), "title": title, "quantity": quantity}
+    if wfr_to_sag_factor is not None and kind != "WFR":
+        raise ValueError(f"{path}: wfr_to_sag_factor={wfr_to_sag_factor!r} given but the data type is {kind} "
+                         "(already surface sag); drop the factor")
     if quantity == "wavefront" and kind != "WFR":
         raise ValueError(f"{path}: data type {kind} is surface sag, not a wavefront; read it with quantity='sag'")
     if quantity == "sag" and kind == "WFR":

@@ -32,6 +32,8 @@ def test_fixture_crlf_comments_nnb_xsc():
     assert m.meta["nnb"] is True and m.meta["xsc"] == 1.0 and m.meta["ysc"] == 1.0
     assert m.meta["codev_type"] == "SUR" and m.meta["nda_declared"] and m.meta["counts_16bit"]
     assert m.label.startswith("fixture 4x3 SUR")
+    with pytest.raises(ValueError, match=r"wfr_to_sag_factor=-0.5 given but the data type is SUR"):
+        read_codev_int(DATA / "codev_grid_crlf_nnb.int", wfr_to_sag_factor=-0.5)
 
 
 def test_fixture_other_writer_nda_minus_32768():
@@ -150,6 +152,8 @@ def test_zfr_fixture_against_hand_values():
     x, y = np.array([25.0, 0.0, 0.0]), np.array([0.0, 0.0, 25.0])
     np.testing.assert_allclose(wavefront_from_coefficients(coeffs, x, y, 25.0, norm=False),
                                w * np.array([0.75, -0.45, 0.25]), atol=1e-12)
+    with pytest.raises(ValueError, match=r"wfr_to_sag_factor=2.0 given but the data type is SUR"):
+        read_codev_zernike(DATA / "codev_zfr9.int", normalised=False, radius_mm=25.0, wfr_to_sag_factor=2.0)
     with pytest.raises(ValueError, match="no normalisation radius.*radius_mm"):
         read_codev_zernike(DATA / "codev_zfr9.int", normalised=False)
 
