@@ -35,7 +35,7 @@ plus the customary 16-bit conventions of interferometer exports. Items marked
   ``OPD = -(cos alpha + cos beta) * sag``), so a reader never does it silently:
   :func:`read_codev_int` with ``quantity="sag"`` refuses a ``WFR`` file unless the
   caller passes ``wfr_to_sag_factor`` (``sag = factor * OPD``; see
-  :func:`grating_wfr_to_sag_factor`), and ``quantity="wavefront"`` refuses ``SUR``.
+  :mod:`pipeline.io_codev_quantity`), and ``quantity="wavefront"`` refuses ``SUR``.
 * ``GRD nx ny``: ``nx`` columns (x), ``ny`` rows (y), row-major from the top row (+y),
   each row from -x to +x *(unverified; interferometer image order)*.
 * ``XSC``/``YSC`` (aperture scaling) and ``NNB`` (with or without a value) are read
@@ -64,6 +64,7 @@ from pathlib import Path
 import numpy as np
 
 from optics.sagmap import SagMap
+from pipeline.io_codev_quantity import check_request, grating_wfr_to_sag_factor, sag_factor
 from pipeline.io_common import atomic_write, numbered_lines, parse_error, read_text
 
 __all__ = ["write_codev_int", "read_codev_int", "grating_wfr_to_sag_factor", "choose_ssz",
@@ -76,7 +77,6 @@ CODEV_NDA = 32767
 _MARKERS = (32767, -32768)  # 16-bit values that only ever mean "no data"
 _LINE_MAX = 80
 _TYPES = ("SUR", "WFR")
-_QUANTITIES = ("sag", "wavefront")
 _VALUED = {"WVL": float, "SSZ": float, "NDA": int, "XSC": float, "YSC": float}
 _OTHER_FILE_TYPES = ("ZFR", "ZRN", "DEF", "FIL", "ZSD")  # other INT variants, not grids
 _EXTENT_RE = re.compile(r"EXTENT_MM\s+(\S+)\s+(\S+)\s+(\S+)\s+(\S+)")
@@ -93,24 +93,6 @@ def choose_ssz(max_abs: float, wavelength_um: float) -> float:
     scale = 10.0 ** (5 - math.floor(math.log10(ideal)))
     ssz = math.floor(ideal * scale) / scale
     return float(f"{ssz:.6g}")  # the exact value the header will carry
-
-
-def grating_wfr_to_sag_factor(incidence_deg: float, diffraction_deg: float) -> float:
-    """``sag = factor * OPD`` for a reflective grating: ``-1 / (cos alpha + cos beta)``.
-
-    The inverse of the wavefront the study writes (:func:`optics.pupil.grating_opd_um`:
-    ``OPD = -(cos alpha + cos beta) h``), on the grating-face grid.
-
-    Parameters
-    ----------
-    incidence_deg, diffraction_deg : float
-        Angles of incidence ``alpha`` and diffraction ``beta`` (degrees).
-    """
-    s = math.cos(math.radians(incidence_deg)) + math.cos(math.radians(diffraction_deg))
-    if not (np.isfinite(s) and abs(s) > 1e-9):
-        raise ValueError(f"incidence_deg={incidence_deg!r}, diffraction_deg={diffraction_deg!r}: "
-                         "cos alpha + cos beta must be finite and non-zero")
-    return -1.0 / s
 
 
 def _title(label: str, x_mm: np.ndarray, y_mm: np.ndarray) -> str:
@@ -416,30 +398,12 @@ def read_codev_int(
         no-data marker; naming ``extent_mm``/``spacing_mm`` when the size is unknown;
         naming ``quantity``/``wfr_to_sag_factor`` when the data type does not match.
     """
-    if quantity not in _QUANTITIES:
-        raise ValueError(f"quantity={quantity!r} is not valid; use one of {_QUANTITIES}")
-    if wfr_to_sag_factor is not None:
-        if quantity != "sag":
-            raise ValueError("wfr_to_sag_factor only applies with quantity='sag'")
-        if not (np.isfinite(wfr_to_sag_factor) and wfr_to_sag_factor != 0):
-            raise ValueError(f"wfr_to_sag_factor={wfr_to_sag_factor!r} must be a finite non-zero number")
+    check_request(quantity, wfr_to_sag_factor)
     values, label, meta = _read_grid(path)
-    kind = meta["codev_type"]
-    if wfr_to_sag_factor is not None and kind != "WFR":
-        raise ValueError(f"{path}: wfr_to_sag_factor={wfr_to_sag_factor!r} given but the data type is {kind} "
-                         "(already surface sag); drop the factor")
-    if quantity == "wavefront" and kind != "WFR":
-        raise ValueError(f"{path}: data type {kind} is surface sag, not a wavefront; read it with quantity='sag'")
-    if quantity == "sag" and kind == "WFR":
-        if wfr_to_sag_factor is None:
-            raise ValueError(
-                f"{path}: data type WFR is a wavefront (OPD), not surface sag; converting needs the "
-                "geometry: pass wfr_to_sag_factor (sag = factor x OPD; a reflective grating: "
-                "grating_wfr_to_sag_factor(alpha, beta) = -1/(cos alpha + cos beta)), "
-                "or read it as a wavefront with quantity='wavefront'"
-            )
-        values = values * wfr_to_sag_factor
-        meta.update(wfr_to_sag_factor=float(wfr_to_sag_factor), converted_from="WFR")
+    factor = sag_factor(path, meta["codev_type"], quantity, wfr_to_sag_factor)
+    if wfr_to_sag_factor is not None:
+        values = values * factor
+        meta.update(wfr_to_sag_factor=factor, converted_from="WFR")
     meta["quantity"] = quantity
     ny, nx = values.shape
     x, y, meta["grid_source"] = _grid_coordinates(path, nx, ny, meta["title"], extent_mm, spacing_mm)

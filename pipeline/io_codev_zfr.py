@@ -39,6 +39,7 @@ from typing import Mapping
 import numpy as np
 
 from optics.zernike import fringe_to_nm, nm_to_fringe
+from pipeline.io_codev_quantity import check_request, sag_factor
 from pipeline.io_common import atomic_write, numbered_lines, parse_error, read_text
 from pipeline.io_zernike import check_coefficients, convert_normalisation
 
@@ -181,11 +182,7 @@ def read_codev_zernike(
         ``codev_type``, ``wavelength_um``, ``ssz``, ``n_terms``, ``radius_mm``,
         ``normalised``, ``title`` (and ``wfr_to_sag_factor`` when used).
     """
-    if quantity not in ("sag", "wavefront"):
-        raise ValueError(f"quantity={quantity!r} is not valid; use 'sag' or 'wavefront'")
-    if wfr_to_sag_factor is not None and not (np.isfinite(wfr_to_sag_factor) and wfr_to_sag_factor != 0
-                                              and quantity == "sag"):
-        raise ValueError(f"wfr_to_sag_factor={wfr_to_sag_factor!r} must be finite, non-zero and used with quantity='sag'")
+    check_request(quantity, wfr_to_sag_factor)
     path = Path(path)
     lines = []
     for n, s in numbered_lines(read_text(path, "CODE V Zernike deck")):
@@ -226,17 +223,10 @@ def read_codev_zernike(
     kind = hdr["type"]
     info = {"codev_type": kind, "wavelength_um": hdr["WVL"], "ssz": hdr["SSZ"], "n_terms": hdr["n"],
             "radius_mm": float(radius_mm), "normalised": bool(normalised), "title": title, "quantity": quantity}
-    if wfr_to_sag_factor is not None and kind != "WFR":
-        raise ValueError(f"{path}: wfr_to_sag_factor={wfr_to_sag_factor!r} given but the data type is {kind} "
-                         "(already surface sag); drop the factor")
-    if quantity == "wavefront" and kind != "WFR":
-        raise ValueError(f"{path}: data type {kind} is surface sag, not a wavefront; read it with quantity='sag'")
-    if quantity == "sag" and kind == "WFR":
-        if wfr_to_sag_factor is None:
-            raise ValueError(f"{path}: data type WFR is a wavefront (OPD), not surface sag; pass wfr_to_sag_factor "
-                             "(sag = factor x OPD) or read it with quantity='wavefront'")
-        coeffs = {k: v * wfr_to_sag_factor for k, v in coeffs.items()}
-        info["wfr_to_sag_factor"] = float(wfr_to_sag_factor)
+    factor = sag_factor(path, kind, quantity, wfr_to_sag_factor)
+    if wfr_to_sag_factor is not None:
+        coeffs = {k: v * factor for k, v in coeffs.items()}
+        info["wfr_to_sag_factor"] = factor
     if normalised:
         coeffs = convert_normalisation(coeffs, to_normalised=True)
     return coeffs, info
