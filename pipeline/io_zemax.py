@@ -1,4 +1,4 @@
-"""Zemax OpticStudio Grid Sag files (``.dat``) for sag maps.
+"""Zemax OpticStudio files: Grid Sag (``.dat``) sag maps and Zernike Standard/Fringe Sag coefficients.
 
 Format (OpticStudio help, "Grid Sag" surface, "Importing Grid Data"; the Zemax
 knowledge-base articles "How to use the Grid Sag surface type" and "How to write a
