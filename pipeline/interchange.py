@@ -6,7 +6,7 @@ One reader/writer pair per sag-map format, registered in :data:`SAG_FORMATS`;
 ======== ================================ ======================================
 suffix   format                           module / quantisation
 ======== ================================ ======================================
-``.int`` CODE V grid interferogram (GRD)  :mod:`pipeline.io_codev`; 0.005 nm
+``.int`` CODE V grid interferogram (GRD)  :mod:`pipeline.io_codev`; 16 bit, max|v|/65532
 ``.dat`` Zemax Grid Sag                   :mod:`pipeline.io_zemax`; 12 digits
 ``.csv`` ``x_mm,y_mm,sag_um`` table        here; 12 significant digits
 ``.nc``  NetCDF4 (xarray, default engine)  here; float64, exact
@@ -292,7 +292,8 @@ def write_sag_map(sagmap: SagMap, path: str | Path, **options) -> Path:
 def read_sag_map(path: str | Path, **options) -> SagMap:
     """Read a sag map, choosing the reader by the suffix of ``path``.
 
-    ``**options`` go to the reader (``extent_mm``/``spacing_mm`` for ``.int``,
+    ``**options`` go to the reader (``extent_mm``/``spacing_mm``, ``quantity``,
+    ``wfr_to_sag_factor`` for ``.int``,
     ``spacing_mm`` for scattered ``.csv``).
     """
     path = Path(path)

@@ -4,47 +4,55 @@ File layout (as written and read here)
 --------------------------------------
 ::
 
-    ! optional comment lines start with '!'
+    ! comment: '!' starts a comment anywhere on a line (CODE V command syntax)
     <title line, <= 80 characters>
-    GRD <nx> <ny> SUR WVL <wvl_um> SSZ <ssz> NDA <nda> [XSC <x>] [YSC <y>]
-    <nx * ny integers, free format, lines <= 80 characters>
+    GRD <nx> <ny> SUR|WFR WVL <wvl_um> SSZ <ssz> [NDA <nda>] [XSC <x>] [YSC <y>] [NNB [<n>]]
+    <nx * ny integers, any number per line, lines <= 80 characters>
 
 Reading of the format (and where it comes from)
 -----------------------------------------------
-The CODE V Reference Manual itself was not in the searchable corpus; the reading
-below is the brief's description cross-checked against public code that exchanges
-these files (prysm ``read_codev_gridint`` and its hand-written test fixture
-``GRD 2 2 SUR WVL 1.0 SSZ 1 NDA -32768``, two MATLAB/Python metalens writers that emit
-``round(waves * ssz)`` under ``GRD n n WFR WVL <um> SSZ <ssz>``, and a Tcl converter
-writing ``ZFR n WFR WVL 0.6328 SSZ 1.0``). Treat the items marked *(unverified)* as
-assumptions to confirm against the manual before relying on them in CODE V:
+The CODE V Reference Manual is not in the searchable corpus; the reading below is
+public code that exchanges these files (prysm ``read_codev_gridint``, whose comment
+cites the manual's 80-character records and ``!`` comments, and its hand-written
+fixture ``GRD 2 2 SUR WVL 1.0 SSZ 1 NDA -32768``; MATLAB/Python metalens writers that
+emit ``round(waves * ssz)`` under ``GRD n n WFR WVL <um> SSZ <ssz>`` without ``NDA``),
+plus the customary 16-bit conventions of interferometer exports. Items marked
+*(unverified)* are assumptions to confirm against the manual:
 
-* ``SSZ`` is the number of integer counts per wavelength ``WVL`` (µm). Hence
-  ``value_um = count / SSZ * WVL``. (prysm's reader divides by WVL instead of
-  multiplying; that is only right for WVL = 1 µm, which its fixture happens to use.)
-* ``SUR``: the data are *surface* deviation (height, single pass) in those units;
-  ``WFR``: *wavefront* (OPD) deviation. We do not convert between them (that needs
-  the angles of incidence on the grating); a WFR map is returned as a SagMap whose
-  ``sag_um`` holds wavefront µm, with ``meta["codev_type"] = "WFR"``.
-* ``NDA`` is the integer that marks a sample without data.
-* ``GRD nx ny``: ``nx`` columns (x) and ``ny`` rows (y). Data are row-major starting
-  at the top row (+y), each row from -x to +x, rows going down to -y *(unverified;
-  the brief's statement, consistent with interferometer image order)*. prysm
-  reshapes ``(nx, ny)`` instead, which swaps rows and columns of non-square maps.
-* ``XSC``/``YSC`` are accepted and kept in ``meta`` but do not change the grid we
-  return *(their aperture-scaling meaning is not modelled here)*.
+* Counts are 16-bit integers: data within ``-32767..32767``; the customary no-data
+  value is ``32767``. **A file without ``NDA`` is read with no-data = 32767**
+  *(unverified default)*; in such a file a count outside ``-32767..32767`` (for
+  example a ``-32768`` marker of another writer) is refused, naming the line and
+  suggesting ``NDA -32768``. In a 16-bit file the marker values ``32767`` and
+  ``-32768`` are never read as sag unless declared by ``NDA``: a marker that is not
+  the declared ``NDA`` is refused. A file with an explicit ``NDA`` whose counts exceed
+  16 bits (older 32-bit writers) is read, with ``meta["counts_16bit"] = False``.
+* ``SSZ`` is the number of counts per wavelength ``WVL`` (µm):
+  ``value_um = count / SSZ * WVL`` (prysm divides by WVL, right only for WVL = 1 µm).
+  SSZ may be a decimal number (a public writer emits ``SSZ 1.0``).
+* ``SUR``: surface deviation (height, single pass); ``WFR``: wavefront (OPD).
+  Converting between them needs the geometry (for a reflective grating
+  ``OPD = -(cos alpha + cos beta) * sag``), so a reader never does it silently:
+  :func:`read_codev_int` with ``quantity="sag"`` refuses a ``WFR`` file unless the
+  caller passes ``wfr_to_sag_factor`` (``sag = factor * OPD``; see
+  :mod:`pipeline.io_codev_quantity`), and ``quantity="wavefront"`` refuses ``SUR``.
+* ``GRD nx ny``: ``nx`` columns (x), ``ny`` rows (y), row-major from the top row (+y),
+  each row from -x to +x *(unverified; interferometer image order)*.
+* ``XSC``/``YSC`` (aperture scaling) and ``NNB`` (with or without a value) are read
+  and kept in ``meta``; they do not change the grid we return.
 * The file has no physical spacing. We write the extent into the title line as
   ``EXTENT_MM x0 x1 y0 y1`` (centres of the first/last samples, mm) and read it back;
   for files without it the caller passes ``extent_mm`` or ``spacing_mm``.
+* Lines may end in LF or CRLF.
 
-SSZ choice
-----------
-A public writer picked a fixed scale that overflows 16-bit integers for maps above
-~1 µm. Here ``SSZ = round(WVL / resolution_um)`` with ``resolution_um = 1e-5``
-(0.01 nm per count, quantisation error <= 0.005 nm); if the largest ``|count|`` would
-exceed ``MAX_COUNT = 10**9`` (well inside int32, so readers using 32-bit integers
-are safe) SSZ is lowered until it fits. At 0.6328 µm that keeps 0.01 nm steps for
-maps up to 10 mm. ``NDA = -2147483647`` (int32 min + 1) can never collide with data.
+SSZ choice and quantisation
+---------------------------
+The writer picks ``SSZ`` so that the largest ``|value|`` of the map maps to
+:data:`MAX_COUNT` = 32766 counts (one below the no-data value, so no count can equal
+``NDA`` = 32767): ``SSZ = MAX_COUNT * WVL / max|value|``, rounded *down* to 6
+significant digits. One count is then ``WVL / SSZ ≈ max|value| / 32766`` µm and the
+quantisation error at most half of that (a 1 µm map: 0.015 nm). ``ssz=`` overrides it
+(for instance to force an integer SSZ); counts past 32766 are then refused.
 """
 
 from __future__ import annotations
@@ -56,29 +64,35 @@ from pathlib import Path
 import numpy as np
 
 from optics.sagmap import SagMap
+from pipeline.io_codev_quantity import check_request, grating_wfr_to_sag_factor, sag_factor
 from pipeline.io_common import atomic_write, numbered_lines, parse_error, read_text
 
-__all__ = ["write_codev_int", "read_codev_int", "MAX_COUNT", "CODEV_NDA"]
+__all__ = ["write_codev_int", "read_codev_int", "grating_wfr_to_sag_factor", "choose_ssz",
+           "MAX_COUNT", "CODEV_NDA"]
 
-MAX_COUNT = 10**9
-CODEV_NDA = -2147483647
+#: Largest |count| written: one below the no-data value.
+MAX_COUNT = 32766
+#: No-data value written, and assumed for files without ``NDA``.
+CODEV_NDA = 32767
+_MARKERS = (32767, -32768)  # 16-bit values that only ever mean "no data"
 _LINE_MAX = 80
 _TYPES = ("SUR", "WFR")
 _VALUED = {"WVL": float, "SSZ": float, "NDA": int, "XSC": float, "YSC": float}
-_OTHER_FILE_TYPES = ("ZFR", "ZRN", "DEF", "FIL", "ZSD")  # other INT variants we do not read
+_OTHER_FILE_TYPES = ("ZFR", "ZRN", "DEF", "FIL", "ZSD")  # other INT variants, not grids
 _EXTENT_RE = re.compile(r"EXTENT_MM\s+(\S+)\s+(\S+)\s+(\S+)\s+(\S+)")
 
 
-def _choose_ssz(max_abs_um: float, wavelength_um: float, resolution_um: float) -> int:
-    ssz = max(1, int(round(wavelength_um / resolution_um)))
-    if max_abs_um / wavelength_um * ssz > MAX_COUNT:
-        ssz = int(math.floor(MAX_COUNT * wavelength_um / max_abs_um))
-        if ssz < 1:
-            raise ValueError(
-                f"sag of {max_abs_um:g} um does not fit CODE V INT integers at WVL {wavelength_um} um "
-                f"(needs |count| <= {MAX_COUNT} with SSZ >= 1)"
-            )
-    return ssz
+def choose_ssz(max_abs: float, wavelength_um: float) -> float:
+    """SSZ that maps ``max_abs`` (µm) to :data:`MAX_COUNT` counts, rounded down to 6 digits.
+
+    Returns 1 for an all-zero map (any SSZ is exact there).
+    """
+    if not (np.isfinite(max_abs) and max_abs > 0):
+        return 1.0
+    ideal = MAX_COUNT * wavelength_um / max_abs
+    scale = 10.0 ** (5 - math.floor(math.log10(ideal)))
+    ssz = math.floor(ideal * scale) / scale
+    return float(f"{ssz:.6g}")  # the exact value the header will carry
 
 
 def _title(label: str, x_mm: np.ndarray, y_mm: np.ndarray) -> str:
@@ -87,8 +101,8 @@ def _title(label: str, x_mm: np.ndarray, y_mm: np.ndarray) -> str:
         if len(ext) <= _LINE_MAX - 2:
             break
     room = _LINE_MAX - len(ext) - 1
-    # a leading '!' would turn the title into a comment line for CODE V and for our reader
-    clean = " ".join((label or "cryograting").split()).lstrip("!").strip()[:room] or "cryograting"
+    # '!' starts a comment for CODE V and for our reader: never put one in the title
+    clean = " ".join((label or "cryograting").replace("!", " ").split())[:room] or "cryograting"
     return f"{clean} {ext}".strip()
 
 
@@ -97,49 +111,63 @@ def write_codev_int(
     path: str | Path,
     kind: str = "SUR",
     wavelength_um: float = 0.6328,
-    resolution_um: float = 1e-5,
+    ssz: float | None = None,
 ) -> Path:
-    """Write a map as a CODE V ``GRD`` interferogram file.
+    """Write a map as a 16-bit CODE V ``GRD`` interferogram file (``NDA 32767``).
 
     Parameters
     ----------
     sagmap : SagMap
         Map to write; ``sag_um`` is surface height (``kind="SUR"``) or wavefront
-        (``kind="WFR"``) in µm, NaN where invalid.
+        (``kind="WFR"``) in µm, NaN where invalid (written as ``NDA``).
     path : str or Path
         Output file (written atomically).
     kind : {"SUR", "WFR"}
         CODE V data type keyword.
     wavelength_um : float
-        ``WVL``: the wavelength the integer counts refer to (µm), > 0.
-    resolution_um : float
-        Target size of one count (µm), > 0; SSZ is ``round(WVL / resolution_um)``,
-        lowered if the largest count would exceed :data:`MAX_COUNT`.
+        ``WVL``: the wavelength the counts refer to (µm), > 0.
+    ssz : float, optional
+        Counts per wavelength. Default :func:`choose_ssz` (largest |value| ->
+        32766 counts). An explicit value must keep every count within ±32766.
 
     Returns
     -------
     Path
-        The written path. Quantisation error is at most ``0.5 * WVL / SSZ`` µm.
+        The written path. One count is ``WVL / SSZ`` µm; the quantisation error is
+        at most half a count.
     """
     kind = str(kind).upper()
     if kind not in _TYPES:
         raise ValueError(f"kind={kind!r} is not a CODE V grid type; use one of {_TYPES}")
-    for name, v in (("wavelength_um", wavelength_um), ("resolution_um", resolution_um)):
-        if not (np.isfinite(v) and v > 0):
-            raise ValueError(f"{name}={v!r} must be a finite number > 0")
-    s = sagmap.sag_um
-    ny, nx = s.shape
-    ssz = _choose_ssz(float(np.nanmax(np.abs(s))), wavelength_um, resolution_um)
+    if not (np.isfinite(wavelength_um) and wavelength_um > 0):
+        raise ValueError(f"wavelength_um={wavelength_um!r} must be a finite number > 0")
+    s = np.asarray(sagmap.sag_um, float)
+    if np.isinf(s).any():
+        raise ValueError(f"map {sagmap.label!r} has infinite values; CODE V INT holds finite data or NDA")
     valid = np.isfinite(s)
+    max_abs = float(np.abs(s[valid]).max()) if valid.any() else 0.0
+    if ssz is None:
+        ssz = choose_ssz(max_abs, wavelength_um)
+    else:
+        if not (np.isfinite(ssz) and ssz > 0):
+            raise ValueError(f"ssz={ssz!r} must be a finite number > 0")
+        ssz = float(f"{float(ssz):.10g}")
     counts = np.full(s.shape, CODEV_NDA, dtype=np.int64)
     counts[valid] = np.rint(s[valid] / wavelength_um * ssz).astype(np.int64)
+    top = int(np.abs(counts[valid]).max()) if valid.any() else 0
+    if top > MAX_COUNT:
+        raise ValueError(
+            f"ssz={ssz:g} gives counts up to {top} for max |value| {max_abs:g} um; CODE V INT "
+            f"counts must stay within +-{MAX_COUNT}: use ssz <= {MAX_COUNT * wavelength_um / max_abs:.6g}"
+        )
+    ny, nx = s.shape
     # file order: top row (+y) first, x increasing along a row; our arrays have y increasing
     tokens = counts[::-1].ravel().astype(str)
     width = int(np.char.str_len(tokens).max())
     per_line = max(1, (_LINE_MAX + 1) // (width + 1))
     padded = np.char.rjust(tokens, width)
     lines = [" ".join(padded[i:i + per_line]) for i in range(0, padded.size, per_line)]
-    header = f"GRD {nx} {ny} {kind} WVL {wavelength_um:.10g} SSZ {ssz} NDA {CODEV_NDA}"
+    header = f"GRD {nx} {ny} {kind} WVL {wavelength_um:.10g} SSZ {ssz:.10g} NDA {CODEV_NDA}"
     path = Path(path)
     with atomic_write(path) as fh:
         fh.write(_title(sagmap.label, sagmap.x_mm, sagmap.y_mm) + "\n")
@@ -148,22 +176,18 @@ def write_codev_int(
     return path
 
 
-def _axis(n: int, lo: float, hi: float) -> np.ndarray:
-    return np.linspace(lo, hi, n)
-
-
 def _grid_coordinates(path, nx, ny, title, extent_mm, spacing_mm):
     if extent_mm is not None:
         x0, x1, y0, y1 = (float(v) for v in extent_mm)
         if not (x1 > x0 and y1 > y0):
             raise ValueError(f"extent_mm={tuple(extent_mm)} must be (xmin, xmax, ymin, ymax) with max > min")
-        return _axis(nx, x0, x1), _axis(ny, y0, y1), "extent_mm argument"
+        return np.linspace(x0, x1, nx), np.linspace(y0, y1, ny), "extent_mm argument"
     if spacing_mm is not None:
         dx, dy = (spacing_mm, spacing_mm) if np.isscalar(spacing_mm) else tuple(spacing_mm)
         if not (dx > 0 and dy > 0):
             raise ValueError(f"spacing_mm={spacing_mm!r} must be > 0 (one value or (dx, dy))")
         hx, hy = 0.5 * (nx - 1) * dx, 0.5 * (ny - 1) * dy
-        return _axis(nx, -hx, hx), _axis(ny, -hy, hy), "spacing_mm argument, centred"
+        return np.linspace(-hx, hx, nx), np.linspace(-hy, hy, ny), "spacing_mm argument, centred"
     m = _EXTENT_RE.search(title)
     if m:
         try:
@@ -172,18 +196,28 @@ def _grid_coordinates(path, nx, ny, title, extent_mm, spacing_mm):
             raise parse_error(path, None, f"title EXTENT_MM {m.group(0)!r} is not four numbers") from None
         if not (x1 > x0 and y1 > y0):
             raise parse_error(path, None, f"title EXTENT_MM {m.group(0)!r} must have max > min")
-        return _axis(nx, x0, x1), _axis(ny, y0, y1), "title EXTENT_MM"
+        return np.linspace(x0, x1, nx), np.linspace(y0, y1, ny), "title EXTENT_MM"
     raise ValueError(
         f"{path}: CODE V INT files carry no physical grid size and the title has no EXTENT_MM; "
         "pass extent_mm=(xmin, xmax, ymin, ymax) or spacing_mm (mm)"
     )
 
 
+def _is_number(tok: str) -> bool:
+    try:
+        float(tok)
+    except ValueError:
+        return False
+    return True
+
+
 def _parse_header(path, lineno: int, line: str) -> dict:
     tok = line.split()
     if not tok or tok[0].upper() != "GRD":
         if tok and tok[0].upper() in _OTHER_FILE_TYPES:
-            raise parse_error(path, lineno, f"INT type {tok[0]!r} is not supported; only GRD grid files")
+            hint = " (a Zernike deck: read it with pipeline.io_codev_zfr.read_codev_zernike)" \
+                if tok[0].upper() == "ZFR" else ""
+            raise parse_error(path, lineno, f"INT type {tok[0]!r} is not a grid; only GRD grid files{hint}")
         raise parse_error(path, lineno, f"header must start with 'GRD nx ny', found {line.strip()[:40]!r}")
     try:
         nx, ny = int(tok[1]), int(tok[2])
@@ -201,10 +235,18 @@ def _parse_header(path, lineno: int, line: str) -> dict:
             hdr["type"] = key
             i += 1
             continue
+        if key == "NNB":  # a flag for some writers, keyword + value for others: take a number if one follows
+            if i + 1 < len(tok) and _is_number(tok[i + 1]):
+                hdr["NNB"] = float(tok[i + 1])
+                i += 2
+            else:
+                hdr["NNB"] = True
+                i += 1
+            continue
         if key not in _VALUED:
             raise parse_error(
                 path, lineno,
-                f"unknown header keyword {tok[i]!r}; valid are {list(_TYPES)} and {sorted(_VALUED)}",
+                f"unknown header keyword {tok[i]!r}; valid are {list(_TYPES)}, {sorted(_VALUED)} and 'NNB'",
             )
         if i + 1 >= len(tok):
             raise parse_error(path, lineno, f"keyword {key} has no value")
@@ -219,51 +261,22 @@ def _parse_header(path, lineno: int, line: str) -> dict:
     for key in ("WVL", "SSZ"):
         if key not in hdr:
             raise parse_error(path, lineno, f"header has no {key} (needed to convert counts to um)")
-        if not hdr[key] > 0:
-            raise parse_error(path, lineno, f"{key}={hdr[key]!r} must be > 0")
+        if not (np.isfinite(hdr[key]) and hdr[key] > 0):
+            raise parse_error(path, lineno, f"{key}={hdr[key]!r} must be a finite number > 0")
     return hdr
 
 
-def read_codev_int(
-    path: str | Path,
-    extent_mm: tuple[float, float, float, float] | None = None,
-    spacing_mm: float | tuple[float, float] | None = None,
-) -> SagMap:
-    """Read a CODE V ``GRD`` interferogram file into a :class:`SagMap`.
+def _line_of(body, index: int) -> int:
+    """File line number of the ``index``-th data value."""
+    seen = 0
+    for n, s in body:
+        seen += len(s.split())
+        if seen > index:
+            return n
+    return body[-1][0]
 
-    Parameters
-    ----------
-    path : str or Path
-        The ``.int`` file.
-    extent_mm : (xmin, xmax, ymin, ymax), optional
-        Coordinates of the first/last sample centres (mm). Overrides the title.
-    spacing_mm : float or (dx, dy), optional
-        Sample spacing (mm); the grid is then centred on the origin. Used when
-        ``extent_mm`` is not given; overrides the title.
 
-    Returns
-    -------
-    SagMap
-        ``sag_um`` in µm (surface for SUR, wavefront for WFR), NaN at ``NDA``;
-        ``meta`` holds ``codev_type``, ``wavelength_um``, ``ssz``, ``nda``, ``title``,
-        ``xsc``/``ysc`` when present and ``grid_source``.
-
-    Raises
-    ------
-    ValueError
-        Naming the file and line for a bad header, a non-integer value, a truncated
-        file or too many values; naming ``extent_mm``/``spacing_mm`` when the size is
-        unknown.
-    """
-    path = Path(path)
-    lines = [(n, s) for n, s in numbered_lines(read_text(path, "CODE V INT")) if s.strip() and not s.lstrip().startswith("!")]
-    if len(lines) < 2:
-        raise parse_error(path, lines[-1][0] if lines else None, "file ends before the GRD header line")
-    title = lines[0][1].strip()
-    hdr_line, hdr_text = lines[1]
-    hdr = _parse_header(path, hdr_line, hdr_text)
-    nx, ny = hdr["nx"], hdr["ny"]
-    body = lines[2:]
+def _read_counts(path, hdr_line, body, nx, ny):
     try:
         counts = np.array(" ".join(s for _, s in body).split()).astype(np.int64)
     except (ValueError, OverflowError):
@@ -281,21 +294,117 @@ def read_codev_int(
         last = body[-1][0] if body else hdr_line
         raise parse_error(path, last, f"truncated: GRD {nx} {ny} needs {expected} values, found {counts.size}")
     if counts.size > expected:
-        seen = 0
-        for n, s in body:
-            seen += len(s.split())
-            if seen > expected:
-                raise parse_error(path, n, f"wrong count: GRD {nx} {ny} needs {expected} values, found {counts.size}")
+        raise parse_error(path, _line_of(body, expected),
+                          f"wrong count: GRD {nx} {ny} needs {expected} values, found {counts.size}")
+    return counts
+
+
+def _no_data_mask(path, body, counts, nda):
+    """NaN mask from ``NDA`` (or the customary 32767), refusing ambiguous markers."""
+    if nda is None:
+        bad = np.flatnonzero(np.abs(counts) > 32767)
+        if bad.size:
+            v = int(counts[bad[0]])
+            raise parse_error(path, _line_of(body, bad[0]),
+                              f"count {v} is outside the 16-bit data range -32767..32767 and the header "
+                              f"has no NDA; if {v} marks missing data, add 'NDA {v}' to the GRD line")
+        return counts == CODEV_NDA
+    wide = np.abs(counts[counts != nda]) > 32767
+    if not wide.any():  # a 16-bit file: the customary markers can only mean "no data"
+        stray = np.flatnonzero(np.isin(counts, [m for m in _MARKERS if m != nda]))
+        if stray.size:
+            v = int(counts[stray[0]])
+            raise parse_error(path, _line_of(body, stray[0]),
+                              f"count {v} is a 16-bit no-data marker but the header declares NDA {nda}; "
+                              "fix NDA (or the data) so no-data has one value")
+    return counts == nda
+
+
+def _read_grid(path):
+    path = Path(path)
+    lines = []
+    for n, s in numbered_lines(read_text(path, "CODE V INT")):
+        s = s.split("!", 1)[0].rstrip()  # '!' starts a comment anywhere on a line
+        if s.strip():
+            lines.append((n, s))
+    if len(lines) < 2:
+        raise parse_error(path, lines[-1][0] if lines else None, "file ends before the GRD header line")
+    title = lines[0][1].strip()
+    hdr_line, hdr_text = lines[1]
+    if title.split()[0].upper() == "GRD" and hdr_text.split()[0].upper() != "GRD":
+        raise parse_error(path, lines[0][0], "the title line is missing: a CODE V INT file starts with a "
+                                             "title line, then the 'GRD nx ny ...' header")
+    hdr = _parse_header(path, hdr_line, hdr_text)
+    nx, ny = hdr["nx"], hdr["ny"]
+    body = lines[2:]
+    counts = _read_counts(path, hdr_line, body, nx, ny)
     nda = hdr.get("NDA")
-    sag = counts.astype(float) / hdr["SSZ"] * hdr["WVL"]
-    if nda is not None:
-        sag[counts == nda] = np.nan
-    sag = sag.reshape(ny, nx)[::-1]  # file is top row (+y) first
-    x, y, source = _grid_coordinates(path, nx, ny, title, extent_mm, spacing_mm)
-    meta = {"codev_type": hdr["type"], "wavelength_um": hdr["WVL"], "ssz": hdr["SSZ"], "nda": nda,
-            "title": title, "grid_source": source, "format": "codev_int"}
-    for key in ("XSC", "YSC"):
+    nodata = _no_data_mask(path, body, counts, nda)
+    values = counts.astype(float) / hdr["SSZ"] * hdr["WVL"]
+    values[nodata] = np.nan
+    values = values.reshape(ny, nx)[::-1]  # file is top row (+y) first
+    valid = counts[~nodata]
+    meta = {"codev_type": hdr["type"], "wavelength_um": hdr["WVL"], "ssz": hdr["SSZ"],
+            "nda": CODEV_NDA if nda is None else nda, "nda_declared": nda is not None,
+            "counts_16bit": bool(valid.size == 0 or np.abs(valid).max() <= 32767),
+            "title": title, "format": "codev_int"}
+    for key in ("XSC", "YSC", "NNB"):
         if key in hdr:
             meta[key.lower()] = hdr[key]
     label = _EXTENT_RE.sub("", title).strip() or path.stem
-    return SagMap(x, y, sag, label, meta)
+    return values, label, meta
+
+
+def read_codev_int(
+    path: str | Path,
+    extent_mm: tuple[float, float, float, float] | None = None,
+    spacing_mm: float | tuple[float, float] | None = None,
+    quantity: str = "sag",
+    wfr_to_sag_factor: float | None = None,
+) -> SagMap:
+    """Read a CODE V ``GRD`` interferogram file into a :class:`SagMap`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.int`` file.
+    extent_mm : (xmin, xmax, ymin, ymax), optional
+        Coordinates of the first/last sample centres (mm). Overrides the title.
+    spacing_mm : float or (dx, dy), optional
+        Sample spacing (mm); the grid is then centred on the origin. Used when
+        ``extent_mm`` is not given; overrides the title.
+    quantity : {"sag", "wavefront"}
+        What the returned ``sag_um`` holds. ``"sag"`` (default): surface height; a
+        ``WFR`` file is refused unless ``wfr_to_sag_factor`` is given.
+        ``"wavefront"``: OPD in µm; a ``SUR`` file is refused.
+    wfr_to_sag_factor : float, optional
+        Only with ``quantity="sag"`` and a ``WFR`` file: ``sag = factor * OPD``
+        (for a reflective grating :func:`grating_wfr_to_sag_factor`; for a mirror
+        at normal incidence ``-0.5``). Recorded in ``meta``.
+
+    Returns
+    -------
+    SagMap
+        Values in µm, NaN at no-data (``NDA``, or 32767 when the header has none);
+        ``meta`` holds ``codev_type``, ``wavelength_um``, ``ssz``, ``nda``,
+        ``nda_declared``, ``counts_16bit``, ``title``, ``grid_source`` and
+        ``xsc``/``ysc``/``nnb`` when present.
+
+    Raises
+    ------
+    ValueError
+        Naming the file and line for a bad header, a non-integer value, a truncated
+        file, too many values, a count outside 16 bits without ``NDA`` or a stray
+        no-data marker; naming ``extent_mm``/``spacing_mm`` when the size is unknown;
+        naming ``quantity``/``wfr_to_sag_factor`` when the data type does not match.
+    """
+    check_request(quantity, wfr_to_sag_factor)
+    values, label, meta = _read_grid(path)
+    factor = sag_factor(path, meta["codev_type"], quantity, wfr_to_sag_factor)
+    if wfr_to_sag_factor is not None:
+        values = values * factor
+        meta.update(wfr_to_sag_factor=factor, converted_from="WFR")
+    meta["quantity"] = quantity
+    ny, nx = values.shape
+    x, y, meta["grid_source"] = _grid_coordinates(path, nx, ny, meta["title"], extent_mm, spacing_mm)
+    return SagMap(x, y, values, label, meta)

@@ -1,4 +1,4 @@
-"""Zemax OpticStudio Grid Sag files (``.dat``) for sag maps.
+"""Zemax OpticStudio files: Grid Sag (``.dat``) sag maps and Zernike Standard/Fringe Sag coefficients.
 
 Format (OpticStudio help, "Grid Sag" surface, "Importing Grid Data"; the Zemax
 knowledge-base articles "How to use the Grid Sag surface type" and "How to write a
@@ -28,6 +28,29 @@ ignored (the sag column is the data).
 
 Values are written with 12 significant digits (``%.12g``), i.e. a relative round-off
 of 5e-13: far below anything physical.
+
+Zernike Standard Sag / Zernike Fringe Sag coefficient files
+-----------------------------------------------------------
+:func:`write_zemax_zernike` writes the surface's extra data as a plain list, one
+value per line, in the order of OpticStudio's Extra Data Editor for these surfaces::
+
+    <number of terms N>
+    <normalisation radius, lens units (mm)>
+    <Z1 coefficient, mm>
+    ...
+    <ZN coefficient, mm>
+
+* ``convention="standard"`` -> surface type **Zernike Standard Sag**: Noll order
+  (Z1 piston, Z2 tilt x, Z3 tilt y, Z4 defocus, ...), **RMS-normalised** terms.
+* ``convention="fringe"`` -> surface type **Zernike Fringe Sag**: Fringe order
+  (Z4 defocus, Z9 spherical, ..., at most 37 terms), **peak-normalised** terms
+  (value 1 at the rim).
+* Coefficients are sag in mm (lens units mm); the radius is the fit's radius.
+The order (terms, radius, coefficients) is the layout those surfaces list in the
+Extra Data Editor *(unverified against an OpticStudio installation: after import,
+check that "Number of Terms" and "Norm Radius" show the first two values)*. A cross-check
+inside OpticStudio: its File > Convert File Formats > "INT Zernike to OpticStudio DAT"
+turns our CODE V ZFR deck (:mod:`pipeline.io_codev_zfr`) into its own Fringe list.
 """
 
 from __future__ import annotations
@@ -37,9 +60,12 @@ from pathlib import Path
 import numpy as np
 
 from optics.sagmap import SagMap
+from optics.zernike import fringe_to_nm, nm_to_fringe, nm_to_noll, noll_to_nm
 from pipeline.io_common import atomic_write, numbered_lines, parse_error, read_text
+from pipeline.io_zernike import check_coefficients, convert_normalisation
 
-__all__ = ["write_zemax_grid_sag", "read_zemax_grid_sag", "nan_gradient", "ZEMAX_UNITS_MM"]
+__all__ = ["write_zemax_grid_sag", "read_zemax_grid_sag", "nan_gradient", "ZEMAX_UNITS_MM",
+           "write_zemax_zernike", "read_zemax_zernike", "ZEMAX_ZERNIKE"]
 
 #: Zemax ``unitflag`` -> millimetres per unit.
 ZEMAX_UNITS_MM: dict[int, float] = {0: 1.0, 1: 10.0, 2: 25.4, 3: 1000.0}
@@ -132,6 +158,9 @@ def read_zemax_grid_sag(path: str | Path) -> SagMap:
         raise parse_error(path, None, "file is empty; expected header 'nx ny delx dely unitflag xdec ydec'")
     n0, head = lines[0]
     tok = head.split()
+    if len(tok) == 1 and len(lines) > 2 and all(len(t.split()) == 1 for _, t in lines[:3]):
+        raise parse_error(path, n0, "one value per line: this looks like a Zernike Standard/Fringe Sag "
+                                    "coefficient list; read it with read_zemax_zernike")
     if len(tok) != 7:
         raise parse_error(path, n0, f"header needs 7 values 'nx ny delx dely unitflag xdec ydec', found {len(tok)}")
     try:
@@ -177,3 +206,124 @@ def read_zemax_grid_sag(path: str | Path) -> SagMap:
     y = ydec * scale + (np.arange(ny) - 0.5 * (ny - 1)) * dy
     meta = {"format": "zemax_grid_sag", "unitflag": unit, "xdec_mm": xdec * scale, "ydec_mm": ydec * scale}
     return SagMap(x, y, sag_um, path.stem, meta)
+
+
+#: convention -> (surface type, index -> (n, m), (n, m) -> index, RMS-normalised terms, max terms)
+ZEMAX_ZERNIKE = {
+    "standard": ("Zernike Standard Sag", noll_to_nm, nm_to_noll, True, 231),
+    "fringe": ("Zernike Fringe Sag", fringe_to_nm, nm_to_fringe, False, 37),
+}
+
+
+def _zernike_convention(convention: str) -> str:
+    c = str(convention).lower()
+    if c not in ZEMAX_ZERNIKE:
+        raise ValueError(f"convention={convention!r} is unknown; valid are {sorted(ZEMAX_ZERNIKE)}")
+    return c
+
+
+def write_zemax_zernike(
+    coeffs,
+    path: str | Path,
+    convention: str,
+    radius_mm: float,
+    coeffs_normalised: bool,
+) -> Path:
+    """Write Zernike sag coefficients as an OpticStudio extra-data list (see module docstring).
+
+    Parameters
+    ----------
+    coeffs : mapping (n, m) -> float
+        Sag coefficients in µm; missing terms up to the highest one are written as 0.
+    path : str or Path
+        Output file (written atomically).
+    convention : {"standard", "fringe"}
+        Zernike Standard Sag (Noll, RMS-normalised) or Zernike Fringe Sag (Fringe,
+        peak-normalised, <= 37 terms).
+    radius_mm : float
+        Normalisation radius (mm), > 0.
+    coeffs_normalised : bool
+        Whether ``coeffs`` multiply RMS-normalised terms (converted as needed).
+
+    Raises
+    ------
+    ValueError
+        A non-finite coefficient (naming the term), a term outside the convention,
+        a bad radius.
+    """
+    convention = _zernike_convention(convention)
+    _, _, to_index, file_norm, max_terms = ZEMAX_ZERNIKE[convention]
+    if not (np.isfinite(radius_mm) and radius_mm > 0):
+        raise ValueError(f"radius_mm={radius_mm!r} must be a finite number > 0")
+    c = check_coefficients(coeffs, "noll" if convention == "standard" else "fringe")
+    if coeffs_normalised != file_norm:
+        c = convert_normalisation(c, to_normalised=file_norm)
+    index = {to_index(n, m): v for (n, m), v in c.items()}
+    n_terms = max(index, default=1)
+    if n_terms > max_terms:
+        raise ValueError(f"{convention} term {n_terms} exceeds the {max_terms} terms of {ZEMAX_ZERNIKE[convention][0]}")
+    values = [index.get(j, 0.0) * 1e-3 for j in range(1, n_terms + 1)]  # um -> mm (lens units)
+    path = Path(path)
+    with atomic_write(path) as fh:
+        fh.write(f"{n_terms}\n{radius_mm:.12g}\n")
+        fh.write("".join(f"{v:.12g}\n" for v in values))
+    return path
+
+
+def read_zemax_zernike(path: str | Path, convention: str, normalised: bool) -> tuple[dict, dict]:
+    """Read an OpticStudio Zernike Standard/Fringe Sag extra-data list (lens units mm).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file: number of terms, normalisation radius (mm), then the coefficients
+        (mm), one value per line (several per line are accepted).
+    convention : {"standard", "fringe"}
+        The surface type the file is for (the file does not say).
+    normalised : bool
+        Return coefficients for RMS-normalised (True) or unnormalised (False) terms.
+
+    Returns
+    -------
+    coeffs : dict (n, m) -> float
+        Sag coefficients in µm.
+    info : dict
+        ``convention``, ``surface_type``, ``n_terms``, ``radius_mm``, ``normalised``.
+    """
+    convention = _zernike_convention(convention)
+    surface, to_nm, _, file_norm, max_terms = ZEMAX_ZERNIKE[convention]
+    path = Path(path)
+    values = [(n, t) for n, s in numbered_lines(read_text(path, f"{surface} coefficients")) for t in s.split()]
+    if len(values) < 2:
+        raise parse_error(path, values[-1][0] if values else None,
+                          "file ends early; expected the number of terms, the normalisation radius and coefficients")
+    (n0, t0), (n1, t1) = values[:2]
+    try:
+        n_terms = int(t0)
+    except ValueError:
+        raise parse_error(path, n0, f"number of terms {t0!r} is not an integer") from None
+    if not 1 <= n_terms <= max_terms:
+        raise parse_error(path, n0, f"number of terms {n_terms} must be in 1..{max_terms} for {surface}")
+    try:
+        radius = float(t1)
+    except ValueError:
+        radius = float("nan")
+    if not (np.isfinite(radius) and radius > 0):
+        raise parse_error(path, n1, f"normalisation radius {t1!r} must be a finite number > 0 (mm)")
+    body = values[2:]
+    if len(body) != n_terms:
+        where = body[n_terms][0] if len(body) > n_terms else values[-1][0]
+        raise parse_error(path, where, f"{n_terms} terms declared, found {len(body)} coefficients")
+    coeffs = {}
+    for j, (n, t) in enumerate(body, start=1):
+        try:
+            v = float(t)
+        except ValueError:
+            v = float("nan")
+        if not np.isfinite(v):
+            raise parse_error(path, n, f"{convention} Z{j} {to_nm(j)}: coefficient {t!r} is not a finite number")
+        coeffs[to_nm(j)] = v * 1e3  # mm -> um
+    if normalised != file_norm:
+        coeffs = convert_normalisation(coeffs, to_normalised=normalised)
+    return coeffs, {"convention": convention, "surface_type": surface, "n_terms": n_terms,
+                    "radius_mm": radius, "normalised": bool(normalised)}

@@ -33,7 +33,8 @@ import numpy as np
 from optics.zernike import fringe_to_nm, nm_to_fringe, nm_to_noll, noll_to_nm, norm_factor
 from pipeline.io_common import atomic_write, numbered_lines, parse_error, read_text
 
-__all__ = ["ZERNIKE_CONVENTIONS", "convert_normalisation", "write_zernike_list", "read_zernike_list"]
+__all__ = ["ZERNIKE_CONVENTIONS", "convert_normalisation", "write_zernike_list", "read_zernike_list",
+           "check_coefficients"]
 
 #: convention -> (index -> (n, m), (n, m) -> index, coefficients normalised in the file)
 ZERNIKE_CONVENTIONS = {
@@ -48,6 +49,27 @@ def _check_convention(convention: str) -> str:
     if c not in ZERNIKE_CONVENTIONS:
         raise ValueError(f"convention={convention!r} is unknown; valid are {sorted(ZERNIKE_CONVENTIONS)}")
     return c
+
+
+def check_coefficients(coeffs: Mapping[tuple[int, int], float], convention: str) -> dict:
+    """``{(n, m): float}`` copy of ``coeffs``; a non-finite or non-numeric coefficient is a
+    ``ValueError`` naming the term (its index in ``convention`` when it has one, and (n, m))."""
+    convention = _check_convention(convention)
+    to_index = ZERNIKE_CONVENTIONS[convention][1]
+    out = {}
+    for (n, m), v in coeffs.items():
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            f = float("nan")
+        if not np.isfinite(f):
+            try:
+                where = f"{convention} term {to_index(int(n), int(m))} "
+            except ValueError:
+                where = ""
+            raise ValueError(f"Zernike coefficient {where}(n, m)=({n}, {m}) is {v!r}; coefficients must be finite numbers")
+        out[(int(n), int(m))] = f
+    return out
 
 
 def convert_normalisation(coeffs: Mapping[tuple[int, int], float], to_normalised: bool) -> dict:
@@ -94,7 +116,7 @@ def write_zernike_list(
     if not (np.isfinite(radius_mm) and radius_mm > 0):
         raise ValueError(f"radius_mm={radius_mm!r} must be a finite number > 0")
     to_index, file_norm = ZERNIKE_CONVENTIONS[convention][1], ZERNIKE_CONVENTIONS[convention][2]
-    c = {(int(n), int(m)): float(v) for (n, m), v in coeffs.items()}
+    c = check_coefficients(coeffs, convention)
     if coeffs_normalised != file_norm:
         c = convert_normalisation(c, to_normalised=file_norm)
     rows = sorted((to_index(n, m), n, m, v) for (n, m), v in c.items())
@@ -182,6 +204,8 @@ def read_zernike_list(path: str | Path, normalised: bool) -> tuple[dict, dict]:
             v = float(parts[3])
         except ValueError:
             raise parse_error(path, n, f"index, n, m must be integers and the coefficient a number: {t!r}") from None
+        if not np.isfinite(v):
+            raise parse_error(path, n, f"{conv} term {j}: coefficient {parts[3]!r} is not a finite number")
         try:
             nm = to_nm(j)
         except ValueError as exc:

@@ -17,8 +17,9 @@ orders −2/−3/−4 (J with 200/50, H and K with 200/75, as the paper). It wri
   map, Zernike (Fringe 1–37 over the 82 × 72 mm box) and Fourier quilt fits with their
   residuals, the grating wavefronts of the profiles, and the line profiles
   (:mod:`pipeline.study_data`);
-* ``exports/`` (``[output] exports``) — sag maps as CODE V INT and Zemax Grid Sag DAT,
-  Zernike lists (Fringe and Noll), grating wavefronts as CODE V INT WFR;
+* ``exports/`` (``[output] exports``) — sag maps as 16-bit CODE V INT and Zemax Grid Sag
+  DAT, the Zernike fit as a CODE V ZFR deck, OpticStudio Zernike Standard/Fringe Sag
+  extra data and project lists (Fringe and Noll), grating wavefronts as CODE V INT WFR;
 * the PNG figures of the config and ``report.html`` that puts them together.
 """
 

@@ -263,9 +263,12 @@ def write_exports(out: Path, cases, maps: dict, zfits: list, wavefronts: list) -
 
     * ``case{i:02d}_{L}_sag.int`` — sag map, CODE V GRD ``SUR`` (WVL 0.6328 µm);
     * ``case{i:02d}_{L}_sag.dat`` — sag map, Zemax Grid Sag (mm);
-    * ``case{i:02d}_{L}_zernike_fringe.txt`` / ``..._zernike_noll.txt`` — the 37-term
-      fit as Fringe (CODE V ZFR, unnormalised) and Zemax Standard (Noll,
-      RMS-normalised) lists, normalisation radius in the header;
+    * ``case{i:02d}_{L}_zernike_zfr.int`` — the 37-term fit as a CODE V ``ZFR 37 SUR``
+      deck (Fringe, unnormalised, waves of 0.6328 µm; radius in the title);
+    * ``case{i:02d}_{L}_zernike_standard_zemax.dat`` / ``..._zernike_fringe_zemax.dat`` —
+      the fit as OpticStudio Zernike Standard Sag / Zernike Fringe Sag extra data (mm);
+    * ``case{i:02d}_{L}_zernike_fringe.txt`` / ``..._zernike_noll.txt`` — the same fit
+      as self-describing project lists (Fringe unnormalised, Noll RMS-normalised);
 
     and per deformed line profile's (case, grating, order, wavelength):
     ``case{i:02d}_{L}_{grating}_m{order}_{wl}um_wfr.int`` — the grating's wavefront
@@ -274,7 +277,9 @@ def write_exports(out: Path, cases, maps: dict, zfits: list, wavefronts: list) -
     """
     from optics.sagmap import SagMap
     from pipeline.interchange import write_sag_map, write_zernike_list
+    from pipeline.io_codev_zfr import write_codev_zernike
     from pipeline.io_common import atomic_write
+    from pipeline.io_zemax import write_zemax_zernike
 
     out.mkdir(parents=True, exist_ok=True)
     index = []
@@ -286,6 +291,13 @@ def write_exports(out: Path, cases, maps: dict, zfits: list, wavefronts: list) -
         index += [(f"{s}_sag.int", c.label, "sag CODE V INT SUR", "", "", ""),
                   (f"{s}_sag.dat", c.label, "sag Zemax Grid Sag", "", "", "")]
         if z is not None:
+            write_codev_zernike(z.coefficients, out / f"{s}_zernike_zfr.int", z.radius_mm, coeffs_normalised=z.norm,
+                                title=f"{c.label} sag fit")
+            index.append((f"{s}_zernike_zfr.int", c.label, "Zernike fit CODE V ZFR SUR", "", "", ""))
+            for conv in ("standard", "fringe"):
+                write_zemax_zernike(z.coefficients, out / f"{s}_zernike_{conv}_zemax.dat", conv, z.radius_mm,
+                                    coeffs_normalised=z.norm)
+                index.append((f"{s}_zernike_{conv}_zemax.dat", c.label, f"Zernike fit Zemax {conv} sag", "", "", ""))
             for conv in ("fringe", "noll"):
                 write_zernike_list(z.coefficients, out / f"{s}_zernike_{conv}.txt", conv, z.radius_mm,
                                    coeffs_normalised=z.norm)

@@ -14,11 +14,12 @@ from pipeline import interchange as ic
 from pipeline.io_codev import CODEV_NDA, MAX_COUNT
 
 # Quantisation of each format for the test map (|sag| <= 3.5 um):
-#   .int  0.5 count = 0.5 * WVL / SSZ = 0.5e-5 um (SSZ = 63280 at WVL 0.6328 um)
+#   .int  16-bit counts, SSZ puts max|sag| at 32766 counts: error <= 0.5 * 3.5 / 32766 um
+#         (1e-5 for SSZ rounded down to 6 digits)
 #   .dat  12 significant digits of the sag in mm  -> < 1e-11 um
 #   .csv  12 significant digits of the sag in um  -> < 1e-11 um
 #   .nc / .npz  float64, exact
-TOL_UM = {".int": 0.5 * 0.6328 / 63280 * (1 + 1e-9), ".dat": 1e-11, ".csv": 1e-11, ".nc": 0.0, ".npz": 0.0}
+TOL_UM = {".int": 0.5 * 3.5 / 32766 * (1 + 1e-5), ".dat": 1e-11, ".csv": 1e-11, ".nc": 0.0, ".npz": 0.0}
 
 
 @pytest.fixture
@@ -55,19 +56,26 @@ def test_round_trip(tmp_path, quadrant_map, suffix):
 
 
 def test_codev_int_layout(tmp_path, quadrant_map):
-    """Header, SSZ, 80-column lines, top-left first value, NDA for NaN."""
+    """Header, 16-bit SSZ, 80-column lines, top-left first value, NDA 32767 for NaN."""
     path = ic.write_sag_map(quadrant_map, tmp_path / "m.int")
     lines = path.read_text().splitlines()
     assert all(len(s) <= 80 for s in lines)
     assert "EXTENT_MM -33 22 -13 13" in lines[0]
-    assert lines[1].split() == ["GRD", "23", "14", "SUR", "WVL", "0.6328", "SSZ", "63280", "NDA", str(CODEV_NDA)]
-    values = np.array(" ".join(lines[2:]).split(), dtype=np.int64)
+    head = lines[1].split()
+    assert head[:6] == ["GRD", "23", "14", "SUR", "WVL", "0.6328"] and head[6] == "SSZ"
+    assert head[8:] == ["NDA", "32767"] and CODEV_NDA == 32767 and MAX_COUNT == 32766
     s = quadrant_map.sag_um
+    ssz = float(head[7])
+    # largest |sag| lands within one 6-digit rounding of 32766 counts, never above
+    ideal = 32766 * 0.6328 / np.nanmax(np.abs(s))
+    assert ideal * (1 - 1e-5) <= ssz <= ideal
+    values = np.array(" ".join(lines[2:]).split(), dtype=np.int64)
     # first value = (-x, +y) corner; the NaN at the top row, column 3 is value 3
-    assert values[0] == round(s[-1, 0] / 0.6328 * 63280)
+    assert values[0] == round(s[-1, 0] / 0.6328 * ssz)
     assert values[3] == CODEV_NDA
-    assert values[-1] == round(s[0, -1] / 0.6328 * 63280) or np.isnan(s[0, -1])
     assert values[13 * 23] == CODEV_NDA  # (-x, -y) corner: first value of the last row
+    data = values[values != CODEV_NDA]
+    assert np.abs(data).max() <= 32766 and np.abs(data).max() >= 32766 * (1 - 1e-5) - 0.5
 
 
 def test_codev_int_reader_fixture(tmp_path):
@@ -75,34 +83,44 @@ def test_codev_int_reader_fixture(tmp_path):
     f = tmp_path / "hand.int"
     f.write_text("! a comment\nhand made\nGRD 3 2 WFR WVL 0.5 SSZ 1000 NDA -99 XSC 1.0 YSC 1.0\n"
                  "1000 2000 3000\n-99 -500 0\n")
-    m = ic.read_sag_map(f, extent_mm=(-1.0, 1.0, -2.0, 2.0))
+    m = ic.read_sag_map(f, extent_mm=(-1.0, 1.0, -2.0, 2.0), quantity="wavefront")
     np.testing.assert_allclose(m.sag_um[1], [0.5, 1.0, 1.5])   # top row (+y) is the first row in the file
     assert np.isnan(m.sag_um[0, 0])
     np.testing.assert_allclose(m.sag_um[0, 1:], [-0.25, 0.0])
     assert m.meta["codev_type"] == "WFR" and m.meta["xsc"] == 1.0
     np.testing.assert_allclose(m.y_mm, [-2.0, 2.0])
     # spacing_mm instead of an extent: grid centred on the origin
-    m2 = ic.read_codev_int(f, spacing_mm=(0.5, 3.0))
+    m2 = ic.read_codev_int(f, spacing_mm=(0.5, 3.0), quantity="wavefront")
     np.testing.assert_allclose(m2.x_mm, [-0.5, 0.0, 0.5])
     np.testing.assert_allclose(m2.y_mm, [-1.5, 1.5])
+    # a wavefront is never surface sag without an explicit factor
+    with pytest.raises(ValueError, match=r"hand\.int: data type WFR is a wavefront.*wfr_to_sag_factor"):
+        ic.read_sag_map(f, extent_mm=(-1.0, 1.0, -2.0, 2.0))
+    m3 = ic.read_sag_map(f, extent_mm=(-1.0, 1.0, -2.0, 2.0), wfr_to_sag_factor=-0.5)
+    np.testing.assert_allclose(m3.sag_um[1], [-0.25, -0.5, -0.75])
+    assert m3.meta["converted_from"] == "WFR" and m3.meta["wfr_to_sag_factor"] == -0.5
 
 
-def test_codev_int_large_sag_keeps_int32_and_resolution(tmp_path, quadrant_map):
+def test_codev_int_large_sag_stays_16bit(tmp_path, quadrant_map):
+    """A 7 mm map still fits 16-bit counts; the step grows with the map (max|sag| / 32766)."""
     big = quadrant_map.scaled(2000.0)  # up to 7 mm of sag
     path = ic.write_codev_int(big, tmp_path / "big.int", wavelength_um=0.6328)
     ssz = float(path.read_text().splitlines()[1].split()[7])
     values = np.array(" ".join(path.read_text().splitlines()[2:]).split(), dtype=np.int64)
-    assert np.abs(values[values != CODEV_NDA]).max() <= MAX_COUNT < 2**31 - 1
-    assert 0.6328 / ssz < 1e-3  # still sub-nanometre
+    assert np.abs(values[values != CODEV_NDA]).max() <= 32766
+    step_um = 0.6328 / ssz
+    assert step_um <= np.nanmax(np.abs(big.sag_um)) / 32766 * (1 + 1e-5)
     back = ic.read_sag_map(path)
-    assert np.nanmax(np.abs(back.sag_um - big.sag_um)) <= 0.5 * 0.6328 / ssz * (1 + 1e-9)
+    assert np.nanmax(np.abs(back.sag_um - big.sag_um)) <= 0.5 * step_um * (1 + 1e-9)
 
 
 def test_codev_int_wfr_round_trip(tmp_path, quadrant_map):
     path = ic.write_sag_map(quadrant_map, tmp_path / "w.int", kind="WFR", wavelength_um=1.25)
-    back = ic.read_sag_map(path)
+    back = ic.read_sag_map(path, quantity="wavefront")
     assert back.meta["codev_type"] == "WFR" and back.meta["wavelength_um"] == 1.25
     assert np.nanmax(np.abs(back.sag_um - quadrant_map.sag_um)) <= 0.5 * 1.25 / back.meta["ssz"] * (1 + 1e-9)
+    with pytest.raises(ValueError, match="not surface sag"):
+        ic.read_sag_map(path)
 
 
 def test_codev_int_needs_extent(tmp_path):

@@ -108,15 +108,28 @@ def test_exports_round_trip_through_interchange(study):
                   zip(ds["zernike_n"].values, ds["zernike_m"].values, ds["zernike_um"].values[0])}
         factor = float(ds["wavefront_opd_per_sag"].values[0])
         x, y = ds["x_mm"].values, ds["y_mm"].values
-    for suffix, tol in (("_sag.int", 1e-5), ("_sag.dat", 1e-9)):
+    for suffix in ("_sag.int", "_sag.dat"):
         m = read_sag_map(ex / f"{stem}{suffix}")
+        # 16-bit INT: half a count, WVL / SSZ = max|sag| / 32766 um per count; DAT: 12 digits
+        tol = 0.5 * m.meta["wavelength_um"] / m.meta["ssz"] * (1 + 1e-9) if suffix == "_sag.int" else 1e-9
+        if suffix == "_sag.int":
+            assert tol <= 0.5 * np.nanmax(np.abs(sag)) / 32766 * (1 + 1e-5)
         np.testing.assert_allclose(m.x_mm, x, atol=1e-9)
         np.testing.assert_allclose(m.y_mm, y, atol=1e-9)
         assert np.array_equal(np.isnan(m.sag_um), np.isnan(sag))
         np.testing.assert_allclose(m.sag_um, sag, atol=tol, equal_nan=True)
-    w = read_sag_map(ex / wfr)
+    w = read_sag_map(ex / wfr, quantity="wavefront")
     assert w.meta["codev_type"] == "WFR" and w.meta["wavelength_um"] == 1.25
-    np.testing.assert_allclose(w.sag_um, factor * sag, atol=1e-5, equal_nan=True)
+    np.testing.assert_allclose(w.sag_um, factor * sag, atol=0.5 * 1.25 / w.meta["ssz"] * (1 + 1e-9), equal_nan=True)
+    # the CODE V ZFR deck and the OpticStudio Zernike Sag lists hold the same fit
+    from pipeline.io_codev_zfr import read_codev_zernike
+    from pipeline.io_zemax import read_zemax_zernike
+
+    decks = [read_codev_zernike(ex / f"{stem}_zernike_zfr.int", normalised=True)]
+    decks += [read_zemax_zernike(ex / f"{stem}_zernike_{c}_zemax.dat", c, normalised=True) for c in ("standard", "fringe")]
+    for back, info in decks:
+        assert info["radius_mm"] == pytest.approx(0.5 * np.hypot(82, 72))
+        np.testing.assert_allclose([back.get(k, 0.0) for k in coeffs], list(coeffs.values()), rtol=1e-10, atol=1e-15)
     for conv, normalised in (("noll", True), ("fringe", False)):
         back, info = read_zernike_list(ex / f"{stem}_zernike_{conv}.txt", normalised=True)
         assert info["radius_mm"] == pytest.approx(0.5 * np.hypot(82, 72))
