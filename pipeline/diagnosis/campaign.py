@@ -69,7 +69,7 @@ from .nominal import fea_sag_map, thermal_factor
 from .synth import (shape_discrepancy, synthetic_profile, synthetic_psf_image, synthetic_surface, unmodelled_shape,
                     write_profile_csv)
 
-__all__ = ["CASE_TYPES", "DISCREPANCIES", "DISCREPANCY_PRESENT", "TRUTHS", "PROFILE_SETS", "PSF_IMAGE_SPEC", "parse_types", "CampaignConfig", "recovery_errors", "make_case", "run_case", "run_campaign", "write_campaign"]
+__all__ = ["CASE_TYPES", "DISCREPANCIES", "DISCREPANCY_PRESENT", "TRUTHS", "PROFILE_SETS", "PSF_IMAGE_SPEC", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "run_case", "run_campaign", "write_campaign"]
 
 CASE_TYPES = (
     ("surface", "astigmatism"), ("surface", "amplitude_scale"), ("surface", "temperature"),
@@ -309,6 +309,19 @@ def recovery_errors(d, effect: str, truth: dict) -> dict | None:
     return {"per_parameter": per, "vector": vec, "within_2sigma": bool(sig_ok)}
 
 
+def score_case(verdict: str, best, effect: str, present=()) -> tuple[bool, list[str]]:
+    """(correct, false companions) of one case whose injected effect is ``effect`` and
+    whose truth also carries the library effects ``present``.
+
+    Correct: a library effect, verdict ``explained``, the top finding ``best`` is the
+    effect alone or lists it in ``degenerate_with``, and it adopted no companion the
+    truth does not carry (those are returned as false attributions, for any case)."""
+    false = [c for c in (best.companions if best is not None else ()) if c != effect and c not in present]
+    correct = bool(effect in LIBRARY and verdict == "explained" and best is not None
+                   and (best.effects == (effect,) or effect in best.degenerate_with) and not false)
+    return correct, false
+
+
 def run_case(args) -> dict:
     """One campaign case (picklable arguments: index, type, config, maps)."""
     index, (kind, effect), cfg, nominal, base = args
@@ -330,9 +343,7 @@ def run_case(args) -> dict:
     best = d.best
     in_lib = effect in LIBRARY
     rec = recovery_errors(d, effect, truth)
-    false_companions = [c for c in (best.companions if best else ()) if c != effect and c not in present]
-    correct = bool(in_lib and d.verdict == "explained" and best is not None
-                   and (best.effects == (effect,) or effect in best.degenerate_with) and not false_companions)
+    correct, false_companions = score_case(d.verdict, best, effect, present)
     return {"index": index, "kind": kind, "effect": effect, "truth": truth, "truth_info": truth_info,
             "truth_present": list(present), "measurement": _measurement_kind(kind, cfg),
             "false_companions": false_companions, "verdict": d.verdict,

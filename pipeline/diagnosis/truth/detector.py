@@ -47,6 +47,8 @@ def correlated_noise(x_um: np.ndarray, sigma: float, length_um: float, rng: np.r
     ``sigma^2 exp(-(dx / length_um)^2 / 2)``."""
     if not (length_um > 0 and sigma >= 0):
         raise ValueError(f"correlated_noise: length_um={length_um} must be > 0 and sigma={sigma} >= 0")
+    if sigma == 0:
+        return np.zeros(x_um.shape)
     d = x_um[:, None] - x_um[None, :]
     C = sigma**2 * np.exp(-0.5 * (d / length_um) ** 2) + 1e-10 * sigma**2 * np.eye(x_um.size)
     w, V = np.linalg.eigh(C)

@@ -96,6 +96,8 @@ def mixed_grating(x_mm, y_mm, fea_um, nominal_um, family: str, distance: float, 
     lo, hi = 0.0, 1.0
     if dist(hi) < distance:
         raise ValueError(f"mixed_grating: family {family} reaches only distance {dist(hi):.3f} < {distance}")
+    if dist(lo) > distance:
+        raise ValueError(f"mixed_grating: the FEA map alone is already at distance {dist(lo):.3f} > {distance}")
     for _ in range(50):
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if dist(mid) < distance else (lo, mid)
