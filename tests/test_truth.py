@@ -312,3 +312,26 @@ def test_validate_default_path_smoke(tmp_path, monkeypatch):
     s = res["summary"]
     assert s["truth"] == "independent" and set(s["by_measurement"]) == {"map"}
     assert s["by_measurement"]["map"]["n_library"] == 2 and s["by_measurement"]["map"]["n_ool"] == 1
+
+
+def test_truth_package_imports_no_forward_model_code():
+    """The independence the package docstring states: no module of the truth imports the
+    forward model, the synthetic-data code or the project's optics functions (only the
+    default collimator's numbers from optics.pupil)."""
+    import ast
+    from pathlib import Path
+
+    import pipeline.diagnosis.truth as pkg
+
+    forbidden = {"optics.imaging", "optics.lineprofile", "optics.grating", "optics.zernike", "optics.sagmap",
+                 "pipeline.diagnosis.forward", "pipeline.diagnosis.synth", "pipeline.diagnosis.psf_image",
+                 "..forward", "..synth", "..psf_image", "..effects", "..engine"}
+    for f in Path(pkg.__file__).parent.glob("*.py"):
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                mod = "." * node.level + (node.module or "")
+                assert mod not in forbidden, (f.name, mod)
+                if mod == "optics.pupil":
+                    assert [a.name for a in node.names] == ["DEFAULT_COLLIMATOR_ZERNIKE_UM"], f.name
+            elif isinstance(node, ast.Import):
+                assert not {a.name for a in node.names} & forbidden, f.name
