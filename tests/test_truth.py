@@ -272,6 +272,7 @@ def test_companion_not_in_truth_is_a_false_attribution():
     assert score_case("explained", best(("plating_gradient",)), "pupil_shift") == (False, ["plating_gradient"])
     assert score_case("explained", best(("quilt_shape",)), "pupil_shift", ["quilt_shape"]) == (True, [])
     assert score_case("unexplained", best(), "pupil_shift") == (False, [])
+    assert score_case("unexplained", best(("blank_bow",)), "pupil_shift") == (False, [])  # nothing attributed
     assert score_case("explained", best(("blank_bow",)), "ool_stray") == (False, ["blank_bow"])
 
 

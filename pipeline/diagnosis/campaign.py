@@ -315,8 +315,10 @@ def score_case(verdict: str, best, effect: str, present=()) -> tuple[bool, list[
 
     Correct: a library effect, verdict ``explained``, the top finding ``best`` is the
     effect alone or lists it in ``degenerate_with``, and it adopted no companion the
-    truth does not carry (those are returned as false attributions, for any case)."""
-    false = [c for c in (best.companions if best is not None else ()) if c != effect and c not in present]
+    truth does not carry. Such companions of an ``explained`` top finding are returned as
+    false attributions, for any case (an ``unexplained`` verdict attributes nothing)."""
+    explained = verdict == "explained" and best is not None
+    false = [c for c in best.companions if c != effect and c not in present] if explained else []
     correct = bool(effect in LIBRARY and verdict == "explained" and best is not None
                    and (best.effects == (effect,) or effect in best.degenerate_with) and not false)
     return correct, false
