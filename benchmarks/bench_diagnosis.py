@@ -5,7 +5,7 @@ injection-recovery campaign. Writes the per-case rows and the summary as JSON (`
     .venv/bin/python benchmarks/bench_diagnosis.py [--cases 208] [--workers 2] [--seed 1] [--cache-dir DIR]
         [--profiles extended|minimal] [--no-scenarios] [--out FILE] [--progress FILE.jsonl] [--profile-map-K K]
         [--psf-image] [--types KIND:EFFECT,...] [--discrepancy unmodelled|companions]
-        [--n-eff-from nominal|best_fit]
+        [--n-eff-from nominal|best_fit] [--truth independent|model]
 
 ``--progress``: every finished case is appended there as a JSON line (partial results
 survive an interrupted run). ``--profiles``: the campaign's line-profile measurement set
@@ -23,7 +23,8 @@ from pathlib import Path
 
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.engine import N_EFF_SOURCES, Criteria
-from pipeline.diagnosis.campaign import DISCREPANCIES, PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, parse_types, run_campaign
+from pipeline.diagnosis.campaign import (DISCREPANCIES, PROFILE_SETS, PSF_IMAGE_SPEC, TRUTHS, CampaignConfig, parse_types,
+                                         run_campaign)
 
 HERE = Path(__file__).parent
 SCEN = HERE.parent / "pipeline" / "scenarios"
@@ -47,6 +48,8 @@ def main(argv=None):
                     help="the truth's model discrepancy (CampaignConfig.discrepancy)")
     ap.add_argument("--n-eff-from", default="nominal", choices=N_EFF_SOURCES,
                     help="residual the effective sample counts come from (Criteria.n_eff_from)")
+    ap.add_argument("--truth", default="independent", choices=TRUTHS,
+                    help="campaign truth generator (CampaignConfig.truth; benchmarks/truth_families.md)")
     a = ap.parse_args(argv)
     criteria = dataclasses.replace(CampaignConfig.criteria, n_eff_from=a.n_eff_from)
     out = {"scenarios": {}}
@@ -63,7 +66,8 @@ def main(argv=None):
         print(name, json.dumps(out["scenarios"][name], default=float))
     cfg = CampaignConfig(n_cases=a.cases, seed=a.seed, workers=a.workers, profile_specs=PROFILE_SETS[a.profiles],
                          profile_map_K=a.profile_map_K, psf_image=PSF_IMAGE_SPEC if a.psf_image else None,
-                         only_types=parse_types(a.types), discrepancy=a.discrepancy, criteria=criteria)
+                         only_types=parse_types(a.types, a.truth), discrepancy=a.discrepancy, criteria=criteria,
+                         truth=a.truth)
     res = run_campaign(cfg, cache_dir=a.cache_dir, progress=a.progress)
     res["profile_set"] = a.profiles
     out["campaign"] = res

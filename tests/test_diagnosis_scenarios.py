@@ -65,11 +65,12 @@ def test_reduced_campaign(cache):
     """19 cases on the campaign's default (extended) line-profile set, J 1.25 um at
     250/100/25 mas + 1.10/1.175/1.40 um at 25 mas: library effects mostly recognised and
     recovered, out-of-library ones not attributed (full campaign, 208 cases:
-    benchmarks/results_diagnosis.md). Types cycle surfaces first, so 19 cases = 2 per
+    benchmarks/results_diagnosis.md). On the forward model's own truth (``truth="model"``),
+    on which these thresholds were set. Types cycle surfaces first, so 19 cases = 2 per
     surface type (12 surface cases: fewer leave the surface check to one or two maps; cases are
     seeded by (seed, index)) + 1 per profile type, so six profiles per case cost CI about what
     2 x 3 profiles per type would."""
-    cfg = CampaignConfig(n_cases=19, seed=7, workers=2, truth_mesh="default")
+    cfg = CampaignConfig(n_cases=19, seed=7, workers=2, truth_mesh="default", truth="model")
     assert cfg.profile_specs == PROFILE_SETS["extended"]
     res = run_campaign(cfg, cache_dir=cache)
     s = res["summary"]

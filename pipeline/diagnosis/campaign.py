@@ -1,10 +1,17 @@
 """Injection-recovery campaign (``cryograting diagnose --validate``).
 
 Each case draws one effect (library or out-of-library) at a random magnitude, makes
-synthetic measurements from a truth that is a different model from the one diagnosed
-(refined-mesh FEA map + a random model discrepancy, converged LSF sampling, noise,
-piston/tilt or shift/flux/background, dropouts, sparse sampling), withholds the effect
-from the model (default-mesh nominal) and runs :func:`~pipeline.diagnosis.diagnose`.
+synthetic measurements from a truth, withholds the effect from the model (default-mesh
+nominal) and runs :func:`~pipeline.diagnosis.diagnose`. Two truth generators
+(``CampaignConfig.truth``, ``--truth``):
+
+* ``"independent"`` (default): :mod:`pipeline.diagnosis.truth` — optics by a 2-D
+  finite-slit Abbe sum written apart from the forward model, quilt-shape mixtures at a
+  5-30 % harmonic distance from the nominal, detector effects, and out-of-library
+  families of ``benchmarks/truth_families.md`` (its case types: ``truth.CASE_TYPES``);
+* ``"model"``: the diagnosis's own forward code (:mod:`.synth`): refined-mesh FEA map +
+  a random model discrepancy, converged LSF sampling, noise, piston/tilt or
+  shift/flux/background, dropouts, sparse sampling (case types :data:`CASE_TYPES`).
 
 Scoring: a library case is *correct* when the verdict is ``explained`` and the top
 finding is the injected effect alone or lists it in ``degenerate_with`` (the engine
@@ -18,7 +25,13 @@ whose error norm is the RMS of the wavefront/surface error; pupil shift: a
 displacement), ``||fit - true|| <= 0.2 ||true||``, and whether the truth lies within
 2 sigma of the fit (honest error bars). The line-profile measurement set is
 ``CampaignConfig.profile_specs`` (:data:`PROFILE_SETS`).
-Out-of-library cases should end ``unexplained`` (or ``no_gap``).
+Out-of-library cases should end ``unexplained`` (or ``no_gap``). A companion the top
+finding adopts that the truth does not carry (the injected effect, and the truth's
+``present`` effects: ``quilt_shape`` for the independent truth, bow and plating
+gradient for the model truth's ``"companions"`` discrepancy) is a false attribution:
+the case is not correct, and the confusion matrix counts it as ``<top>+<companion>``.
+The summary gives the three scores per measurement kind (``by_measurement``: map only,
+profiles only, profiles + map).
 
 The model discrepancy (``CampaignConfig.discrepancy``): ``"unmodelled"`` (default) is a
 0.01 µm RMS trefoil/tetrafoil/pentafoil surface error (:func:`~.synth.unmodelled_shape`),
@@ -55,7 +68,7 @@ from .nominal import fea_sag_map, thermal_factor
 from .synth import (shape_discrepancy, synthetic_profile, synthetic_psf_image, synthetic_surface, unmodelled_shape,
                     write_profile_csv)
 
-__all__ = ["CASE_TYPES", "DISCREPANCIES", "PROFILE_SETS", "PSF_IMAGE_SPEC", "parse_types", "CampaignConfig", "recovery_errors", "make_case", "run_case", "run_campaign", "write_campaign"]
+__all__ = ["CASE_TYPES", "DISCREPANCIES", "DISCREPANCY_PRESENT", "TRUTHS", "PROFILE_SETS", "PSF_IMAGE_SPEC", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "run_case", "run_campaign", "write_campaign"]
 
 CASE_TYPES = (
     ("surface", "astigmatism"), ("surface", "amplitude_scale"), ("surface", "temperature"),
@@ -86,6 +99,10 @@ PROFILE_SPECS = PROFILE_SETS["extended"]
 SURFACE_T_K = 128.0
 #: CampaignConfig.discrepancy -> the truth's model discrepancy (see the module docstring).
 DISCREPANCIES = {"unmodelled": unmodelled_shape, "companions": shape_discrepancy}
+#: Library effects the model truth carries besides the injected one, per discrepancy.
+DISCREPANCY_PRESENT = {"unmodelled": (), "companions": ("blank_bow", "plating_gradient")}
+#: CampaignConfig.truth: the truth generators (module docstring).
+TRUTHS = ("independent", "model")
 
 
 @dataclass(frozen=True)
@@ -99,7 +116,9 @@ class CampaignConfig:
     workers: int = 2
     noise_um: float = 0.01
     noise_rel: float = 0.01
-    case_types: tuple = CASE_TYPES
+    #: Case types cycled over; None: the truth generator's own (:data:`CASE_TYPES` for
+    #: "model", :data:`pipeline.diagnosis.truth.CASE_TYPES` for "independent").
+    case_types: tuple | None = None
     profile_specs: tuple = PROFILE_SPECS
     #: If set, the line-profile cases also get a cold-minus-warm map of the same blank at
     #: this temperature (K), as in the paper's data (a cryogenic interferogram beside the
@@ -114,9 +133,17 @@ class CampaignConfig:
     only_types: tuple | None = None
     #: The truth's model discrepancy, a key of :data:`DISCREPANCIES`.
     discrepancy: str = "unmodelled"
+    #: The truth generator, one of :data:`TRUTHS`.
+    truth: str = "independent"
     criteria: Criteria = Criteria(heldout_top=1, pair_from=2)
 
     def __post_init__(self) -> None:
+        if self.truth not in TRUTHS:
+            raise ValueError(f"CampaignConfig: truth={self.truth!r} is not one of {list(TRUTHS)}")
+        if self.case_types is None:
+            from .truth import CASE_TYPES as INDEPENDENT_TYPES
+
+            object.__setattr__(self, "case_types", INDEPENDENT_TYPES if self.truth == "independent" else CASE_TYPES)
         if self.profile_map_K is not None and not 20.0 <= self.profile_map_K <= 290.0:
             raise ValueError(f"CampaignConfig: profile_map_K={self.profile_map_K} K is outside the valid range "
                              "20 ... 290 K (or None: profiles only)")
@@ -131,15 +158,20 @@ class CampaignConfig:
                              f"{[f'{k}:{e}' for k, e in self.case_types]}")
 
 
-def parse_types(text: str | None) -> tuple | None:
-    """``"line_profile:collimator_wfe,surface:astigmatism"`` -> ((kind, effect), ...); None -> None."""
+def parse_types(text: str | None, truth: str = "model") -> tuple | None:
+    """``"line_profile:collimator_wfe,surface:astigmatism"`` -> ((kind, effect), ...); None -> None.
+    ``truth``: the generator whose case types are valid (:data:`TRUTHS`)."""
     if not text:
         return None
+    from .truth import CASE_TYPES as INDEPENDENT_TYPES
+
+    valid = INDEPENDENT_TYPES if truth == "independent" else CASE_TYPES
     out = []
     for item in text.split(","):
         kind, sep, effect = item.strip().partition(":")
-        if not sep or (kind, effect) not in CASE_TYPES:
-            raise ValueError(f"--types: {item.strip()!r} is not a case type; valid: {[f'{k}:{e}' for k, e in CASE_TYPES]}")
+        if not sep or (kind, effect) not in valid:
+            raise ValueError(f"--types: {item.strip()!r} is not a case type of the {truth} truth; valid: "
+                             f"{[f'{k}:{e}' for k, e in valid]}")
         out.append((kind, effect))
     return tuple(out)
 
@@ -276,22 +308,46 @@ def recovery_errors(d, effect: str, truth: dict) -> dict | None:
     return {"per_parameter": per, "vector": vec, "within_2sigma": bool(sig_ok)}
 
 
+def score_case(verdict: str, best, effect: str, present=()) -> tuple[bool, list[str]]:
+    """(correct, false companions) of one case whose injected effect is ``effect`` and
+    whose truth also carries the library effects ``present``.
+
+    Correct: a library effect, verdict ``explained``, the top finding ``best`` is the
+    effect alone or lists it in ``degenerate_with``, and it adopted no companion the
+    truth does not carry. Such companions of an ``explained`` top finding are returned as
+    false attributions, for any case (an ``unexplained`` verdict attributes nothing)."""
+    explained = verdict == "explained" and best is not None
+    false = [c for c in best.companions if c != effect and c not in present] if explained else []
+    correct = bool(effect in LIBRARY and verdict == "explained" and best is not None
+                   and (best.effects == (effect,) or effect in best.degenerate_with) and not false)
+    return correct, false
+
+
 def run_case(args) -> dict:
     """One campaign case (picklable arguments: index, type, config, maps)."""
     index, (kind, effect), cfg, nominal, base = args
     rng = np.random.default_rng([cfg.seed, index])
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
-        man, truth = make_case(kind, effect, rng, base, Path(tmp), cfg)
+        if cfg.truth == "independent":
+            from .truth import make_case as make_independent_case
+
+            man, truth = make_independent_case(kind, effect, rng, nominal, base, Path(tmp), cfg)
+        else:
+            man, truth = make_case(kind, effect, rng, base, Path(tmp), cfg)
+            truth = {**truth, "_present": list(DISCREPANCY_PRESENT[cfg.discrepancy])}
+        present = truth.pop("_present", [])
+        truth_info = truth.pop("_truth", None)
         from .manifest import parse_manifest
 
         d = diagnose(parse_manifest(man, tmp), criteria=cfg.criteria, nominal=nominal, keep_curves=False)
     best = d.best
     in_lib = effect in LIBRARY
     rec = recovery_errors(d, effect, truth)
-    correct = bool(in_lib and d.verdict == "explained" and best is not None
-                   and (best.effects == (effect,) or effect in best.degenerate_with))
-    return {"index": index, "kind": kind, "effect": effect, "truth": truth, "verdict": d.verdict,
+    correct, false_companions = score_case(d.verdict, best, effect, present)
+    return {"index": index, "kind": kind, "effect": effect, "truth": truth, "truth_info": truth_info,
+            "truth_present": list(present), "measurement": _measurement_kind(kind, cfg),
+            "false_companions": false_companions, "verdict": d.verdict,
             "top": best.effect if best else None, "top_degenerate_with": list(best.degenerate_with) if best else [],
             "top_delta_bic": best.delta_bic if best else None, "top_shrink": best.shrink_fraction if best else None,
             "top_heldout_shrink": best.heldout_shrink_fraction if best else None,
@@ -312,6 +368,24 @@ def run_case(args) -> dict:
             "seconds": time.perf_counter() - t0}
 
 
+def _measurement_kind(kind: str, cfg: CampaignConfig) -> str:
+    """"map" (surface cases), "profiles" or "profiles+map" (line-profile cases)."""
+    if kind == "surface":
+        return "map"
+    return "profiles" if cfg.profile_map_K is None else "profiles+map"
+
+
+def _scores(rows: list[dict]) -> dict:
+    """The three headline scores of ``rows`` (correct top, within 20 %, out-of-library unexplained)."""
+    lib = [r for r in rows if r["effect"] in LIBRARY]
+    ool = [r for r in rows if r["effect"] not in LIBRARY]
+    return {"n_library": len(lib), "n_ool": len(ool),
+            "correct_top": sum(r["correct"] for r in lib),
+            "recovered_20pct": sum(r["recovery_error"] is not None and r["recovery_error"] <= 0.2 for r in lib),
+            "ool_unexplained": sum(r["verdict"] != "explained" for r in ool),
+            "false_companion_cases": sum(bool(r.get("false_companions")) for r in rows)}
+
+
 def _summary(rows: list[dict], wall_s: float, cfg: CampaignConfig) -> dict:
     lib = [r for r in rows if r["effect"] in LIBRARY]
     ool = [r for r in rows if r["effect"] not in LIBRARY]
@@ -319,6 +393,8 @@ def _summary(rows: list[dict], wall_s: float, cfg: CampaignConfig) -> dict:
     for r in rows:
         row = confusion.setdefault(f"{r['kind']}:{r['effect']}", {})
         col = r["top"] if r["verdict"] == "explained" else r["verdict"]
+        if r["verdict"] == "explained" and r.get("false_companions"):
+            col = "+".join([col, *r["false_companions"]])
         row[col] = row.get(col, 0) + 1
     rec = [r["recovery_error"] for r in lib if r["recovery_error"] is not None]
     per_type = {}
@@ -344,7 +420,9 @@ def _summary(rows: list[dict], wall_s: float, cfg: CampaignConfig) -> dict:
                                                        for r in lib if r["correct"]) / max(sum(r["correct"] for r in lib), 1)),
             "median_recovery_error": float(np.median(rec)) if rec else None,
             "ool_unexplained_rate": sum(r["verdict"] != "explained" for r in ool) / max(len(ool), 1),
-            "per_type": per_type, "confusion": confusion,
+            "per_type": per_type, "confusion": confusion, "truth": cfg.truth,
+            "by_measurement": {k: _scores([r for r in rows if r.get("measurement") == k])
+                               for k in sorted({r.get("measurement") for r in rows})},
             "seconds_per_case_mean": float(np.mean([r["seconds"] for r in rows])),
             "wall_s": wall_s, "workers": cfg.workers, "seed": cfg.seed}
 
@@ -368,6 +446,9 @@ def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None, progres
 
     ``progress`` (path, optional): each finished case is appended to it as one JSON line
     (in case order), so an interrupted campaign leaves its partial results."""
+    if cfg.truth == "independent" and cfg.psf_image is not None:
+        raise ValueError("CampaignConfig: psf_image needs truth='model' (the independent truth makes no "
+                         "point-source images)")
     t0 = time.perf_counter()
     nominal, base = campaign_maps(cfg, cache_dir)
     tasks = [(i, cfg.case_types[i % len(cfg.case_types)], cfg, nominal, base) for i in range(cfg.n_cases)

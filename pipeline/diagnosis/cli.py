@@ -27,8 +27,9 @@ def _run(args) -> int:
 
         cfg = CampaignConfig(n_cases=args.cases, seed=args.seed, workers=args.workers,
                              profile_specs=PROFILE_SETS[args.profiles], profile_map_K=args.profile_map_K,
-                             psf_image=PSF_IMAGE_SPEC if args.psf_image else None, only_types=parse_types(args.types),
-                             discrepancy=args.discrepancy)
+                             psf_image=PSF_IMAGE_SPEC if args.psf_image else None,
+                             only_types=parse_types(args.types, args.truth), discrepancy=args.discrepancy,
+                             truth=args.truth)
         cfg = replace(cfg, criteria=_criteria(args, cfg.criteria))
         res = run_campaign(cfg, cache_dir=args.cache_dir)
         path = write_campaign(res, args.out)
@@ -78,8 +79,13 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--types", default=None, metavar="KIND:EFFECT,...",
                    help="campaign (with --validate): run only these case types, e.g. line_profile:collimator_wfe "
                         "(cases keep their index and random draws)")
+    p.add_argument("--truth", default="independent", choices=("independent", "model"),
+                   help="campaign (with --validate): truth generator: independent = 2-D finite-slit Abbe optics, "
+                        "quilt-shape mixtures, detector effects and out-of-library families written apart from the "
+                        "forward model (default; benchmarks/truth_families.md); model = the diagnosis's own forward "
+                        "code with a small discrepancy")
     p.add_argument("--discrepancy", default="unmodelled", choices=("unmodelled", "companions"),
-                   help="campaign (with --validate): the truth's model discrepancy: unmodelled = 0.01 um RMS "
+                   help="campaign (with --validate, --truth model): the truth's model discrepancy: unmodelled = 0.01 um RMS "
                         "trefoil/tetrafoil/pentafoil (outside the library, default); companions = bow + plating "
                         "gradient (library companions, the first campaigns')")
 

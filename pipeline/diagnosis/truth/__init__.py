@@ -1,0 +1,41 @@
+"""Independent truths for the injection-recovery campaign (``diagnose --validate``).
+
+Independence: the list of code paths the generator does NOT share with the diagnosis
+forward model (:mod:`pipeline.diagnosis.forward`, :mod:`.synth`, :mod:`.psf_image`):
+
+* optics: :mod:`.abbe` is a literal 2-D finite-slit Abbe sum in numpy (its own grating
+  equation from the paper's table, slit and source sampling, pupil grid with grey rim
+  from sub-sampled cells, Zernike polynomials, grating phase, Fraunhofer propagation
+  evaluated per source, along-slit collapse, pixel integration by its transfer
+  function). It does not import :mod:`optics.imaging`, :mod:`optics.lineprofile`,
+  :mod:`optics.grating`, :mod:`optics.pupil` functions, :mod:`optics.zernike`,
+  :mod:`optics.sagmap` or :mod:`pipeline.diagnosis.forward`; the forward model's
+  infinite-slit strip, ``LsfSettings`` discretisation, ``box_convolve`` and sag
+  resampling are not used;
+* grating maps: :mod:`.gratings` mixes the FEA map with analytic sum- and product-form
+  quilts fitted to it (own least squares), at a drawn harmonic distance from the nominal,
+  and interpolates with scipy; the model's ``blank_shape_um``, bow and plating terms are
+  not used;
+* detector and interferometer: :mod:`.detector` and :func:`.generate.measured_map`
+  (super-sampled pixels at random sub-pixel phases, inter-pixel coupling, counts with
+  Poisson and read noise, correlated noise, pedestal or background subtraction; map
+  piston/tilt, correlated noise, dropouts) — not :mod:`.synth`;
+* out-of-library effects: :mod:`.families` (``benchmarks/truth_families.md``), not the
+  model campaign's coma/bump/ghost/distortion.
+
+Shared (deliberately, as data or physics the diagnosis is meant to assume):
+
+* the FEA solver (:func:`pipeline.diagnosis.nominal.fea_sag_map`): the truth's FEA map
+  comes from another mesh (``CampaignConfig.truth_mesh``) of the same code;
+* :func:`pipeline.diagnosis.nominal.thermal_factor` (the mismatch-strain ratio from the
+  material tables) for temperature truths;
+* the instrument's default collimator wavefront (the numbers of
+  :data:`optics.pupil.DEFAULT_COLLIMATOR_ZERNIKE_UM`), the effects' parameter
+  conventions (so the injected values mean what the library's do), and the manifest
+  and file formats the diagnosis reads.
+"""
+
+from .abbe import AbbeSettings, abbe_line_profile
+from .generate import CASE_TYPES, make_case
+
+__all__ = ["AbbeSettings", "abbe_line_profile", "CASE_TYPES", "make_case"]

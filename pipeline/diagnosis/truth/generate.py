@@ -1,0 +1,170 @@
+"""One independent campaign case: truth deformation, optics, detector, files, manifest.
+
+:func:`make_case` is the independent counterpart of
+:func:`pipeline.diagnosis.campaign.make_case` (same signature and return: manifest dict,
+injected truth); :data:`CASE_TYPES` lists its case types (library effects as the model
+campaign's, out-of-library families of :mod:`.families`).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
+
+from ..nominal import thermal_factor
+from .abbe import GRATINGS, RELATIVE_NA, AbbeSettings, abbe_line_profile, zernike_noll
+from .detector import measure_profile
+from .families import PROFILE_OOL, SURFACE_OOL, draw_profile_ool, draw_surface_ool
+from .gratings import GratingTruth, mixed_grating, sag_function
+
+__all__ = ["CASE_TYPES", "FAMILIES", "SURFACE_T_K", "truth_grating", "measured_map", "make_case"]
+
+CASE_TYPES = (
+    ("surface", "astigmatism"), ("surface", "amplitude_scale"), ("surface", "temperature"),
+    ("surface", "registration"), *(("surface", e) for e in SURFACE_OOL),
+    ("line_profile", "amplitude_scale"), ("line_profile", "temperature"), ("line_profile", "pupil_shift"),
+    ("line_profile", "collimator_wfe"), ("line_profile", "slit_width"), *(("line_profile", e) for e in PROFILE_OOL),
+)
+FAMILIES = ("sum_mix", "product_mix")
+SURFACE_T_K = 128.0
+APERTURE_MM = 137.0
+#: The instrument's collimator wavefront (shared data: the model's default collimator).
+COLLIMATOR_UM = dict(DEFAULT_COLLIMATOR_ZERNIKE_UM)
+
+
+def _signed(rng, lo, hi):
+    return float(rng.choice([-1.0, 1.0]) * rng.uniform(lo, hi))
+
+
+def truth_grating(nominal, fea, rng: np.random.Generator) -> GratingTruth:
+    """A truth deformation (µm at the nominal's cold temperature): ``fea`` (another mesh)
+    mixed with a quilt of a random family at a harmonic distance drawn in 5-30 %."""
+    fam = FAMILIES[int(rng.integers(0, len(FAMILIES)))]
+    n = np.where(np.isfinite(nominal.sag_um), nominal.sag_um, 0.0)
+    return mixed_grating(fea.x_mm, fea.y_mm, fea.sag_um, n, fam, float(rng.uniform(0.05, 0.30)), rng)
+
+
+def measured_map(g: GratingTruth, factor: float, rng: np.random.Generator, extra=None, registration=None,
+                 noise_um: float = 0.01) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Interferometer map on a 1 mm grid over the 137 mm window (NaN outside / dropouts):
+    ``factor`` times the truth (moved by ``registration`` = (dx, dy, rot_deg): the feature at
+    q appears at R q + d), plus ``extra(x, y)``, piston ±0.5 µm, tilt ±2 µrad, white noise,
+    correlated noise (Gaussian-filtered, 3-10 mm, 0.003-0.008 µm) and 3 % dropouts."""
+    ax = np.arange(-68.0, 68.0 + 0.5, 1.0)
+    X, Y = np.meshgrid(ax, ax)
+    qx, qy = X, Y
+    if registration is not None:
+        dx, dy, rot = registration
+        c, s = math.cos(math.radians(rot)), math.sin(math.radians(rot))
+        xr, yr = X - dx, Y - dy
+        qx, qy = c * xr + s * yr, -s * xr + c * yr
+    z = factor * sag_function(g)(qx, qy)
+    if extra is not None:
+        z = z + extra(X, Y)
+    z = z + rng.uniform(-0.5, 0.5) + rng.uniform(-2e-3, 2e-3) * X + rng.uniform(-2e-3, 2e-3) * Y
+    z = z + rng.normal(0.0, noise_um, z.shape)
+    cn = gaussian_filter(rng.normal(size=z.shape), rng.uniform(3.0, 10.0), mode="wrap")
+    z = z + cn / cn.std() * rng.uniform(0.003, 0.008)
+    z[(X**2 + Y**2 > (0.5 * APERTURE_MM) ** 2) | (rng.random(z.shape) < 0.03) | ~np.isfinite(z)] = np.nan
+    return ax, ax, z
+
+
+def _write_profile(path: Path, x, y) -> None:
+    with open(path, "w") as fh:
+        fh.write("offset_um,intensity\n")
+        for a, b in zip(x, y):
+            fh.write(f"{a:.4f},{b:.3f}\n")
+
+
+def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, out: Path, cfg,
+              settings: AbbeSettings = AbbeSettings()) -> tuple[dict, dict]:
+    """Write one independent case into ``out``; returns (manifest dict, injected truth).
+
+    ``nominal``, ``fea``: the diagnosed nominal and the truth's FEA map (SagMap-like:
+    ``x_mm``, ``y_mm``, ``sag_um``) at 80 K. ``cfg``: a CampaignConfig (nominal_mesh,
+    profile_specs, profile_map_K, noise_um). The truth dict holds the injected
+    parameters, and under ``"_present"`` the library effects the truth carries besides
+    the injected one (``quilt_shape``: its quilt shape differs from the nominal's), under
+    ``"_truth"`` how it was made."""
+    if getattr(cfg, "psf_image", None) is not None:
+        raise ValueError("the independent truth makes no point-source images; use truth='model' with psf_image")
+    g = truth_grating(nominal, fea, rng)
+    sim = {"coverage": "all", "t0_um": 200.0, "polish": 0.75, "cold_K": 80.0, "mesh": cfg.nominal_mesh}
+    meta = {"family": g.family, "mix": g.mix, "harmonic_distance": g.distance}
+    truth: dict = {}
+    if kind == "surface":
+        scale, T, extra, reg = 1.0, SURFACE_T_K, None, None
+        if effect == "amplitude_scale":
+            scale = float(rng.choice([rng.uniform(0.6, 0.85), rng.uniform(1.2, 1.6)]))
+            truth = {"scale_spare": scale}
+        elif effect == "temperature":
+            dT = _signed(rng, 20.0, 50.0)
+            T, truth = SURFACE_T_K + dT, {"temperature_offset_K": dT}
+        elif effect == "astigmatism":
+            a, th = rng.uniform(0.04, 0.15), rng.uniform(0, 2 * np.pi)
+            truth = {"astig_0_um": a * math.cos(th), "astig_45_um": a * math.sin(th)}
+            R = 0.5 * APERTURE_MM
+
+            def extra(x, y):
+                rho, t = np.hypot(x, y) / R, np.arctan2(y, x)
+                return truth["astig_0_um"] * zernike_noll(2, 2, rho, t) + truth["astig_45_um"] * zernike_noll(2, -2, rho, t)
+        elif effect == "registration":
+            r, th = rng.uniform(1.5, 5.0), rng.uniform(0, 2 * np.pi)
+            truth = {"reg_dx_mm": r * math.cos(th), "reg_dy_mm": r * math.sin(th), "reg_rot_deg": rng.uniform(-1.5, 1.5)}
+            reg = (truth["reg_dx_mm"], truth["reg_dy_mm"], truth["reg_rot_deg"])
+        elif effect in SURFACE_OOL:
+            truth, extra = draw_surface_ool(effect, rng)
+        else:
+            raise ValueError(f"make_case: surface effect={effect!r} is not a case type of the independent truth")
+        x, y, z = measured_map(g, scale * thermal_factor(T, 80.0), rng, extra, reg, cfg.noise_um)
+        np.savez(out / "map.npz", x_mm=x, y_mm=y, sag_um=z)
+        meas = [{"kind": "surface", "file": "map.npz", "temperature_K": SURFACE_T_K, "aperture_diameter_mm": APERTURE_MM}]
+        return {"simulation": sim, "measurement": meas}, {**truth, "_present": ["quilt_shape"], "_truth": meta}
+    scale, shift, coll, slit, distortion, camera, artefact = 1.0, (0.0, 0.0), dict(COLLIMATOR_UM), None, None, None, None
+    if effect == "amplitude_scale":
+        scale = float(rng.choice([rng.uniform(0.6, 0.85), rng.uniform(1.2, 1.6)]))
+        truth = {"scale_J": scale}
+    elif effect == "temperature":
+        dT = rng.uniform(35.0, 75.0)
+        scale, truth = thermal_factor(80.0 + dT, 80.0), {"temperature_offset_K": dT}
+    elif effect == "pupil_shift":
+        truth = {"pupil_x_mm": _signed(rng, 3.0, 8.0), "pupil_y_mm": rng.uniform(-3.0, 3.0)}
+        shift = (truth["pupil_x_mm"], truth["pupil_y_mm"])
+    elif effect == "collimator_wfe":
+        v = rng.normal(size=3)
+        v *= rng.uniform(0.15, 0.35) / np.linalg.norm(v)
+        truth = {"coll_coma_um": v[0], "coll_defocus_um": v[1], "coll_astig45_um": v[2]}
+        for key, nm in (("coll_coma_um", (3, 1)), ("coll_defocus_um", (2, 0)), ("coll_astig45_um", (2, -2))):
+            coll[nm] = coll.get(nm, 0.0) + truth[key]
+    elif effect == "slit_width":
+        truth = {"slit_image_width_um": float(rng.choice([rng.uniform(19.0, 23.0), rng.uniform(31.0, 38.0)]))}
+        slit = truth["slit_image_width_um"]
+    elif effect in PROFILE_OOL:
+        truth, distortion, camera, artefact = draw_profile_ool(effect, rng)
+    else:
+        raise ValueError(f"make_case: line_profile effect={effect!r} is not a case type of the independent truth")
+    sag = sag_function(g.scaled(scale))
+    meas = []
+    for i, (gr, wl, order, ps) in enumerate(cfg.profile_specs):
+        # the library's slit width is the 27 µm gratings'; the 29 µm HK slit scales alike
+        slit_i = None if slit is None else slit * GRATINGS[gr][4] / 27.0
+        u, det = abbe_line_profile(gr, wl, order, RELATIVE_NA[ps], sag, pupil_shift_mm=shift, collimator_um=coll,
+                                   camera_um=camera, slit_image_width_um=slit_i, settings=settings)
+        x, counts, _ = measure_profile(u, det, rng, distortion=distortion)
+        if artefact is not None:
+            counts = artefact(x, counts, rng)
+        _write_profile(out / f"p{i}.csv", x, counts)
+        meas.append({"kind": "line_profile", "file": f"p{i}.csv", "name": f"{gr}_{wl}_{ps}mas", "grating": gr,
+                     "order": order, "wavelength_um": wl, "pixel_scale_mas": ps})
+    if cfg.profile_map_K is not None:
+        dT = truth.get("temperature_offset_K", 0.0)
+        x, y, z = measured_map(g, scale * thermal_factor(cfg.profile_map_K + dT, 80.0 + dT), rng, None, None, cfg.noise_um)
+        np.savez(out / "map.npz", x_mm=x, y_mm=y, sag_um=z)
+        meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K,
+                     "aperture_diameter_mm": APERTURE_MM})
+    return {"simulation": sim, "measurement": meas}, {**truth, "_present": ["quilt_shape"], "_truth": meta}
