@@ -138,6 +138,8 @@ class CampaignConfig:
     criteria: Criteria = Criteria(heldout_top=1, pair_from=2)
 
     def __post_init__(self) -> None:
+        if isinstance(self.n_cases, bool) or not isinstance(self.n_cases, int) or self.n_cases < 1:
+            raise ValueError(f"CampaignConfig: n_cases={self.n_cases!r} must be an integer >= 1")
         if self.truth not in TRUTHS:
             raise ValueError(f"CampaignConfig: truth={self.truth!r} is not one of {list(TRUTHS)}")
         if self.case_types is None:

@@ -23,6 +23,8 @@ def _criteria(args, base=None):
 
 def _run(args) -> int:
     if args.validate:
+        if args.cases < 1:
+            raise ValueError(f"--cases {args.cases} must be >= 1 (campaign cases)")
         from .campaign import PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, parse_types, run_campaign, write_campaign
 
         cfg = CampaignConfig(n_cases=args.cases, seed=args.seed, workers=args.workers,

@@ -91,6 +91,7 @@ from .forward import ProfileForward, SurfaceForward
 from .psf_image import PsfImageForward
 from .manifest import Manifest, load_data, load_manifest
 from .nominal import nominal_sag_map
+from .plausibility import check_measurements
 from .where import measurement_parts, profile_parts, psf_image_parts, satellite_spacing_um, surface_parts
 
 __all__ = ["Criteria", "N_EFF_SOURCES", "post_fit_n_eff", "recounted", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects", "all_effects", "parameters_of", "unconstrained", "acting_on", "gap_statistics", "gaps"]
@@ -780,6 +781,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     data = load_data(manifest)
     if nominal is None:
         nominal = nominal_sag_map(manifest.simulation, cache_dir)
+    check_measurements(manifest, data, nominal)
     t["load_s"] = time.perf_counter() - t["start"]
     prob, nom = build_problem(manifest, data, nominal)
     kinds = {f.kind for f in prob.forwards}

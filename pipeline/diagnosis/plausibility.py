@@ -1,0 +1,310 @@
+"""Plausibility of the measurements before any fit: can the nominal model produce them?
+
+A fit always returns numbers, so nonsense in must be stopped before it: a profile of
+random numbers fits some slit width, a map of zeros some amplitude at its prior bound,
+and a map written in nm (1000x too large) is called "unexplained" with no hint about
+its unit. Each check compares a measurement with the noise it carries and with what
+the nominal model predicts for it:
+
+* line profile: the offsets must span a plausible range for the nominal line (else the
+  unit is named, e.g. mm instead of µm); there must be a line, a peak at least
+  ``min_peak_sigma`` noise sigmas above the profile's median; its FWHM must lie within
+  ``width_range`` times the nominal line's FWHM;
+* surface map: its RMS about piston and tilt must exceed ``min_signal_ratio`` times its
+  white noise ("no signal" otherwise), and lie within ``max_orders`` decades of the
+  nominal's RMS at the measurement temperature (else "wrong unit (nm)?" / "(mm)?");
+* PSF image: a peak at least ``min_peak_sigma`` noise sigmas above its median.
+
+:func:`measurement_problems` lists the problems of every measurement;
+:func:`check_measurements` raises one ``ValueError`` line with every problem that makes
+the data undiagnosable (a profile without a line or of implausible width, a magnitude
+off by ``max_orders`` decades, or no measurement with signal at all) and warns about the
+rest (a map without signal beside measurements that have one is still data: it says
+the deformation is below its noise). :func:`at_prior_bound` names fitted parameters
+that sit at their prior bound: such a fit is the prior speaking, not the data.
+
+Noise is the measurement's stated ``noise_um`` / ``noise_rel`` or else estimated from
+the data (:func:`pipeline.diagnosis.noise.estimate_noise`).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from .noise import estimate_noise
+
+__all__ = ["Plausibility", "Problem", "line_fwhm", "peak_sigma", "profile_problems", "map_problems",
+           "image_problems", "measurement_problems", "check_measurements", "at_prior_bound", "unit_hint"]
+
+
+@dataclass(frozen=True)
+class Plausibility:
+    """Thresholds of the checks (see module docstring).
+
+    Why these values: a real line profile or image is normalised to a unit peak and has
+    noise of a few percent at most (the campaign uses 1 %: a peak 100 sigma above its
+    median), so 10 sigma leaves an order of magnitude of margin while a flat profile
+    (~3 sigma) or uniform random numbers (~2 sigma) fail by a factor of 3 or more.
+    The library's slit width prior (15-45 µm against 27 µm) changes the FWHM by
+    0.6-1.7x; 0.3-5x leaves room for any real line. A map's amplitude can change by
+    0.3-3x (``amplitude_scale``) and its temperature by -60..+80 K, i.e. far less than a
+    factor 100 (2 decades), while a unit error is a factor 1000.
+    """
+
+    min_peak_sigma: float = 10.0
+    width_range: tuple = (0.3, 5.0)
+    min_signal_ratio: float = 2.0
+    max_orders: float = 2.0
+    #: offsets must span [lo, hi] times the nominal FWHM
+    span_range: tuple = (1.0, 100.0)
+
+    def __post_init__(self) -> None:
+        lo, hi = self.width_range
+        if not 0 < lo < 1 < hi:
+            raise ValueError(f"Plausibility: width_range={self.width_range!r} must be (lo, hi) with 0 < lo < 1 < hi")
+        lo, hi = self.span_range
+        if not 0 < lo < hi:
+            raise ValueError(f"Plausibility: span_range={self.span_range!r} must be (lo, hi) with 0 < lo < hi")
+        for name in ("min_peak_sigma", "min_signal_ratio", "max_orders"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"Plausibility: {name}={v!r} must be a finite number > 0")
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One implausibility of a measurement: ``code`` ("no_line", "width", "unit",
+    "no_signal"), a one-line ``message``, and whether it makes the data undiagnosable."""
+
+    measurement: str
+    code: str
+    message: str
+    fatal: bool = True
+
+    def __str__(self) -> str:
+        return f"measurement {self.measurement!r}: {self.message}"
+
+
+_UNITS = {3: ("nm", "mm"), 6: ("pm", "m")}  # decades above -> (too large unit), below -> (too small)
+
+
+def unit_hint(orders: float, length_unit: str = "µm") -> str:
+    """``"wrong unit (nm)?"`` for a value ~3 decades too large (a µm quantity written in
+    nm), ``"(mm)?"`` ~3 decades too small, ``"(m)?"`` 6 decades; else ``"wrong unit?"``."""
+    k = int(round(abs(orders)))
+    if k in _UNITS and abs(abs(orders) - k) < 0.75 and length_unit == "µm":
+        return f"wrong unit ({_UNITS[k][0 if orders > 0 else 1]})?"
+    return "wrong unit?"
+
+
+def peak_sigma(intensity: np.ndarray, sigma: float) -> float:
+    """How many noise sigmas the maximum of ``intensity`` lies above its median
+    (inf for noiseless data with a peak)."""
+    y = np.asarray(intensity, float)
+    h = float(np.max(y) - np.median(y))
+    if sigma > 0:
+        return h / sigma
+    return math.inf if h > 0 else 0.0
+
+
+def line_fwhm(offset_um: np.ndarray, intensity: np.ndarray) -> float:
+    """Full width at half maximum (unit of ``offset_um``) of the line around the
+    profile's maximum, the half level taken halfway between the median and the peak.
+
+    The crossings are interpolated linearly between samples; where the profile does not
+    drop below the half level before an end, that end counts (the width is then a lower
+    bound).
+    """
+    o = np.argsort(offset_um)
+    x, y = np.asarray(offset_um, float)[o], np.asarray(intensity, float)[o]
+    i = int(np.argmax(y))
+    half = 0.5 * (y[i] + float(np.median(y)))
+
+    def crossing(step: int) -> float:
+        j = i
+        while 0 <= j + step < y.size and y[j + step] >= half:
+            j += step
+        k = j + step
+        if not 0 <= k < y.size:
+            return float(x[j])
+        t = (y[j] - half) / (y[j] - y[k])  # y[j] >= half > y[k]
+        return float(x[j] + t * (x[k] - x[j]))
+
+    return crossing(1) - crossing(-1)
+
+
+def profile_problems(name: str, offset_um: np.ndarray, intensity: np.ndarray, nominal_fwhm_um: float,
+                     noise_rel: float | None = None, rules: Plausibility = Plausibility()) -> list[Problem]:
+    """Problems of a line profile against the nominal line's FWHM (µm).
+
+    Checked in this order, and the first failure ends the list (the later checks assume
+    the earlier ones): the offsets' span (a unit error), a line above the noise, its width.
+    """
+    x, y = np.asarray(offset_um, float), np.asarray(intensity, float)
+    span = float(np.ptp(x))
+    lo, hi = rules.span_range[0] * nominal_fwhm_um, rules.span_range[1] * nominal_fwhm_um
+    if not lo <= span <= hi:
+        hint = unit_hint(math.log10(span / math.sqrt(lo * hi))) if span > 0 else "wrong unit?"
+        return [Problem(name, "unit", f"offsets span {span:.3g} µm; expected {lo:.0f}..{hi:.0f} µm "
+                        f"({rules.span_range[0]:g}-{rules.span_range[1]:g}x the nominal line's FWHM "
+                        f"{nominal_fwhm_um:.1f} µm): {hint}")]
+    sigma = noise_rel if noise_rel is not None else estimate_noise(x, y)
+    if not math.isfinite(sigma):
+        sigma = 0.0
+    z = peak_sigma(y, sigma)
+    if not z >= rules.min_peak_sigma:
+        return [Problem(name, "no_line", f"no line found: peak {z:.1f} sigma above the median, "
+                        f"need >= {rules.min_peak_sigma:g}")]
+    w = line_fwhm(x, y)
+    ratio = w / nominal_fwhm_um
+    if not rules.width_range[0] <= ratio <= rules.width_range[1]:
+        return [Problem(name, "width", f"line FWHM {w:.3g} µm is {ratio:.2g}x the nominal's {nominal_fwhm_um:.1f} µm; "
+                        f"a line the model can produce has {rules.width_range[0]:g}-{rules.width_range[1]:g}x")]
+    return []
+
+
+def _piston_tilt_residual(x: np.ndarray, y: np.ndarray, v: np.ndarray) -> np.ndarray:
+    A = np.column_stack([np.ones_like(x), x, y])
+    c, *_ = np.linalg.lstsq(A, v, rcond=None)
+    return v - A @ c
+
+
+def map_problems(name: str, x_mm: np.ndarray, y_mm: np.ndarray, sag_um: np.ndarray, nominal_sag_um: np.ndarray,
+                 noise_um: float | None = None, rules: Plausibility = Plausibility()) -> list[Problem]:
+    """Problems of a surface map (valid samples at ``x_mm, y_mm``) against the nominal
+    sag predicted at the same points and temperature (µm; nan where the nominal has none).
+
+    "no_signal" (not fatal here: :func:`check_measurements` decides) if the RMS about
+    piston and tilt is below ``min_signal_ratio`` noise sigmas; "unit" if it is
+    ``max_orders`` decades or more away from the nominal's RMS.
+    """
+    x, y, v = (np.asarray(a, float) for a in (x_mm, y_mm, sag_um))
+    rms = float(np.sqrt(np.mean(_piston_tilt_residual(x, y, v) ** 2)))
+    sigma = noise_um if noise_um is not None else estimate_noise(x, v, rows=y)
+    if not math.isfinite(sigma):
+        sigma = 0.0
+    if not (rms > rules.min_signal_ratio * sigma and rms > 0):
+        return [Problem(name, "no_signal", f"no signal: map RMS {rms:.3g} µm about piston and tilt is "
+                        f"{rms / sigma if sigma > 0 else 0.0:.2f}x its noise {sigma:.3g} µm, "
+                        f"need > {rules.min_signal_ratio:g}x", fatal=False)]
+    nom = np.asarray(nominal_sag_um, float)
+    ok = np.isfinite(nom)
+    if ok.sum() < 10:
+        return []
+    nom_rms = float(np.sqrt(np.mean(_piston_tilt_residual(x[ok], y[ok], nom[ok]) ** 2)))
+    if not nom_rms > 0:
+        return []
+    orders = math.log10(rms / nom_rms)
+    if abs(orders) >= rules.max_orders:
+        where = "above" if orders > 0 else "below"
+        return [Problem(name, "unit", f"map RMS {rms:.2g} µm is {abs(orders):.0f} orders {where} the nominal's "
+                        f"{nom_rms:.2g} µm: {unit_hint(orders)}")]
+    return []
+
+
+def image_problems(name: str, x_um: np.ndarray, y_um: np.ndarray, intensity: np.ndarray,
+                   noise_rel: float | None = None, rules: Plausibility = Plausibility()) -> list[Problem]:
+    """Problems of a point-source image: a peak ``min_peak_sigma`` noise sigmas above its
+    median (noise along the image rows when not stated: biased high near the Airy rings,
+    so the test errs towards accepting)."""
+    v = np.asarray(intensity, float)
+    sigma = noise_rel if noise_rel is not None else estimate_noise(np.asarray(x_um, float), v,
+                                                                    rows=np.asarray(y_um, float))
+    if not math.isfinite(sigma):
+        sigma = 0.0
+    z = peak_sigma(v, sigma)
+    if not z >= rules.min_peak_sigma:
+        return [Problem(name, "no_line", f"no point-source image found: peak {z:.1f} sigma above the median, "
+                        f"need >= {rules.min_peak_sigma:g}")]
+    return []
+
+
+def _nominal_at(nominal, x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
+    from scipy.interpolate import RegularGridInterpolator
+
+    f = RegularGridInterpolator((nominal.y_mm, nominal.x_mm), nominal.sag_um, bounds_error=False, fill_value=np.nan)
+    return f(np.column_stack([y_mm, x_mm]))
+
+
+def _nominal_fwhm_um(m, nominal) -> float:
+    from .forward import profile_curve
+
+    u, y = profile_curve(m.grating, m.wavelength_um, m.order, m.pixel_scale_mas, nominal, {}, m.slit_position)
+    return line_fwhm(u, y)
+
+
+def measurement_problems(manifest, data: tuple, nominal, rules: Plausibility = Plausibility()) -> list[Problem]:
+    """Problems of every measurement (``data`` from :func:`.manifest.load_data`) against
+    the nominal sag map at ``manifest.simulation.cold_K`` (a :class:`optics.sagmap.SagMap`)."""
+    from .manifest import ProfileData, PsfImageData, SurfaceData
+    from .nominal import thermal_factor
+
+    sim = manifest.simulation
+    out: list[Problem] = []
+    for d in data:
+        m = d.measurement
+        if isinstance(d, ProfileData):
+            out += profile_problems(m.name, d.offset_um, d.intensity, _nominal_fwhm_um(m, nominal), m.noise_rel, rules)
+        elif isinstance(d, SurfaceData):
+            k = thermal_factor(m.temperature_K, sim.cold_K, sim.warm_K)
+            out += map_problems(m.name, d.x_mm, d.y_mm, d.sag_um, k * _nominal_at(nominal, d.x_mm, d.y_mm),
+                                m.noise_um, rules)
+        elif isinstance(d, PsfImageData):
+            out += image_problems(m.name, d.x_um, d.y_um, d.intensity, m.noise_rel, rules)
+    return out
+
+
+def check_measurements(manifest, data: tuple, nominal, rules: Plausibility = Plausibility()) -> list[Problem]:
+    """Refuse data the nominal model cannot have produced, before any fit.
+
+    Raises
+    ------
+    ValueError
+        One line naming every fatal problem (:func:`measurement_problems`), or "no
+        signal" when no measurement carries any.
+
+    Returns
+    -------
+    list of Problem
+        The non-fatal problems (also issued as warnings).
+    """
+    probs = measurement_problems(manifest, data, nominal, rules)
+    fatal = [p for p in probs if p.fatal]
+    quiet = {p.measurement for p in probs if p.code == "no_signal"}
+    if not fatal and quiet and quiet >= {d.measurement.name for d in data}:
+        fatal = [p for p in probs if p.code == "no_signal"]
+    if fatal:
+        raise ValueError("implausible data, nothing diagnosed: " + "; ".join(str(p) for p in fatal))
+    for p in probs:
+        warnings.warn(str(p), stacklevel=2)
+    return probs
+
+
+def at_prior_bound(values: dict, bounds: dict, rel_tol: float = 1e-3) -> tuple:
+    """Names of the parameters in ``values`` that lie within ``rel_tol`` of their prior
+    range's width from a bound (``bounds``: name -> (lo, hi); names without bounds are
+    skipped). A fit that ends there was stopped by the prior, not by the data, so its
+    value cannot be the sole basis of an ``explained`` verdict.
+
+    Raises
+    ------
+    ValueError
+        If ``rel_tol`` is not in [0, 0.5) or a bound pair is not ``lo < hi``.
+    """
+    if not 0 <= rel_tol < 0.5:
+        raise ValueError(f"at_prior_bound: rel_tol={rel_tol!r} must be in [0, 0.5)")
+    out = []
+    for name, v in values.items():
+        if name not in bounds:
+            continue
+        lo, hi = bounds[name]
+        if not lo < hi:
+            raise ValueError(f"at_prior_bound: bounds[{name!r}]=({lo}, {hi}) must have lo < hi")
+        tol = rel_tol * (hi - lo)
+        if v <= lo + tol or v >= hi - tol:
+            out.append(name)
+    return tuple(out)
