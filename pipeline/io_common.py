@@ -17,7 +17,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["atomic_write", "atomic_path", "parse_error", "numbered_lines", "read_text"]
+__all__ = ["atomic_write", "atomic_path", "parse_error", "numbered_lines", "read_text", "decode_text"]
 
 
 def _create_tmp(path: Path, suffix: str) -> tuple[int, str]:
@@ -94,11 +94,34 @@ def read_text(path: str | Path, what: str) -> str:
     """Whole text of ``path``; a missing/unreadable file becomes a ``ValueError`` naming it."""
     path = Path(path)
     try:
-        return path.read_text(encoding="utf-8", errors="replace")
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise ValueError(f"{what} {path}: file does not exist") from None
     except OSError as exc:
         raise ValueError(f"{what} {path}: cannot read ({exc.strerror or exc})") from None
+    return decode_text(raw, path, what)
+
+
+def decode_text(raw: bytes, path: str | Path, what: str, strict: bool = False) -> str:
+    """Text of a file's bytes: UTF-8 (a byte-order mark is dropped), or UTF-16/32 when
+    the file starts with their byte-order mark (Windows tools write these).
+
+    Undecodable bytes become U+FFFD unless ``strict``, which raises a ``ValueError``
+    naming the file and the byte offset."""
+    import codecs
+
+    for bom, enc in ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"),
+                     (codecs.BOM_UTF8, "utf-8-sig"), (codecs.BOM_UTF16_LE, "utf-16"), (codecs.BOM_UTF16_BE, "utf-16")):
+        if raw.startswith(bom):
+            break
+    else:
+        enc = "utf-8"
+    try:
+        text = raw.decode(enc, errors="strict" if strict else "replace")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{what} {path}: is not {enc.upper()} text (undecodable byte at offset {exc.start}); "
+                         "save it as UTF-8") from None
+    return text.replace("\r\n", "\n").replace("\r", "\n")  # universal newlines, as open() in text mode
 
 
 def numbered_lines(text: str) -> list[tuple[int, str]]:
