@@ -5,8 +5,7 @@ into the regular µm grid of :class:`optics.sagmap.SagMap`.
   uniform grid with some nodes absent (a masked interferometer export lists only the
   points inside its aperture) are put back on that grid, absent nodes NaN. Otherwise
   the points are scattered: linear interpolation on their Delaunay triangulation
-  (:class:`scipy.interpolate.LinearNDInterpolator`, what ``griddata(method="linear")``
-  uses), NaN outside the convex hull, at the median nearest-neighbour distance unless a
+  (what ``scipy.interpolate.griddata(method="linear")`` does), NaN outside the convex hull, at the median nearest-neighbour distance unless a
   spacing is given. The map's ``meta["gridding"]`` says which, for the report.
 * :func:`sag_unit_factor` — factor from a ``units`` string (nm, µm, mm, m, waves) to µm.
 """
@@ -171,8 +170,7 @@ def grid_points(x_mm: np.ndarray, y_mm: np.ndarray, sag_um: np.ndarray, *, spaci
 
 
 def _scattered(x, y, s, spacing_mm, source):
-    from scipy.interpolate import LinearNDInterpolator
-    from scipy.spatial import QhullError, cKDTree
+    from scipy.spatial import Delaunay, QhullError, cKDTree
 
     ok = np.isfinite(s)
     x, y, s = x[ok], y[ok], s[ok]
@@ -197,11 +195,26 @@ def _scattered(x, y, s, spacing_mm, source):
     gx = x.min() + spacing_mm * np.arange(nx)
     gy = y.min() + spacing_mm * np.arange(ny)
     try:
-        interp = LinearNDInterpolator(np.column_stack([x, y]), s)
+        tri = Delaunay(np.column_stack([x, y]))
     except QhullError:
         raise ValueError(f"{source}: the {x.size} points are collinear or coincident; cannot triangulate") from None
     X, Y = np.meshgrid(gx, gy)
+    sag = _barycentric(tri, s, np.column_stack([X.ravel(), Y.ravel()])).reshape(X.shape)
     meta = {"gridding": f"scattered: linear interpolation on the Delaunay triangulation (NaN outside the convex "
                         f"hull), spacing {spacing_mm:.4g} mm ({how})",
             "spacing_mm": [spacing_mm, spacing_mm], "n_points": int(x.size)}
-    return gx, gy, interp(X, Y), meta
+    return gx, gy, sag, meta
+
+
+def _barycentric(tri, values: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Linear interpolation on the triangles of ``tri`` (what ``griddata(method="linear")``
+    does), NaN outside the hull. Written out because LinearNDInterpolator's evaluation
+    was measured 100x slower than ``find_simplex`` on grids with many outside nodes."""
+    simplex = tri.find_simplex(points)
+    out = np.full(points.shape[0], np.nan)
+    inside = simplex >= 0
+    T = tri.transform[simplex[inside]]
+    b = np.einsum("nij,nj->ni", T[:, :2], points[inside] - T[:, 2])
+    w = np.column_stack([b, 1.0 - b.sum(axis=1)])
+    out[inside] = np.sum(w * values[tri.simplices[simplex[inside]]], axis=1)
+    return out
