@@ -27,16 +27,15 @@ the surface's *local* +Z, which for a mirror met by light travelling along +Z po
 needs ``-sag`` (and, to stay right-handed, one of x/y mirrored). That depends on the
 lens file, so no flip is applied here; the orientation tests pin our own layout.
 
-Also here: Zernike coefficient lists (re-exported from :mod:`pipeline.io_zernike`),
-:func:`read_line_profile` for measured profiles, and :func:`load_sag_map` used by
-the ``--sag`` option of the CLI.
+Also here (re-exported): Zernike coefficient lists (:mod:`pipeline.io_zernike`),
+measured line profiles and PSF images (:mod:`pipeline.io_measured`), and
+:func:`load_sag_map` used by the ``--sag`` option of the CLI. Point lists and units:
+:mod:`pipeline.io_gridding`.
 """
 
 from __future__ import annotations
 
-import csv
 import inspect
-import io
 import json
 from pathlib import Path
 from typing import Callable
@@ -45,8 +44,9 @@ import numpy as np
 
 from optics.sagmap import SagMap
 from pipeline.io_codev import read_codev_int, write_codev_int
-from pipeline.io_common import atomic_path, atomic_write, parse_error, read_text
+from pipeline.io_common import atomic_path, atomic_write, parse_error, read_csv_columns
 from pipeline.io_gridding import grid_points, length_unit_factor, sag_unit_factor
+from pipeline.io_measured import read_line_profile, read_psf_image, write_psf_image_csv
 from pipeline.io_zemax import read_zemax_grid_sag, write_zemax_grid_sag
 from pipeline.io_zernike import (ZERNIKE_CONVENTIONS, convert_normalisation, read_zernike_list,
                                  write_zernike_list)
@@ -91,55 +91,6 @@ def write_sag_csv(sagmap: SagMap, path: str | Path) -> Path:
     return path
 
 
-def _fast_csv_columns(text: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray] | None:
-    """NumPy parse of a clean file (header on line 1, no blank or ragged lines); None
-    means "use the line-by-line parser", which is the one that words the errors."""
-    if "#" in text:
-        return None  # comment lines: the line-by-line parser skips them
-    head, _, body = text.partition("\n")
-    header = [h.strip().lower() for h in head.split(",")]
-    if not all(c in header for c in names) or not body.strip() or "\n\n" in body.rstrip("\n"):
-        return None
-    if any(line.count(",") != len(header) - 1 for line in body.rstrip("\n").split("\n")):
-        return None  # ragged: let the slow parser name the line
-    try:
-        v = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, dtype=float,
-                       usecols=[header.index(c) for c in names])
-    except ValueError:
-        return None
-    return v, np.arange(2, v.shape[0] + 2)
-
-
-def _read_csv_columns(path: Path, what: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """Numeric columns ``names`` of a CSV with a header; returns (values[n, k], line numbers[n])."""
-    text = read_text(path, what)
-    fast = _fast_csv_columns(text, names)
-    if fast is not None:
-        return fast
-    rows = list(csv.reader(io.StringIO(text)))
-    lineno = [i + 1 for i, r in enumerate(rows)]
-    body = [(n, r) for n, r in zip(lineno, rows)
-            if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
-    if not body:
-        raise parse_error(path, None, f"file is empty; expected a header with columns {list(names)}")
-    hline, header = body[0]
-    header = [h.strip().lower() for h in header]
-    missing = [c for c in names if c not in header]
-    if missing:
-        raise parse_error(path, hline, f"missing column(s) {missing}; found header {header}, need {list(names)}")
-    idx = [header.index(c) for c in names]
-    vals, lines = [], []
-    for n, r in body[1:]:
-        if len(r) != len(header):
-            raise parse_error(path, n, f"expected {len(header)} values like the header, found {len(r)}")
-        try:
-            vals.append([float(r[i]) for i in idx])
-        except ValueError:
-            raise parse_error(path, n, f"non-numeric value in {','.join(r)!r}") from None
-        lines.append(n)
-    return np.array(vals, dtype=float).reshape(-1, len(names)), np.array(lines, dtype=int)
-
-
 def read_sag_csv(path: str | Path, spacing_mm: float | None = None) -> SagMap:
     """Read a table of points ``x_mm,y_mm,sag_um`` (header names case-insensitive, any
     column order, extra columns ignored, rows in any order).
@@ -158,7 +109,7 @@ def read_sag_csv(path: str | Path, spacing_mm: float | None = None) -> SagMap:
         Grid spacing (mm) for scattered points; unused when the points form a grid.
     """
     path = Path(path)
-    v, lines = _read_csv_columns(path, "sag CSV", _CSV_COLUMNS)
+    v, lines = read_csv_columns(path, "sag CSV", _CSV_COLUMNS)
     if v.shape[0] < 3:
         raise parse_error(path, None, f"needs >= 3 data rows, found {v.shape[0]}")
     bad = ~np.isfinite(v[:, :2]).all(axis=1)
@@ -377,7 +328,8 @@ def read_sag_map(path: str | Path, **options) -> SagMap:
     """Read a sag map, choosing the reader by the suffix of ``path``.
 
     ``**options`` go to the reader (``extent_mm``/``spacing_mm`` for ``.int``,
-    ``spacing_mm`` for scattered ``.csv``).
+    ``spacing_mm`` for scattered ``.csv``, ``wavelength_um`` for a ``.nc`` in waves);
+    an option the format does not use is refused naming the valid ones.
     """
     path = Path(path)
     reader = _format_for(path)[0]
@@ -394,124 +346,3 @@ def load_sag_map(path: str | Path) -> SagMap:
         return read_sag_map(path)
     except ValueError as exc:
         raise ValueError(f"--sag {exc}") from None
-
-
-# ------------------------------------------------------------------ measured line profiles
-def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Read a measured line profile from a CSV with columns ``offset_um,intensity``.
-
-    Measured profiles come in counts (any normalisation), background-subtracted (so
-    with negative noise samples) or on a constant pedestal, on any grid of offsets
-    (non-uniform, any range, line centred anywhere) and in any row order: all are
-    accepted. Flux, background and centring are nuisances of the diagnosis fit.
-
-    Parameters
-    ----------
-    path : str or Path
-        CSV file with a header naming ``offset_um`` and ``intensity`` (any order,
-        case-insensitive, other columns ignored).
-    normalise : bool
-        Divide the intensity by its total flux (trapezoid rule over ``offset_um``),
-        the unit-area normalisation of :mod:`optics.imaging` profiles.
-
-    Returns
-    -------
-    offset_um, intensity : ndarray, shape (n,)
-        Sorted by increasing offset.
-
-    Raises
-    ------
-    ValueError
-        Naming file and (where it applies) line: missing columns, non-numeric or
-        non-finite values, fewer than 5 samples, duplicate offsets, total flux <= 0.
-    """
-    path = Path(path)
-    v, lines = _read_csv_columns(path, "line profile", ("offset_um", "intensity"))
-    if v.shape[0] < 5:
-        raise parse_error(path, None, f"needs >= 5 samples, found {v.shape[0]}")
-    nonfinite = ~np.isfinite(v).all(axis=1)
-    if nonfinite.any():
-        raise parse_error(path, int(lines[nonfinite][0]), "offset_um and intensity must be finite numbers")
-    order = np.argsort(v[:, 0], kind="stable")
-    x, y, ln = v[order, 0], v[order, 1], lines[order]
-    dup = np.flatnonzero(np.diff(x) == 0)
-    if dup.size:
-        raise parse_error(path, int(ln[dup[0] + 1]), f"duplicate offset_um {x[dup[0]]:g}")
-    flux = float(np.trapezoid(y, x))
-    if not flux > 0:
-        raise parse_error(path, None, f"no flux: the total flux (integral of intensity over offset_um) "
-                          f"is {flux:g}, must be > 0")
-    return x, (y / flux if normalise else y)
-
-
-def _load_npz_columns(path: Path, names: tuple[str, ...]) -> np.ndarray:
-    """Arrays ``names`` of an ``.npz`` flattened into columns; errors name the file."""
-    import zipfile
-
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            missing = [k for k in names if k not in z.files]
-            if missing:
-                raise parse_error(path, None, f"lacks arrays {missing}; has {sorted(z.files)}")
-            cols = [np.ravel(z[k]) for k in names]
-    except FileNotFoundError:
-        raise parse_error(path, None, "file does not exist") from None
-    except (OSError, EOFError, zipfile.BadZipFile, ValueError) as exc:
-        if isinstance(exc, ValueError) and str(path) in str(exc):
-            raise
-        raise parse_error(path, None, f"is not a readable .npz: {exc}") from None
-    for k, c in zip(names, cols):
-        if np.iscomplexobj(c) or not np.issubdtype(c.dtype, np.number):
-            raise parse_error(path, None, f"array {k!r} has dtype {c.dtype}; expected real numbers")
-    if len({c.size for c in cols}) != 1:
-        raise parse_error(path, None, f"arrays {list(names)} have different sizes {[c.size for c in cols]}")
-    return np.column_stack([c.astype(float) for c in cols])
-
-
-def read_psf_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Read a measured point-source image: CSV ``x_um,y_um,intensity`` (header, any
-    column order, other columns ignored) or ``.npz`` with arrays ``x_um``, ``y_um``,
-    ``intensity``. ``x`` is along the dispersion, ``y`` along the slit (detector µm).
-    Like line profiles: counts, negative (background-subtracted) samples, a pedestal and
-    any grid are accepted.
-
-    Returns
-    -------
-    x_um, y_um, intensity : ndarray, shape (n,)
-        Sorted by (y, x); intensities as given.
-
-    Raises
-    ------
-    ValueError
-        Naming file and (where it applies) line: missing columns or arrays, non-finite
-        values, fewer than 25 samples, duplicate points, total flux (sum) <= 0.
-    """
-    path = Path(path)
-    if path.suffix.lower() == ".npz":
-        v = _load_npz_columns(path, ("x_um", "y_um", "intensity"))
-        lines = np.zeros(v.shape[0], int)
-    else:
-        v, lines = _read_csv_columns(path, "PSF image", ("x_um", "y_um", "intensity"))
-    line = (lambda k: int(lines[k]) if lines[k] else None)
-    if v.shape[0] < 25:
-        raise parse_error(path, None, f"needs >= 25 samples, found {v.shape[0]}")
-    bad = ~np.isfinite(v).all(axis=1)
-    if bad.any():
-        raise parse_error(path, line(int(np.flatnonzero(bad)[0])), "x_um, y_um and intensity must be finite numbers")
-    order = np.lexsort((v[:, 0], v[:, 1]))
-    v, lines = v[order], lines[order]
-    dup = np.flatnonzero((np.diff(v[:, 0]) == 0) & (np.diff(v[:, 1]) == 0))
-    if dup.size:
-        raise parse_error(path, line(dup[0] + 1), f"duplicate point x_um={v[dup[0], 0]:g}, y_um={v[dup[0], 1]:g}")
-    flux = float(v[:, 2].sum())
-    if not flux > 0:
-        raise parse_error(path, None, f"no flux: the total flux (sum of intensity) is {flux:g}, must be > 0")
-    return v[:, 0], v[:, 1], v[:, 2]
-
-
-def write_psf_image_csv(path: str | Path, x_um: np.ndarray, y_um: np.ndarray, intensity: np.ndarray) -> None:
-    """CSV ``x_um,y_um,intensity`` (header, one sample per line), written atomically."""
-    with atomic_write(Path(path)) as fh:
-        fh.write("x_um,y_um,intensity\n")
-        for a, b, c in zip(np.ravel(x_um), np.ravel(y_um), np.ravel(intensity)):
-            fh.write(f"{a:.3f},{b:.3f},{c:.6g}\n")

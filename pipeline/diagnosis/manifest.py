@@ -15,9 +15,9 @@ A manifest names the nominal simulation and the measurements it is compared with
     file = "cryo_map.int"
     temperature_K = 128
     aperture_diameter_mm = 137
-    spacing_mm = 0.5          # optional: grid of a file that does not carry it (CODE V INT
-                              # without the EXTENT_MM title), or [dx, dy]; or instead
-    # extent_mm = [-68.5, 68.5, -60, 60]  # first/last sample centres x0, x1, y0, y1 (mm)
+    # optional, for a file that does not carry its grid (a CODE V INT without the
+    # EXTENT_MM title): spacing_mm = 0.5 (or [dx, dy]), or instead
+    # extent_mm = [-68.5, 68.5, -60, 60]  (first/last sample centres x0, x1, y0, y1, mm)
 
     [[measurement]]
     kind = "line_profile"     # CSV offset_um,intensity
