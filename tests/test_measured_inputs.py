@@ -14,7 +14,7 @@ import pytest
 from optics.sagmap import quilt_sag_map
 from pipeline import interchange as ic
 from pipeline.diagnosis.forward import ProfileForward
-from pipeline.diagnosis.manifest import ProfileData, load_data, load_manifest, parse_manifest
+from pipeline.diagnosis.manifest import ProfileData, load_data, load_manifest, parse_manifest, recentre
 
 A_UM, PX_MM, PY_MM = 0.3, 21.0, 18.0  # analytic quilt 0.3 cos(2 pi x / 21) cos(2 pi y / 18)
 
@@ -242,6 +242,40 @@ def test_profile_forward_fits_pedestal_counts_and_shift():
     assert db - da == pytest.approx(7.3, abs=0.02)
     # residual in fraction of the peak: both ~ the model's own interpolation error
     assert cb == pytest.approx(ca, rel=0.05, abs=1e-8)
+
+
+def test_profile_in_detector_coordinates_is_recentred(tmp_path):
+    """A line at 1023.7 µm (detector coordinates, far outside the fit's +-45 µm shift
+    range) is moved to the origin on loading; the fit then finds the same line position
+    and residual as for the profile written about 0."""
+    from scipy.optimize import minimize_scalar
+
+    from pipeline.diagnosis.forward import profile_curve
+
+    nominal = quilt_sag_map(0.6, "sum", spacing_mm=1.0)
+    u, y = profile_curve("J", 1.25, -2, 250, nominal, {})
+    x = np.sort(np.random.default_rng(7).uniform(-60, 60, 140))
+    clean = np.interp(x, u, y) * 1e4 + 200.0
+    fws = []
+    for name, off in (("near", 0.0), ("far", 1023.7)):
+        f = _profile_file(tmp_path / f"{name}.csv", x + off, clean)
+        (pd,) = load_data(parse_manifest({"measurement": [{"kind": "line_profile", "file": str(f), "grating": "J",
+                                                           "wavelength_um": 1.25, "pixel_scale_mas": 250}]}))
+        fws.append((ProfileForward(pd, nominal, 80.0), pd.origin_um))
+        if name == "near":  # its half-maximum centre, left in place (within 20 µm of 0)
+            c_near = recentre(pd.offset_um, pd.intensity, 0.0)
+    (near, o_near), (far, o_far) = fws
+    assert o_near == 0.0 and abs(c_near) < 20 and o_far == pytest.approx(1023.7 + c_near, abs=0.051)
+
+    def best(fw):
+        r = minimize_scalar(lambda d: float(np.sum(fw.residual({}, d) ** 2)),
+                            bounds=(fw.delta0_um - 1.5, fw.delta0_um + 1.5), method="bounded",
+                            options={"xatol": 1e-4})
+        return r.x, r.fun
+
+    (dn, cn), (df, cf) = best(near), best(far)
+    assert df + o_far - 1023.7 == pytest.approx(dn, abs=0.02)
+    assert cf == pytest.approx(cn, rel=0.05, abs=1e-8)
 
 
 # ------------------------------------------------------------------ manifests

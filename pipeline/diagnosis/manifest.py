@@ -49,7 +49,8 @@ Surfaces may also give ``wavelength_um`` (for a NetCDF map in ``units = "waves"`
 refuses those its format does not use. Profiles and images may be in counts, with a
 pedestal, negative (background-subtracted) samples, any centring and any offset grid;
 they are handed to the fit with a robust floor (20th percentile) removed and scaled to
-unit line peak, so ``noise_rel`` is a fraction of the line's peak above background.
+unit line peak, so ``noise_rel`` is a fraction of the line's peak above background, and
+a line far from the origin (in detector coordinates) is moved to it (``origin_um``).
 Relative paths are relative to the manifest. Every error names the measurement and
 the field; unknown fields are refused with the valid ones.
 """
@@ -64,7 +65,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["Simulation", "Measurement", "Manifest", "SurfaceData", "ProfileData", "PsfImageData",
-           "MEASUREMENT_KEYS", "SIMULATION_KEYS", "unit_line_peak", "unknown_keys_error",
+           "MEASUREMENT_KEYS", "SIMULATION_KEYS", "recentre", "unit_line_peak", "unknown_keys_error",
            "load_manifest", "parse_manifest", "load_data"]
 
 _COVERAGES = ("all", "holes", "surfaces")
@@ -170,6 +171,8 @@ class ProfileData:
     measurement: Measurement
     offset_um: np.ndarray
     intensity: np.ndarray
+    #: offset (µm, file's frame) subtracted from the file's offsets (:func:`recentre`)
+    origin_um: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -181,6 +184,8 @@ class PsfImageData:
     x_um: np.ndarray
     y_um: np.ndarray
     intensity: np.ndarray
+    #: (x, y) µm subtracted from the file's coordinates (:func:`recentre`)
+    origin_um: tuple[float, float] = (0.0, 0.0)
 
 
 def _err(name: str, fld: str, value, valid: str) -> ValueError:
@@ -382,6 +387,21 @@ def unit_line_peak(intensity: np.ndarray, what: str, name: str, file: Path) -> n
     return (v - floor) / peak
 
 
+#: Lines found farther than this from the origin (µm) are moved to it: half the range of
+#: the fits' initial position search (profiles +-40 µm, PSF images +-20 µm), whose
+#: position nuisance is bounded (+-45 µm), so a profile in detector coordinates fits.
+RECENTRE_BEYOND_UM = {"line_profile": 20.0, "psf_image": 10.0}
+
+
+def recentre(coords: np.ndarray, unit_peak: np.ndarray, beyond_um: float) -> float:
+    """Centre of the samples above half the peak (their intensity-weighted mean), rounded
+    to 0.1 µm, when it lies farther than ``beyond_um`` from 0; else 0. The position is a
+    fitted nuisance in every model, so moving the data changes no finding."""
+    hi = unit_peak >= 0.5
+    c = float(np.sum(unit_peak[hi] * coords[hi]) / np.sum(unit_peak[hi]))
+    return round(c, 1) if abs(c) > beyond_um else 0.0
+
+
 def _read_profile(m: Measurement) -> ProfileData:
     from pipeline.interchange import read_line_profile
 
@@ -391,7 +411,10 @@ def _read_profile(m: Measurement) -> ProfileData:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
     if u.size < 10:
         raise _err(m.name, "file", str(m.file), f"has {u.size} samples; need >= 10")
-    return ProfileData(m, np.asarray(u, float), unit_line_peak(y, "line", m.name, m.file))
+    v = unit_line_peak(y, "line", m.name, m.file)
+    u = np.asarray(u, float)
+    c = recentre(u, v, RECENTRE_BEYOND_UM["line_profile"])
+    return ProfileData(m, u - c, v, c)
 
 
 def _read_psf_image(m: Measurement) -> PsfImageData:
@@ -406,7 +429,9 @@ def _read_psf_image(m: Measurement) -> PsfImageData:
         if (counts >= 5).sum() < 5:
             raise _err(m.name, "noise_rel", None, f"is required: the {x.size} samples of {m.file.name} are not on "
                        "rows of >= 5 points, so the noise cannot be estimated from the image")
-    return PsfImageData(m, x, y, unit_line_peak(v, "image", m.name, m.file))
+    v = unit_line_peak(v, "image", m.name, m.file)
+    cx, cy = (recentre(a, v, RECENTRE_BEYOND_UM["psf_image"]) for a in (x, y))
+    return PsfImageData(m, x - cx, y - cy, v, (cx, cy))
 
 
 _READERS = {"surface": _read_surface, "line_profile": _read_profile, "psf_image": _read_psf_image}
