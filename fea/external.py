@@ -108,7 +108,7 @@ def face_sag_map(points_mm: np.ndarray, displacement_mm: np.ndarray, face: FaceM
         origin = R @ np.asarray(origin_mm, float)
     P = P - origin
     area = face.nodal_area(P)
-    normals = face.nodal_normals(P) if face.oriented else None
+    normals = face.nodal_normals(P) @ R.T  # the face's normals are stored in the solver's frame
     if face.oriented:
         mean_n = (area[:, None] * normals).sum(axis=0)
         mean_n /= np.linalg.norm(mean_n)
@@ -117,7 +117,6 @@ def face_sag_map(points_mm: np.ndarray, displacement_mm: np.ndarray, face: FaceM
                              "optical frame, not +z; choose axes whose third entry is the face's outward normal "
                              "(e.g. 'x,-y,-z' for a face looking along -z)")
     else:  # a surface mesh has no outward side: take the side towards optical +z
-        normals = face.nodal_normals(P)
         normals *= np.where(normals[:, 2] < 0, -1.0, 1.0)[:, None]
     rb = fit_rigid_body(P[idx], 1e3 * U[idx], area[idx], origin_mm=(0.0, 0.0, 0.0))
     resid = 1e3 * U - rigid_displacement_um(rb, P)

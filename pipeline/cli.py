@@ -190,10 +190,12 @@ def build_parser() -> argparse.ArgumentParser:
     q.set_defaults(func=_cmd_calibrate)
 
     from pipeline.diagnosis.cli import register as register_diagnosis
+    from pipeline.fe_cli import register as register_fe
     from pipeline.optics_cli import register as register_optics
 
     register_optics(sub)
     register_diagnosis(sub)
+    register_fe(sub)
     return p
 
 
