@@ -15,7 +15,7 @@ import numpy as np
 
 from .fe_face import FACE_TYPES, FaceMesh
 
-__all__ = ["interpolate_face", "shape_functions"]
+__all__ = ["evaluate_face", "interpolate_face", "shape_functions"]
 
 _QUAD_CORNERS = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
 _QUAD_MIDS = np.array([[0.0, -1.0], [1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]])
@@ -89,6 +89,16 @@ def interpolate_face(xy: np.ndarray, values: np.ndarray, face: FaceMesh, x_mm: n
     ndarray, shape (ny, nx)
         NaN outside the face.
     """
+    X, Y = np.meshgrid(np.asarray(x_mm, float), np.asarray(y_mm, float))
+    return evaluate_face(xy, values, face, X.ravel(), Y.ravel()).reshape(X.shape)
+
+
+def evaluate_face(xy: np.ndarray, values: np.ndarray, face: FaceMesh, px_mm: np.ndarray,
+                  py_mm: np.ndarray) -> np.ndarray:
+    """Nodal ``values`` on ``face`` at the points (px_mm, py_mm), shape (p,); NaN outside the face.
+
+    Same parameters as :func:`interpolate_face`, with points instead of grid lines.
+    """
     from matplotlib.tri import Triangulation
 
     tris, owner = [], []
@@ -108,12 +118,12 @@ def interpolate_face(xy: np.ndarray, values: np.ndarray, face: FaceMesh, x_mm: n
     except (RuntimeError, ValueError) as exc:
         raise ValueError(f"the face's cells overlap or are degenerate when projected on the optical x-y plane "
                          f"({exc}); is the optical z axis the face's normal?") from None
-    X, Y = np.meshgrid(np.asarray(x_mm, float), np.asarray(y_mm, float))
-    found = np.asarray(finder(X.ravel(), Y.ravel()))
-    out = np.full(X.size, np.nan)
+    px, py = np.asarray(px_mm, float).ravel(), np.asarray(py_mm, float).ravel()
+    found = np.asarray(finder(px, py))
+    out = np.full(px.size, np.nan)
     inside = found >= 0
     blk, cell = owner[found[inside], 0], owner[found[inside], 1]
-    pts = np.column_stack([X.ravel()[inside], Y.ravel()[inside]])
+    pts = np.column_stack([px[inside], py[inside]])
     res = np.full(pts.shape[0], np.nan)
     for b, (t, c) in enumerate(face.blocks):
         m = blk == b
@@ -123,4 +133,4 @@ def interpolate_face(xy: np.ndarray, values: np.ndarray, face: FaceMesh, x_mm: n
         loc = _local_coords(t, xy[conn[:, :FACE_TYPES[t][0]]], pts[m])
         res[m] = np.einsum("pk,pk->p", shape_functions(t, loc), values[conn])
     out[inside] = res
-    return out.reshape(X.shape)
+    return out

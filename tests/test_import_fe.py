@@ -238,3 +238,74 @@ def test_cli_import_fe_writes_a_readable_map(tmp_path, capsys):
     m = read_sag_map(tmp_path / "m.csv")
     assert np.nanmax(np.abs(m.sag_um - exact_on(m))) <= A_UM * (KX**2 + KY**2) * 36 / 8
     assert main(["import-fe", str(good), "--surface", "z=0", "--unit", "ft", "--out", str(tmp_path / "x.csv")]) == 2
+
+
+# ---------------------------------------------------------------------- our own FEA, through VTU
+def _enclosing_radius(tri_xy):
+    """Radius of the smallest disc containing each triangle (n, 3, 2): half the longest edge if
+    the triangle is not acute, else its circumradius."""
+    a = np.linalg.norm(tri_xy[:, 1] - tri_xy[:, 2], axis=1)
+    b = np.linalg.norm(tri_xy[:, 0] - tri_xy[:, 2], axis=1)
+    c = np.linalg.norm(tri_xy[:, 0] - tri_xy[:, 1], axis=1)
+    e = np.sort(np.stack([a, b, c], axis=1), axis=1)
+    u, v = tri_xy[:, 1] - tri_xy[:, 0], tri_xy[:, 2] - tri_xy[:, 0]
+    area = 0.5 * np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    circ = a * b * c / (4 * area)
+    return np.where(e[:, 2] ** 2 >= e[:, 0] ** 2 + e[:, 1] ** 2, e[:, 2] / 2, circ)
+
+
+@pytest.mark.slow  # 15-30 s on 2 shared cores: the coarse-mesh solve
+def test_own_fea_written_to_vtu_reads_back_to_its_own_sag(tmp_path):
+    """The coarse-mesh eighth model (P2 tetrahedra) written as tetra10 VTU and read back.
+
+    (1) On the flat front face the tetra10 faces are straight-sided triangle6 cells, so the
+    reader + face extraction + quadratic shape functions reproduce the FE field: at fea's own
+    lattice samples (exact P2 values from scikit-fem's facet basis) they agree to round-off.
+    (2) The imported map (rigid-body plane put back) and fea's own map (linear interpolation of
+    the lattice samples on their Delaunay triangulation) differ by at most the linear
+    interpolation bound r² M / 2 (Waldron 1998): r = the largest smallest-enclosing-disc radius
+    of the Delaunay triangles holding grid points, M = the largest Frobenius norm of the sag's
+    Hessian (>= its spectral norm), estimated by second differences of the imported map.
+    """
+    from scipy.spatial import Delaunay
+
+    from fea.api import prepare, solve
+    from fea.face_interp import evaluate_face
+    from fea.fe_face import parse_surface, select_face
+    from fea.mesh import MeshSpec
+    from pipeline.io_fe import read_fe_result
+
+    model = prepare(mesh=MeshSpec(size_mm=5.0, size_bulk_mm=10.0))
+    r = solve(200, 0.5, prepared=model)
+    path = write_vtu(tmp_path / "own.vtu", r.coords_mm.T, "tetra10", model.basis.element_dofs.T,
+                     r.displacement_mm.T)
+    z_front = float(r.coords_mm[2].max())
+    # (1)
+    data = read_fe_result(path)
+    face = select_face(data.points_mm, data.blocks, parse_surface(f"z={z_front}"), tol=1e-6)
+    s = r.sag
+    q = (s.x_mm >= 0) & (s.y_mm >= 0)  # the modelled quarter of the mirrored face
+    got = evaluate_face(data.points_mm[:, :2], 1e3 * data.displacement_mm[:, 2], face, s.x_mm[q], s.y_mm[q])
+    np.testing.assert_allclose(got, s.sag_um[q], atol=1e-9 * np.abs(s.sag_um).max())
+    # (2)
+    imp = import_fe(path, f"z={z_front}", origin=(0.0, 0.0, z_front))
+    assert imp.sag_map.meta["interpolation"].startswith("quadratic")
+    m, rb = imp.sag_map, imp.rigid_body
+    X, Y = m.grid()
+    U = m.sag_um + rb.dz_um + 1e-3 * (rb.rx_urad * Y - rb.ry_urad * X)
+    own = s.sag_map(0.5).resampled(m.x_mm, m.y_mm)
+    d = U - own.sag_um
+    ok = np.isfinite(d)
+    assert ok.mean() > 0.95
+    tri = Delaunay(np.column_stack([s.x_mm, s.y_mm]))
+    hit = np.unique(tri.find_simplex(np.column_stack([X[ok], Y[ok]])))
+    r_enc = _enclosing_radius(tri.points[tri.simplices[hit[hit >= 0]]]).max()
+    h = m.dx_mm
+    fxx = np.diff(U, 2, axis=1)[1:-1, :] / h**2
+    fyy = np.diff(U, 2, axis=0)[:, 1:-1] / h**2
+    fxy = np.diff(np.diff(U, axis=0), axis=1)[:-1, :-1] / h**2
+    M = np.nanmax(np.sqrt(fxx**2 + fyy**2 + 2 * fxy[: fxx.shape[0], : fxx.shape[1]] ** 2))
+    bound = r_enc**2 * M / 2
+    err = np.abs(d[ok]).max()
+    print(f'own FEA via VTU: max |import - fea map| = {err:.2e} um, bound {bound:.2e} um, r_enc {r_enc:.3f} mm, M {M:.3e} um/mm2')
+    assert err <= bound, (err, bound)
