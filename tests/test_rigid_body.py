@@ -129,3 +129,23 @@ def test_own_fea_case_outputs_rigid_body_and_power(tmp_path):
     # two quadratures of the same face integral (corner-lumped vs the 15-point lattice)
     assert out["rb_dz_um"] == pytest.approx(mean, abs=0.05 * s.pv_um("full", remove_tilt=False))
     assert 0 < out["pv_center_pttp_um"] and 0 < out["rms_center_pttp_um"] <= out["rms_center_um"] + 1e-12
+
+
+def test_study_nc_carries_rigid_body_with_units(tmp_path):
+    from types import SimpleNamespace
+
+    import xarray as xr
+
+    from optics.sagmap import quilt_sag_map
+    from pipeline.fea_cases import FIGURE_KEYS
+    from pipeline.study_data import study_dataset, write_study_netcdf
+
+    case = SimpleNamespace(label="a", group="g", full={"t0_um": 200.0, "pitch_x_mm": 21.0, "pitch_y_mm": 18.0})
+    out = {k: 1.0 for k in FIGURE_KEYS}
+    ds = study_dataset([case], {"a": out}, {"a": quilt_sag_map(0.5, spacing_mm=4.0)}, [None], [None])
+    write_study_netcdf(ds, tmp_path / "s.nc")
+    with xr.open_dataset(tmp_path / "s.nc") as back:
+        assert back["rb_rz_urad"].attrs["units"] == "urad" and "clocking" in back["rb_rz_urad"].attrs["long_name"]
+        assert back["rb_dz_um"].attrs["units"] == "um"
+        assert back["rms_full_pttp_um"].attrs["units"] == "um"
+        assert back["power_center_um_per_mm2"].attrs["units"] == "um mm-2"
