@@ -160,6 +160,9 @@ def read_fe_result(path, *, displacement_csv=None, field: str | None = None,
         raise ValueError(f"{path}: file does not exist")
     try:
         mesh = meshio.read(path)
+    except ModuleNotFoundError as exc:  # e.g. h5py for XDMF with HDF5 data
+        raise ValueError(f"{path}: reading this format needs the Python package {exc.name!r} "
+                         "(pip install 'cryograting[xdmf]' for h5py)") from None
     except Exception as exc:  # meshio raises many types (ReadError, KeyError, ...) for files it cannot read
         raise ValueError(f"{path}: meshio cannot read it as an FE mesh ({type(exc).__name__}: {exc})") from None
     points = np.asarray(mesh.points, float)

@@ -200,6 +200,32 @@ def test_exodus_with_component_arrays(tmp_path):
     np.testing.assert_allclose(r.rigid_body.dz_um, D_UM[2], atol=1e-9)
 
 
+def test_xdmf(tmp_path):
+    pytest.importorskip("h5py")
+    pts, ct, cells = plate(6.0, nz=1)
+    u = 1e-3 * field_um(pts)
+    meshio.write(tmp_path / "plate.xdmf", meshio.Mesh(pts, [(ct, cells)], point_data={"Displacement": u}))
+    r = import_fe(tmp_path / "plate.xdmf", "z=0")
+    np.testing.assert_allclose(r.rigid_body.rz_urad, TH_URAD[2], atol=1e-9)
+
+
+def test_gmsh_physical_group_names_the_face(tmp_path):
+    """A gmsh mesh whose optical face is a physical surface group: selected by name, oriented
+    by the volume cells; the other boundary faces (sides, back) are not taken."""
+    from fea.fe_face import parse_surface, select_face
+
+    pts, ct, cells = plate(6.0, nz=1)
+    quads = select_face(pts, [(ct, cells)], parse_surface("z=0")).blocks[0][1]
+    mesh = meshio.Mesh(pts, [(ct, cells), ("quad", quads)], point_data={"displacement": 1e-3 * field_um(pts)},
+                       cell_data={"gmsh:physical": [np.full(len(cells), 1), np.full(len(quads), 2)],
+                                  "gmsh:geometrical": [np.full(len(cells), 1), np.full(len(quads), 2)]},
+                       field_data={"blank": np.array([1, 3]), "optical_face": np.array([2, 2])})
+    meshio.write(tmp_path / "plate.msh", mesh, file_format="gmsh22", binary=True)
+    r = import_fe(tmp_path / "plate.msh", "optical_face")
+    assert r.n_face_nodes == np.count_nonzero(pts[:, 2] == 0)
+    np.testing.assert_allclose([r.rigid_body.dz_um, r.rigid_body.rz_urad], [D_UM[2], TH_URAD[2]], atol=1e-9)
+
+
 # ---------------------------------------------------------------------- bad inputs
 def test_bad_inputs_name_parameter_value_and_options(tmp_path):
     pts, ct, cells = plate(6.0, nz=1)
