@@ -130,7 +130,8 @@ def _pick_field(point_data: dict, name: str | None, source: str) -> np.ndarray:
         if len(hits) != 1:
             raise ValueError(f"field=None: {source} has {'no' if not hits else 'several'} nodal displacement "
                              f"array(s) named {list(_DISP_NAMES)} (any case); nodal vectors present: "
-                             f"{sorted(vectors)}, point data present: {sorted(point_data)}; give field=NAME, or displacement_csv for a mesh without results")
+                             f"{sorted(vectors)}, point data present: {sorted(point_data)}; give field=NAME, "
+                             "or displacement_csv for a mesh without results")
         v = vectors[hits[0]]
     if v.shape[1] == 2:
         v = np.column_stack([v, np.zeros(len(v))])
