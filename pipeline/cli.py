@@ -27,7 +27,7 @@ def _cmd_tables(a) -> int:
 
     rows = run_tables(a.out, progress=not a.quiet, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm)
     print(format_table(rows))
-    print(f"\nwritten: {Path(a.out) / 'tables.csv'}, {Path(a.out) / 'sweep.nc'}")
+    print(f"\nwritten: {Path(a.out) / 'tables.csv'}, {Path(a.out) / 'sweep.nc'}, {Path(a.out) / 'figure_summary.csv'}")
     return 0
 
 

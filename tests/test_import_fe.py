@@ -133,6 +133,15 @@ def test_quadratic_faces_reproduce_a_quadratic_sag_exactly(tmp_path):
     assert np.abs(r1.sag_map.sag_um - (want - r1.rigid_body.dz_um)).max() > 1e-4
 
 
+def test_sag_along_normal_equals_z_on_a_flat_face_with_in_plane_motion(tmp_path):
+    """On a flat face the outward normal is +z: in-plane displacements must not leak into the sag."""
+    pts, ct, cells = plate(6.0, nz=1)
+    path = write_vtu(tmp_path / "p.vtu", pts, ct, cells, 1e-3 * field_um(pts))
+    rz, rn = import_fe(path, "z=0"), import_fe(path, "z=0", sag_along="normal")
+    np.testing.assert_allclose(rn.sag_map.sag_um, rz.sag_map.sag_um, atol=1e-12)
+    assert rn.sag_map.meta["sag_along"] == "normal"
+
+
 def test_face_looking_down_needs_axes_and_transforms_the_motion(tmp_path):
     """A face at the bottom (outward -z): optical frame x, -y, -z (a rotation by 180° about x)."""
     pts, ct, cells = plate(3.0, z=(0.0, 10.0))
