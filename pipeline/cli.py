@@ -27,7 +27,7 @@ def _cmd_tables(a) -> int:
 
     rows = run_tables(a.out, progress=not a.quiet, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm)
     print(format_table(rows))
-    print(f"\nwritten: {Path(a.out) / 'tables.csv'}, {Path(a.out) / 'sweep.nc'}")
+    print(f"\nwritten: {Path(a.out) / 'tables.csv'}, {Path(a.out) / 'sweep.nc'}, {Path(a.out) / 'figure_summary.csv'}")
     return 0
 
 
@@ -190,10 +190,12 @@ def build_parser() -> argparse.ArgumentParser:
     q.set_defaults(func=_cmd_calibrate)
 
     from pipeline.diagnosis.cli import register as register_diagnosis
+    from pipeline.fe_cli import register as register_fe
     from pipeline.optics_cli import register as register_optics
 
     register_optics(sub)
     register_diagnosis(sub)
+    register_fe(sub)
     return p
 
 

@@ -12,7 +12,7 @@ sweep over coatings and temperatures assembles the bulk once.
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -20,13 +20,15 @@ import numpy as np
 from fea.api import mesh_spec_for
 from fea.calibration import STRESS_SCALE, paper_cases
 from fea.coating import COVERAGES, Coating
+from fea.front_figure import front_figure_outputs
 from fea.geometry import Blank
 from fea.materials import MATERIALS
 from fea.mesh import MeshSpec
 from fea.model import PreparedBlank, ThermalLoad
 
 __all__ = ["FEA_PARAMETERS", "FEACaseRunner", "fea_grid", "run_fea_sweep", "run_tables",
-           "TableRow", "format_table", "SAG_GRID_X_MM", "SAG_GRID_Y_MM"]
+           "TableRow", "format_table", "SAG_GRID_X_MM", "SAG_GRID_Y_MM", "FIGURE_KEYS", "case_namespace",
+           "write_figure_summary"]
 
 #: Fixed output grid of the sag maps (covers the default 160 x 140 mm face).
 SAG_SPACING_MM = 0.5
@@ -225,6 +227,7 @@ class FEACaseRunner:
             "ndof": int(r.info["ndof"]), "solve_s": float(r.info["solve_s"]),
             "stress_scale_used": float(scale),
         }
+        out.update(front_figure_outputs(model.mesh, r, model.symmetry_planes))
         if self.with_maps:
             m = s.sag_map(SAG_SPACING_MM).resampled(SAG_GRID_X_MM, SAG_GRID_Y_MM)
             out["sag_um"] = (("y_mm", "x_mm"), m.sag_um.astype(np.float32))
@@ -256,6 +259,49 @@ def _namespace() -> str:
     return f"fea-v{MODEL_VERSION}-scale{STRESS_SCALE:.8g}"
 
 
+def case_namespace() -> str:
+    """Cache namespace of :class:`FEACaseRunner` outputs: the model's, plus the version of the
+    output set (cases cached before the rigid-body/power outputs are recomputed, not reused)."""
+    return f"{_namespace()}-outputs2"
+
+
+#: Per-case outputs of the front face's rigid-body motion and low-order figure
+#: (:mod:`fea.front_figure`) -> (SigFit-style column header, UDUNITS unit, long name).
+FIGURE_KEYS = {
+    "rb_dx_um": ("T1 dx", "um", "front-face rigid-body translation x (dispersion), relative to the blank"),
+    "rb_dy_um": ("T2 dy", "um", "front-face rigid-body translation y (rulings), relative to the blank"),
+    "rb_dz_um": ("T3 dz", "um", "front-face rigid-body translation z (piston), relative to the blank"),
+    "rb_rx_urad": ("R1 rx", "urad", "front-face rigid-body rotation about x, relative to the blank"),
+    "rb_ry_urad": ("R2 ry", "urad", "front-face rigid-body rotation about y, relative to the blank"),
+    "rb_rz_urad": ("R3 rz", "urad", "front-face rigid-body rotation about z (groove clocking), relative to the blank"),
+    "pv_center_um": ("PV center PT", "um", "P/V over the central 82 x 72 mm, piston and tilt removed"),
+    "rms_center_um": ("RMS center PT", "um", "RMS over the central 82 x 72 mm, piston and tilt removed"),
+    "pv_center_pttp_um": ("PV center PTP", "um", "P/V over the central 82 x 72 mm, piston, tilt, power removed"),
+    "rms_center_pttp_um": ("RMS center PTP", "um", "RMS over the central 82 x 72 mm, piston, tilt, power removed"),
+    "power_center_um_per_mm2": ("power center", "um mm-2", "removed power c of c (x^2 + y^2), central 82 x 72 mm"),
+    "pv_full_um": ("PV full PT", "um", "P/V over the whole face, piston and tilt removed"),
+    "rms_full_um": ("RMS full PT", "um", "RMS over the whole face, piston and tilt removed"),
+    "pv_full_pttp_um": ("PV full PTP", "um", "P/V over the whole face, piston, tilt, power removed"),
+    "rms_full_pttp_um": ("RMS full PTP", "um", "RMS over the whole face, piston, tilt, power removed"),
+    "power_full_um_per_mm2": ("power full", "um mm-2", "removed power c of c (x^2 + y^2), whole face"),
+}
+
+
+def write_figure_summary(path, labels, outputs: dict) -> Path:
+    """SigFit-style summary CSV: one row per case, rigid-body motion then P/V and RMS with
+    piston/tilt (PT) and piston/tilt/power (PTP) removed; a units row under the header."""
+    from pipeline.io_common import atomic_write
+
+    keys = [k for k in FIGURE_KEYS if all(k in outputs[lb] for lb in labels)]
+    with atomic_write(Path(path)) as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(["case", *(FIGURE_KEYS[k][0] for k in keys)])
+        w.writerow(["units", *(FIGURE_KEYS[k][1] for k in keys)])
+        for lb in labels:
+            w.writerow([lb, *(f"{float(outputs[lb][k]):.6g}" for k in keys)])
+    return Path(path)
+
+
 def run_fea_sweep(axes: dict, out_dir, *, scheduler: str | None = None, workers: int | None = 1,
                   progress: bool = True, with_maps: bool = True):
     """Run every combination of ``axes`` (name → list of values) and write the results.
@@ -271,11 +317,14 @@ def run_fea_sweep(axes: dict, out_dir, *, scheduler: str | None = None, workers:
     core = {k: [FEA_PARAMETERS[k][0]] for k in ("coverage", "t0_um", "polish")}
     axes = {**core, **axes}
     cases = fea_grid(**axes)
-    res = run_sweep(FEACaseRunner(with_maps), cases, out_dir, namespace=_namespace(),
+    res = run_sweep(FEACaseRunner(with_maps), cases, out_dir, namespace=case_namespace(),
                     workers=workers, scheduler=scheduler, progress=progress, description="FEA sweep")
     out = Path(out_dir)
     res.write_csv(out / "sweep.csv")
     res.write_netcdf(out / "sweep.nc")
+    if len(res):
+        labels = [" ".join(f"{k}={v}" for k, v in case.as_dict().items()) for case, _ in res]
+        write_figure_summary(out / "figure_summary.csv", labels, {lb: o for lb, (_, o) in zip(labels, res)})
     return res
 
 
@@ -290,6 +339,8 @@ class TableRow:
     paper_direction: str
     model_direction_um: float
     calibrated: bool
+    #: the case's rigid-body and low-order figure outputs (:data:`FIGURE_KEYS`), written as extra columns
+    figure: dict = field(default_factory=dict, compare=False)
 
     @property
     def error(self) -> float:
@@ -316,14 +367,16 @@ def run_tables(out_dir, *, progress: bool = True, mesh_size_mm: float | None = N
                                ("stress_scale", stress_scale)) if v is not None}
     paper = paper_cases()
     cases = [Case({"coverage": c.coverage, "t0_um": c.t0_um, "polish": c.polish, **extra}) for c in paper]
-    res = run_sweep(FEACaseRunner(), cases, out_dir, namespace=_namespace(), workers=1,
+    res = run_sweep(FEACaseRunner(), cases, out_dir, namespace=case_namespace(), workers=1,
                     progress=progress, description="paper tables")
     rows = [TableRow(c.table, c.coverage, c.t0_um, c.polish, c.pv_center_um, float(out["pv_center_um"]),
-                     c.direction, float(out["quilt_direction_um"]), c.calibrate)
+                     c.direction, float(out["quilt_direction_um"]), c.calibrate, figure_of(out))
             for c, (_, out) in zip(paper, res)]
     out = Path(out_dir)
     res.write_netcdf(out / "sweep.nc")
     _write_rows(rows, out / "tables.csv")
+    labels = [f"{r.table} {r.coverage} {r.t0_um:g}/{100 * r.polish:g}" for r in rows]
+    write_figure_summary(out / "figure_summary.csv", labels, {lb: r.figure for lb, r in zip(labels, rows)})
     if not return_maps:
         return rows
     from optics.sagmap import SagMap
@@ -336,17 +389,27 @@ def run_tables(out_dir, *, progress: bool = True, mesh_size_mm: float | None = N
     return rows, maps
 
 
+def figure_of(outputs: dict) -> dict:
+    """The :data:`FIGURE_KEYS` outputs of one case (those present)."""
+    return {k: float(outputs[k]) for k in FIGURE_KEYS if k in outputs}
+
+
+_TABLE_FIGURE_KEYS = [k for k in FIGURE_KEYS if k not in ("pv_center_um", "rms_center_um", "pv_full_um",
+                                                          "rms_full_um")]
+
+
 def _write_rows(rows, path: Path) -> None:
     from pipeline.io_common import atomic_write
 
+    extra = [k for k in _TABLE_FIGURE_KEYS if rows and all(k in r.figure for r in rows)]
     buf = [["table", "coverage", "t0_um", "polish", "paper_pv_center_um", "model_pv_center_um",
              "error_percent", "paper_direction", "model_quilt_direction_um", "direction_ok",
-             "used_in_calibration"]]
+             "used_in_calibration", *extra]]
     for r in rows:
         buf.append([r.table, r.coverage, f"{r.t0_um:g}", f"{r.polish:g}", f"{r.paper_pv_um:.2f}",
                     f"{r.model_pv_um:.4f}", f"{100 * r.error:+.1f}", r.paper_direction,
                     f"{r.model_direction_um:+.4f}", str(r.direction_ok).lower(),
-                    "yes" if r.calibrated else "no"])
+                    "yes" if r.calibrated else "no", *(f"{r.figure[k]:.6g}" for k in extra)])
     with atomic_write(path) as fh:
         csv.writer(fh, lineterminator="\n").writerows(buf)
 

@@ -27,16 +27,15 @@ the surface's *local* +Z, which for a mirror met by light travelling along +Z po
 needs ``-sag`` (and, to stay right-handed, one of x/y mirrored). That depends on the
 lens file, so no flip is applied here; the orientation tests pin our own layout.
 
-Also here: Zernike coefficient lists (re-exported from :mod:`pipeline.io_zernike`),
-:func:`read_line_profile` for measured profiles, and :func:`load_sag_map` used by
-the ``--sag`` option of the CLI.
+Also here (re-exported): Zernike coefficient lists (:mod:`pipeline.io_zernike`),
+measured line profiles and PSF images (:mod:`pipeline.io_measured`), and
+:func:`load_sag_map` used by the ``--sag`` option of the CLI. Point lists and units:
+:mod:`pipeline.io_gridding`.
 """
 
 from __future__ import annotations
 
-import csv
 import inspect
-import io
 import json
 from pathlib import Path
 from typing import Callable
@@ -45,7 +44,9 @@ import numpy as np
 
 from optics.sagmap import SagMap
 from pipeline.io_codev import read_codev_int, write_codev_int
-from pipeline.io_common import atomic_path, atomic_write, parse_error, read_text
+from pipeline.io_common import atomic_path, atomic_write, parse_error, read_csv_columns
+from pipeline.io_gridding import grid_points, length_unit_factor, sag_unit_factor
+from pipeline.io_measured import read_line_profile, read_psf_image, write_psf_image_csv
 from pipeline.io_zemax import read_zemax_grid_sag, write_zemax_grid_sag
 from pipeline.io_zernike import (ZERNIKE_CONVENTIONS, convert_normalisation, read_zernike_list,
                                  write_zernike_list)
@@ -90,92 +91,76 @@ def write_sag_csv(sagmap: SagMap, path: str | Path) -> Path:
     return path
 
 
-def _fast_csv_columns(text: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray] | None:
-    """NumPy parse of a clean file (header on line 1, no blank or ragged lines); None
-    means "use the line-by-line parser", which is the one that words the errors."""
-    head, _, body = text.partition("\n")
-    header = [h.strip() for h in head.split(",")]
-    if not all(c in header for c in names) or not body.strip() or "\n\n" in body.rstrip("\n"):
-        return None
-    if any(line.count(",") != len(header) - 1 for line in body.rstrip("\n").split("\n")):
-        return None  # ragged: let the slow parser name the line
-    try:
-        v = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, dtype=float,
-                       usecols=[header.index(c) for c in names])
-    except ValueError:
-        return None
-    return v, np.arange(2, v.shape[0] + 2)
-
-
-def _read_csv_columns(path: Path, what: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """Numeric columns ``names`` of a CSV with a header; returns (values[n, k], line numbers[n])."""
-    text = read_text(path, what)
-    fast = _fast_csv_columns(text, names)
-    if fast is not None:
-        return fast
-    rows = list(csv.reader(io.StringIO(text)))
-    lineno = [i + 1 for i, r in enumerate(rows)]
-    body = [(n, r) for n, r in zip(lineno, rows) if r and any(c.strip() for c in r)]
-    if not body:
-        raise parse_error(path, None, f"file is empty; expected a header with columns {list(names)}")
-    hline, header = body[0]
-    header = [h.strip() for h in header]
-    missing = [c for c in names if c not in header]
-    if missing:
-        raise parse_error(path, hline, f"missing column(s) {missing}; found header {header}, need {list(names)}")
-    idx = [header.index(c) for c in names]
-    vals, lines = [], []
-    for n, r in body[1:]:
-        if len(r) != len(header):
-            raise parse_error(path, n, f"expected {len(header)} values like the header, found {len(r)}")
-        try:
-            vals.append([float(r[i]) for i in idx])
-        except ValueError:
-            raise parse_error(path, n, f"non-numeric value in {','.join(r)!r}") from None
-        lines.append(n)
-    return np.array(vals, dtype=float).reshape(-1, len(names)), np.array(lines, dtype=int)
-
-
-def _uniform_axis(v: np.ndarray) -> np.ndarray | None:
-    u = np.unique(np.round(v, 9))  # coordinates agree to 1 nm in mm
-    if u.size < 2:
-        return None
-    d = np.diff(u)
-    return u if np.allclose(d, d[0], rtol=1e-6, atol=1e-9) else None
-
-
 def read_sag_csv(path: str | Path, spacing_mm: float | None = None) -> SagMap:
-    """Read ``x_mm,y_mm,sag_um`` (extra columns ignored).
+    """Read a table of points ``x_mm,y_mm,sag_um`` (header names case-insensitive, any
+    column order, extra columns ignored, rows in any order).
 
-    If the points form a complete uniform grid it is used as is (``nan`` sag = hole);
-    otherwise the finite points are treated as scattered and gridded with
-    :meth:`SagMap.from_scattered` at ``spacing_mm`` (required then).
+    Points on a uniform grid, complete or not (a masked export lists only the points
+    inside its aperture), are put back on that grid with NaN at the absent nodes and at
+    ``nan`` sag values; truly scattered points are interpolated linearly onto a grid of
+    ``spacing_mm`` (default: their median nearest-neighbour distance), NaN outside their
+    convex hull (:func:`pipeline.io_gridding.grid_points`). ``meta["gridding"]`` says which.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file.
+    spacing_mm : float, optional
+        Grid spacing (mm) for scattered points; unused when the points form a grid.
     """
     path = Path(path)
-    v, lines = _read_csv_columns(path, "sag CSV", _CSV_COLUMNS)
+    v, lines = read_csv_columns(path, "sag CSV", _CSV_COLUMNS)
     if v.shape[0] < 3:
         raise parse_error(path, None, f"needs >= 3 data rows, found {v.shape[0]}")
     bad = ~np.isfinite(v[:, :2]).all(axis=1)
     if bad.any():
-        raise parse_error(path, int(lines[bad][0]), "x_mm and y_mm must be finite")
-    ux, uy = _uniform_axis(v[:, 0]), _uniform_axis(v[:, 1])
-    if ux is not None and uy is not None and ux.size * uy.size == v.shape[0]:
-        ix = np.searchsorted(ux, np.round(v[:, 0], 9))
-        iy = np.searchsorted(uy, np.round(v[:, 1], 9))
-        sag = np.full((uy.size, ux.size), np.nan)
-        filled = np.zeros(sag.shape, dtype=bool)
-        filled[iy, ix] = True
-        if filled.all():
-            sag[iy, ix] = v[:, 2]
-            return SagMap(ux, uy, sag, path.stem, {"format": "csv", "gridded": True})
-    if spacing_mm is None:
-        raise ValueError(f"{path}: points are not a complete uniform grid; pass spacing_mm (mm) to grid them")
-    ok = np.isfinite(v[:, 2])
-    m = SagMap.from_scattered(v[ok, 0], v[ok, 1], v[ok, 2], spacing_mm=spacing_mm, label=path.stem)
-    return SagMap(m.x_mm, m.y_mm, m.sag_um, m.label, {"format": "csv", "gridded": False, "spacing_mm": spacing_mm})
+        k = int(np.flatnonzero(bad)[0])
+        raise parse_error(path, int(lines[k]), f"x_mm={v[k, 0]:g}, y_mm={v[k, 1]:g}: coordinates must be finite")
+    inf = np.isinf(v[:, 2])
+    if inf.any():
+        raise parse_error(path, int(lines[inf][0]), "sag_um is infinite; write nan (or leave the point out) for no data")
+    gx, gy, sag, meta = grid_points(v[:, 0], v[:, 1], v[:, 2], spacing_mm=spacing_mm, lines=lines, source=str(path))
+    return _sagmap(path, gx, gy, sag, path.stem, {"format": "csv", **meta})
 
 
-# ------------------------------------------------------------------ NetCDF / NPZ
+def _sagmap(path: Path, x_mm, y_mm, sag_um, label: str, meta: dict) -> SagMap:
+    """SagMap whose construction errors name the file."""
+    try:
+        return SagMap(x_mm, y_mm, sag_um, label, meta)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+
+
+def _axes_map(path: Path, field: str, x, y, sag, label: str, meta: dict) -> SagMap:
+    """A map from axis arrays (1-D, or 2-D meshgrids) and ``sag[y, x]`` as stored in
+    NetCDF/NPZ: refuses complex or non-finite coordinates, flips descending axes."""
+    x, y, sag = np.asarray(x), np.asarray(y), np.asarray(sag)
+    for name, a in ((field, sag), ("x_mm", x), ("y_mm", y)):
+        if np.iscomplexobj(a):
+            raise ValueError(f"{path}: {name!r} is complex ({a.dtype}); a sag map must be real "
+                             "(write the real part, or the modulus, explicitly)")
+        if not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
+            raise ValueError(f"{path}: {name!r} has non-numeric dtype {a.dtype}")
+    if sag.ndim != 2:
+        raise ValueError(f"{path}: {field!r} has shape {sag.shape}; expected 2-D [y, x]")
+    if x.ndim == 2 and x.shape == sag.shape:
+        x = x[0]  # meshgrid layout
+    if y.ndim == 2 and y.shape == sag.shape:
+        y = y[:, 0]
+    x, y, sag = x.astype(float), y.astype(float), sag.astype(float)
+    for name, a in (("x_mm", x), ("y_mm", y)):
+        if not np.isfinite(a).all():
+            k = int(np.flatnonzero(~np.isfinite(a))[0])
+            raise ValueError(f"{path}: {name}[{k}]={a[k]!r}; coordinates must be finite")
+    if np.isinf(sag).any():
+        raise ValueError(f"{path}: {field!r} has {int(np.isinf(sag).sum())} infinite values; use NaN for no data")
+    if x.ndim == 1 and x.size > 1 and x[0] > x[-1]:
+        x, sag = x[::-1], sag[:, ::-1]
+    if y.ndim == 1 and y.size > 1 and y[0] > y[-1]:
+        y, sag = y[::-1], sag[::-1]
+    return _sagmap(path, x, y, sag, label, meta)
+
+
 def write_sag_netcdf(sagmap: SagMap, path: str | Path) -> Path:
     """NetCDF via xarray: variable ``sag_um`` on dims ``(y_mm, x_mm)`` with units attrs."""
     import xarray as xr
@@ -194,25 +179,63 @@ def write_sag_netcdf(sagmap: SagMap, path: str | Path) -> Path:
     return path
 
 
-def read_sag_netcdf(path: str | Path) -> SagMap:
-    """Read a NetCDF sag map (variable ``sag_um`` with coordinates ``y_mm``, ``x_mm``)."""
+def read_sag_netcdf(path: str | Path, wavelength_um: float | None = None) -> SagMap:
+    """Read a NetCDF sag map: variable ``sag_um`` (or ``sag``) on dims ``(y_mm, x_mm)``
+    (or ``(y, x)``), NaN or ``_FillValue`` = no data.
+
+    The sag's ``units`` attribute is honoured (nm, um/µm, mm, m, or waves with
+    ``wavelength_um``) and converted to µm; without one, ``sag_um`` is taken as µm and
+    ``sag`` is refused. Coordinate ``units`` (nm, µm, mm, m; default mm) are honoured
+    too. Descending coordinates are flipped.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.nc`` file.
+    wavelength_um : float, optional
+        Wavelength (µm) of one wave, for ``units = "waves"``.
+    """
     import xarray as xr
 
     path = Path(path)
     if not path.exists():
         raise ValueError(f"{path}: file does not exist")
-    with xr.open_dataset(path) as ds:
-        if "sag_um" not in ds:
-            raise ValueError(f"{path}: no variable 'sag_um'; found {sorted(ds.data_vars)}")
-        da = ds["sag_um"]
-        if set(da.dims) != {"y_mm", "x_mm"}:
-            raise ValueError(f"{path}: 'sag_um' has dims {da.dims}; expected ('y_mm', 'x_mm')")
-        da = da.transpose("y_mm", "x_mm")
+    try:
+        ds = xr.open_dataset(path)
+    except Exception as exc:  # netCDF4/h5 raise OSError, ValueError, KeyError... on a garbage file
+        raise ValueError(f"{path}: not a readable NetCDF file ({type(exc).__name__}: {exc})") from None
+    with ds:
+        field = next((n for n in ("sag_um", "sag") if n in ds.data_vars), None)
+        if field is None:
+            raise ValueError(f"{path}: no variable 'sag_um' (or 'sag'); found {sorted(map(str, ds.data_vars))}")
+        da = ds[field]
+        dims = next((d for d in (("y_mm", "x_mm"), ("y", "x")) if set(da.dims) == set(d)), None)
+        if dims is None:
+            raise ValueError(f"{path}: {field!r} has dims {da.dims}; expected ('y_mm', 'x_mm') or ('y', 'x')")
+        da = da.transpose(*dims)
+        units = da.attrs.get("units")
+        if units is None and field == "sag":
+            raise ValueError(f"{path}: variable 'sag' has no 'units' attribute; give units (nm, um, mm, m, waves) "
+                             "or name the variable 'sag_um'")
+        try:
+            factor = 1.0 if units is None else sag_unit_factor(units, wavelength_um)
+            axes = []
+            for d in dims[::-1]:
+                cu = da[d].attrs.get("units") if d in da.coords else None
+                axes.append(da[d].values * (1.0 if cu is None else length_unit_factor(cu)) if d in da.coords
+                            else None)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {field!r}: {exc}") from None
+        if axes[0] is None or axes[1] is None:
+            raise ValueError(f"{path}: {field!r} lacks coordinate values for {dims}")
         try:
             meta = json.loads(ds.attrs.get("meta_json", "{}"))
         except json.JSONDecodeError:
             meta = {}
-        return SagMap(da["x_mm"].values, da["y_mm"].values, da.values, ds.attrs.get("label", path.stem), meta)
+        if units is not None:
+            meta = {**meta, "source_units": str(units)}
+        return _axes_map(path, field, axes[0], axes[1], np.asarray(da.values) * factor,
+                         str(ds.attrs.get("label", path.stem)), meta)
 
 
 def write_sag_npz(sagmap: SagMap, path: str | Path) -> Path:
@@ -224,16 +247,28 @@ def write_sag_npz(sagmap: SagMap, path: str | Path) -> Path:
 
 
 def read_sag_npz(path: str | Path) -> SagMap:
-    """Read a ``.npz`` sag map (arrays ``x_mm``, ``y_mm``, ``sag_um``, optional ``label``)."""
+    """Read a ``.npz`` sag map: arrays ``x_mm``, ``y_mm`` (1-D, or 2-D meshgrids),
+    ``sag_um[y, x]`` (µm, NaN = no data) and optional ``label``. Complex arrays are
+    refused; descending axes are flipped."""
+    import zipfile
+
     path = Path(path)
     if not path.exists():
         raise ValueError(f"{path}: file does not exist")
-    with np.load(path, allow_pickle=False) as d:
-        missing = {"x_mm", "y_mm", "sag_um"} - set(d.files)
-        if missing:
-            raise ValueError(f"{path}: missing arrays {sorted(missing)}; found {sorted(d.files)}")
-        label = str(d["label"]) if "label" in d.files else path.stem
-        return SagMap(d["x_mm"], d["y_mm"], d["sag_um"], label)
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            missing = {"x_mm", "y_mm", "sag_um"} - set(d.files)
+            if missing:
+                raise ValueError(f"{path}: missing arrays {sorted(missing)}; found {sorted(d.files)}")
+            label = str(d["label"]) if "label" in d.files else path.stem
+            x, y, sag = d["x_mm"], d["y_mm"], d["sag_um"]
+    except (OSError, EOFError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
+    except ValueError as exc:
+        if str(path) in str(exc):
+            raise
+        raise ValueError(f"{path}: not a readable .npz file ({exc})") from None
+    return _axes_map(path, "sag_um", x, y, sag, label, {})
 
 
 # ------------------------------------------------------------------ registry
@@ -293,8 +328,9 @@ def read_sag_map(path: str | Path, **options) -> SagMap:
     """Read a sag map, choosing the reader by the suffix of ``path``.
 
     ``**options`` go to the reader (``extent_mm``/``spacing_mm``, ``quantity``,
-    ``wfr_to_sag_factor`` for ``.int``,
-    ``spacing_mm`` for scattered ``.csv``).
+    ``wfr_to_sag_factor`` for ``.int``, ``spacing_mm`` for scattered ``.csv``,
+    ``wavelength_um`` for a ``.nc`` in waves); an option the format does not use is
+    refused naming the valid ones.
     """
     path = Path(path)
     reader = _format_for(path)[0]
@@ -311,109 +347,3 @@ def load_sag_map(path: str | Path) -> SagMap:
         return read_sag_map(path)
     except ValueError as exc:
         raise ValueError(f"--sag {exc}") from None
-
-
-# ------------------------------------------------------------------ measured line profiles
-def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Read a measured line profile from a CSV with columns ``offset_um,intensity``.
-
-    Parameters
-    ----------
-    path : str or Path
-        CSV file with a header naming ``offset_um`` and ``intensity`` (any order,
-        other columns ignored). Intensities may have any normalisation.
-    normalise : bool
-        Scale the intensity to unit area (trapezoid rule over ``offset_um``), the
-        normalisation of :mod:`optics.imaging` profiles.
-
-    Returns
-    -------
-    offset_um, intensity : ndarray, shape (n,)
-        Sorted by increasing offset.
-
-    Raises
-    ------
-    ValueError
-        Naming file and (where it applies) line: missing columns, non-numeric or
-        non-finite values, fewer than 5 samples, negative intensities, duplicate
-        offsets, no flux.
-    """
-    path = Path(path)
-    v, lines = _read_csv_columns(path, "line profile", ("offset_um", "intensity"))
-    if v.shape[0] < 5:
-        raise parse_error(path, None, f"needs >= 5 samples, found {v.shape[0]}")
-    nonfinite = ~np.isfinite(v).all(axis=1)
-    if nonfinite.any():
-        raise parse_error(path, int(lines[nonfinite][0]), "offset_um and intensity must be finite numbers")
-    neg = v[:, 1] < 0
-    if neg.any():
-        k = int(np.flatnonzero(neg)[0])
-        raise parse_error(path, int(lines[k]), f"intensity {v[k, 1]:g} is negative; intensities must be >= 0")
-    order = np.argsort(v[:, 0], kind="stable")
-    x, y, ln = v[order, 0], v[order, 1], lines[order]
-    dup = np.flatnonzero(np.diff(x) == 0)
-    if dup.size:
-        raise parse_error(path, int(ln[dup[0] + 1]), f"duplicate offset_um {x[dup[0]]:g}")
-    flux = float(np.trapezoid(y, x))
-    if not flux > 0:
-        raise parse_error(path, None, "no flux: all intensities are zero")
-    return x, (y / flux if normalise else y)
-
-
-def read_psf_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Read a measured point-source image: CSV ``x_um,y_um,intensity`` (header, any
-    column order, other columns ignored) or ``.npz`` with arrays ``x_um``, ``y_um``,
-    ``intensity``. ``x`` is along the dispersion, ``y`` along the slit (detector µm).
-
-    Returns
-    -------
-    x_um, y_um, intensity : ndarray, shape (n,)
-        Sorted by (y, x); intensities as given (any normalisation).
-
-    Raises
-    ------
-    ValueError
-        Naming file and (where it applies) line: missing columns or arrays, non-finite
-        values, fewer than 25 samples, negative intensities, duplicate points, no flux.
-    """
-    path = Path(path)
-    if path.suffix.lower() == ".npz":
-        try:
-            with np.load(path) as z:
-                missing = [k for k in ("x_um", "y_um", "intensity") if k not in z.files]
-                if missing:
-                    raise parse_error(path, None, f"lacks arrays {missing}; has {sorted(z.files)}")
-                v = np.column_stack([np.ravel(z[k]).astype(float) for k in ("x_um", "y_um", "intensity")])
-        except (OSError, ValueError) as exc:
-            if isinstance(exc, ValueError) and str(path) in str(exc):
-                raise
-            raise parse_error(path, None, f"is not a readable .npz: {exc}") from None
-        lines = np.zeros(v.shape[0], int)
-    else:
-        v, lines = _read_csv_columns(path, "PSF image", ("x_um", "y_um", "intensity"))
-    line = (lambda k: int(lines[k]) if lines[k] else None)
-    if v.shape[0] < 25:
-        raise parse_error(path, None, f"needs >= 25 samples, found {v.shape[0]}")
-    bad = ~np.isfinite(v).all(axis=1)
-    if bad.any():
-        raise parse_error(path, line(int(np.flatnonzero(bad)[0])), "x_um, y_um and intensity must be finite numbers")
-    neg = v[:, 2] < 0
-    if neg.any():
-        k = int(np.flatnonzero(neg)[0])
-        raise parse_error(path, line(k), f"intensity {v[k, 2]:g} is negative; intensities must be >= 0")
-    order = np.lexsort((v[:, 0], v[:, 1]))
-    v, lines = v[order], lines[order]
-    dup = np.flatnonzero((np.diff(v[:, 0]) == 0) & (np.diff(v[:, 1]) == 0))
-    if dup.size:
-        raise parse_error(path, line(dup[0] + 1), f"duplicate point x_um={v[dup[0], 0]:g}, y_um={v[dup[0], 1]:g}")
-    if not v[:, 2].max() > 0:
-        raise parse_error(path, None, "no flux: all intensities are zero")
-    return v[:, 0], v[:, 1], v[:, 2]
-
-
-def write_psf_image_csv(path: str | Path, x_um: np.ndarray, y_um: np.ndarray, intensity: np.ndarray) -> None:
-    """CSV ``x_um,y_um,intensity`` (header, one sample per line), written atomically."""
-    with atomic_write(Path(path)) as fh:
-        fh.write("x_um,y_um,intensity\n")
-        for a, b, c in zip(np.ravel(x_um), np.ravel(y_um), np.ravel(intensity)):
-            fh.write(f"{a:.3f},{b:.3f},{c:.6g}\n")

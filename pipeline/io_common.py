@@ -6,10 +6,14 @@
 * :func:`parse_error` — one wording for malformed files: file, line number, what was
   found and what is valid.
 * :func:`numbered_lines` — text lines with 1-based line numbers for those messages.
+* :func:`read_text` / :func:`read_csv_columns` — a file's text (UTF-8, or UTF-16/32 with
+  a byte-order mark) and the numeric columns of a CSV with a header, errors by line.
 """
 
 from __future__ import annotations
 
+import csv
+import io
 import os
 import secrets
 import uuid
@@ -17,7 +21,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["atomic_write", "atomic_path", "output_dir", "parse_error", "numbered_lines", "read_text"]
+import numpy as np
+
+__all__ = ["atomic_write", "atomic_path", "output_dir", "parse_error", "numbered_lines", "read_text",
+           "decode_text", "read_csv_columns"]
 
 
 def _create_tmp(path: Path, suffix: str) -> tuple[int, str]:
@@ -119,11 +126,85 @@ def read_text(path: str | Path, what: str) -> str:
     """Whole text of ``path``; a missing/unreadable file becomes a ``ValueError`` naming it."""
     path = Path(path)
     try:
-        return path.read_text(encoding="utf-8", errors="replace")
+        raw = path.read_bytes()
     except FileNotFoundError:
         raise ValueError(f"{what} {path}: file does not exist") from None
     except OSError as exc:
         raise ValueError(f"{what} {path}: cannot read ({exc.strerror or exc})") from None
+    return decode_text(raw, path, what)
+
+
+def decode_text(raw: bytes, path: str | Path, what: str, strict: bool = False) -> str:
+    """Text of a file's bytes: UTF-8 (a byte-order mark is dropped), or UTF-16/32 when
+    the file starts with their byte-order mark (Windows tools write these).
+
+    Undecodable bytes become U+FFFD unless ``strict``, which raises a ``ValueError``
+    naming the file and the byte offset."""
+    import codecs
+
+    for bom, enc in ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"),
+                     (codecs.BOM_UTF8, "utf-8-sig"), (codecs.BOM_UTF16_LE, "utf-16"), (codecs.BOM_UTF16_BE, "utf-16")):
+        if raw.startswith(bom):
+            break
+    else:
+        enc = "utf-8"
+    try:
+        text = raw.decode(enc, errors="strict" if strict else "replace")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{what} {path}: is not {enc.upper()} text (undecodable byte at offset {exc.start}); "
+                         "save it as UTF-8") from None
+    return text.replace("\r\n", "\n").replace("\r", "\n")  # universal newlines, as open() in text mode
+
+
+def _fast_csv_columns(text: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray] | None:
+    """NumPy parse of a clean file (header on line 1, no blank or ragged lines); None
+    means "use the line-by-line parser", which is the one that words the errors."""
+    if "#" in text:
+        return None  # comment lines: the line-by-line parser skips them
+    head, _, body = text.partition("\n")
+    header = [h.strip().lower() for h in head.split(",")]
+    if not all(c in header for c in names) or not body.strip() or "\n\n" in body.rstrip("\n"):
+        return None
+    if any(line.count(",") != len(header) - 1 for line in body.rstrip("\n").split("\n")):
+        return None  # ragged: let the slow parser name the line
+    try:
+        v = np.loadtxt(io.StringIO(body), delimiter=",", ndmin=2, dtype=float,
+                       usecols=[header.index(c) for c in names])
+    except ValueError:
+        return None
+    return v, np.arange(2, v.shape[0] + 2)
+
+
+def read_csv_columns(path: Path, what: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Numeric columns ``names`` of a CSV with a header (names matched case-insensitively,
+    other columns ignored, ``#`` comment lines and blank lines skipped); returns
+    (values[n, k], line numbers[n]). Errors name the file and line."""
+    text = read_text(path, what)
+    fast = _fast_csv_columns(text, names)
+    if fast is not None:
+        return fast
+    rows = list(csv.reader(io.StringIO(text)))
+    lineno = [i + 1 for i, r in enumerate(rows)]
+    body = [(n, r) for n, r in zip(lineno, rows)
+            if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
+    if not body:
+        raise parse_error(path, None, f"file is empty; expected a header with columns {list(names)}")
+    hline, header = body[0]
+    header = [h.strip().lower() for h in header]
+    missing = [c for c in names if c not in header]
+    if missing:
+        raise parse_error(path, hline, f"missing column(s) {missing}; found header {header}, need {list(names)}")
+    idx = [header.index(c) for c in names]
+    vals, lines = [], []
+    for n, r in body[1:]:
+        if len(r) != len(header):
+            raise parse_error(path, n, f"expected {len(header)} values like the header, found {len(r)}")
+        try:
+            vals.append([float(r[i]) for i in idx])
+        except ValueError:
+            raise parse_error(path, n, f"non-numeric value in {','.join(r)!r}") from None
+        lines.append(n)
+    return np.array(vals, dtype=float).reshape(-1, len(names)), np.array(lines, dtype=int)
 
 
 def numbered_lines(text: str) -> list[tuple[int, str]]:

@@ -100,8 +100,10 @@ def _run_fea(config: StudyConfig, out: Path, progress: bool):
         SAG_GRID_Y_MM,
         FEACaseRunner,
         TableRow,
-        _namespace,
         _write_rows,
+        case_namespace,
+        figure_of,
+        write_figure_summary,
     )
     from pipeline.sweep import Case, run_sweep
 
@@ -111,11 +113,12 @@ def _run_fea(config: StudyConfig, out: Path, progress: bool):
     # the 3-D renders reuse these solutions instead of solving their cases again
     keep = [p for _, ps, _ in study_renders(cases).values() for p in ps] if config.output.figures else []
     runner = FEACaseRunner(fields_dir=out / "fields", fields_for=keep)
-    res = run_sweep(runner, [Case(c.params) for c in cases], out, namespace=_namespace(), workers=1,
+    res = run_sweep(runner, [Case(c.params) for c in cases], out, namespace=case_namespace(), workers=1,
                     progress=progress, description="FEA cases")
     res.write_netcdf(out / "sweep.nc")
     outputs = {c.label: o for c, (_, o) in zip(cases, res)}
     _write_cases(cases, outputs, out / "cases.csv")
+    write_figure_summary(out / "figure_summary.csv", [c.label for c in cases], outputs)
     maps = {c.label: SagMap(SAG_GRID_X_MM, SAG_GRID_Y_MM,
                             np.asarray(o["sag_um"][1] if isinstance(o["sag_um"], tuple) else o["sag_um"], float),
                             c.label)
@@ -130,7 +133,7 @@ def _run_fea(config: StudyConfig, out: Path, progress: bool):
             in_paper.add(match.label)
             rows.append(TableRow(pc.table, pc.coverage, pc.t0_um, pc.polish, pc.pv_center_um,
                                  float(o["pv_center_um"]), pc.direction, float(o["quilt_direction_um"]),
-                                 pc.calibrate))
+                                 pc.calibrate, figure_of(o)))
     if rows:
         _write_rows(rows, out / "tables.csv")
     return cases, outputs, maps, rows, in_paper

@@ -174,9 +174,15 @@ def study_dataset(cases, outputs: dict, maps: dict, zfits: list, ffits: list, pr
     data = {}
     numeric = [k for k, v in outputs[labels[0]].items()
                if not k.startswith("coord:") and isinstance(v, (int, float, np.integer, np.floating))]
+    from pipeline.fea_cases import FIGURE_KEYS
+
     for k in numeric:
-        units, long = _OUTPUT_UNITS.get(k, ("", k))
-        data[k] = ("case", np.array([float(outputs[lb][k]) for lb in labels]), {"units": units, "long_name": long})
+        units, long = _OUTPUT_UNITS.get(k) or FIGURE_KEYS.get(k, ("", "", k))[1:]
+        a = {"units": units, "long_name": long}
+        if k.startswith("rb_"):
+            a["comment"] = ("least-squares 6-DOF motion of the front face about its centre (0, 0, z_front) minus "
+                            "that of the whole blank (fea.front_figure); x dispersion, y rulings, z outward normal")
+        data[k] = ("case", np.array([float(outputs[lb].get(k, np.nan)) for lb in labels]), a)
     data["sag_um"] = (("case", "y_mm", "x_mm"), np.stack([maps[lb].sag_um for lb in labels]).astype(np.float32),
                       {"units": "µm", "long_name": "front-face sag along +z (outward normal), NaN = no data"})
     if zt:

@@ -391,7 +391,8 @@ class SweepResult(Sequence):
         """
         import importlib.util
 
-        engine = "h5netcdf" if importlib.util.find_spec("h5py") else "netcdf4"
+        find = importlib.util.find_spec
+        engine = "h5netcdf" if find("h5py") and find("h5netcdf") else "netcdf4"  # h5py alone (XDMF) is not enough
         if engine == "netcdf4" and not importlib.util.find_spec("netCDF4"):
             raise ImportError("write_netcdf needs h5netcdf + h5py or netCDF4: pip install 'h5netcdf[h5py]'")
         ds = self.to_dataset()

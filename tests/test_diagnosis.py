@@ -162,7 +162,7 @@ def _profile_manifest(tmp_path, grating="J", wl=1.25, order=-2, intensity=None):
     ({"grating": "Z"}, "grating='Z'"),
     ({"wl": 3.0, "order": -4}, "wavelength_um=3.0"),
     ({"intensity": lambda u: np.zeros_like(u)}, "flux"),
-    ({"intensity": lambda u: np.exp(-0.5 * (u / 10) ** 2) - 0.1}, "negative"),
+    ({"intensity": lambda u: np.exp(-0.5 * (u / 10) ** 2) - 0.5}, "no flux"),  # area 25 - 100 < 0
 ])
 def test_bad_profile_manifest(tmp_path, kw, fragment):
     with pytest.raises(ValueError) as e:

@@ -98,7 +98,7 @@ def test_bad_psf_manifest(tmp_path, edit, fragment):
 
 @pytest.mark.parametrize("content, fragment", [
     ("x_um,y_um\n" + "".join(f"{i},0\n" for i in range(30)), "missing column"),
-    ("x_um,y_um,intensity\n" + "".join(f"{i},{i % 3},{-1 if i == 7 else 1}\n" for i in range(30)), "negative"),
+    ("x_um,y_um,intensity\n" + "".join(f"{i},{i % 3},{-1 if i != 7 else 1}\n" for i in range(30)), "no flux"),
     ("x_um,y_um,intensity\n" + "".join(f"{i},{i % 3},0\n" for i in range(30)), "no flux"),
     ("x_um,y_um,intensity\n" + "".join(f"{i},{i * 0.37},1\n" for i in range(30)), "noise_rel"),
 ])

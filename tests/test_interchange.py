@@ -162,14 +162,16 @@ def test_zemax_reader_units_and_decentre(tmp_path):
     assert np.isnan(m.sag_um[-2, 2])  # point 7 = second row from the top, third column
 
 
-def test_csv_scattered_needs_spacing(tmp_path):
+def test_csv_scattered_gridded(tmp_path):
     rng = np.random.default_rng(3)
     x, y = rng.uniform(-10, 10, 400), rng.uniform(-5, 5, 400)
     f = tmp_path / "scat.csv"
     np.savetxt(f, np.column_stack([x, y, 2.0 + 0.1 * x - 0.05 * y]), delimiter=",",
                header="x_mm,y_mm,sag_um", comments="")
-    with pytest.raises(ValueError, match="spacing_mm"):
-        ic.read_sag_map(f)
+    auto = ic.read_sag_map(f)  # spacing: median nearest-neighbour distance; a plane is exact
+    assert auto.meta["gridding"].startswith("scattered: linear")
+    np.testing.assert_allclose(auto.sag_um[auto.mask], (2.0 + 0.1 * auto.grid()[0] - 0.05 * auto.grid()[1])[auto.mask],
+                               atol=1e-9)
     m = ic.read_sag_map(f, spacing_mm=1.0)
     X, Y = m.grid()
     ok = m.mask  # outside the convex hull of the points: NaN
@@ -318,7 +320,7 @@ def test_read_line_profile(tmp_path):
     ("offset,intensity\n" + "1,1\n" * 6, r"line 1: missing column\(s\) \['offset_um'\]"),
     ("offset_um,intensity\n0,1\n1,2\n2,two\n3,1\n4,1\n", r"line 4: non-numeric"),
     ("offset_um,intensity\n0,1\n1,2\n2,1\n3,1\n", r"needs >= 5 samples, found 4"),
-    ("offset_um,intensity\n0,1\n1,2\n2,-1\n3,1\n4,1\n", r"line 4: intensity -1 is negative"),
+    ("offset_um,intensity\n0,1\n1,-2\n2,-1\n3,-1\n4,1\n", r"no flux.* is -3, must be > 0"),
     ("offset_um,intensity\n0,0\n1,0\n2,0\n3,0\n4,0\n", r"no flux"),
     ("offset_um,intensity\n0,1\n1,2\n1,1\n3,1\n4,1\n", r"line 4: duplicate offset_um 1"),
 ])

@@ -15,6 +15,9 @@ A manifest names the nominal simulation and the measurements it is compared with
     file = "cryo_map.int"
     temperature_K = 128
     aperture_diameter_mm = 137
+    # optional, for a file that does not carry its grid (a CODE V INT without the
+    # EXTENT_MM title): spacing_mm = 0.5 (or [dx, dy]), or instead
+    # extent_mm = [-68.5, 68.5, -60, 60]  (first/last sample centres x0, x1, y0, y1, mm)
 
     [[measurement]]
     kind = "line_profile"     # CSV offset_um,intensity
@@ -41,12 +44,20 @@ its white noise is estimated from the power beyond the optical cut-off when it l
 regular grid finer than ``wavelength f_cam / (2 D)`` (≈ 2 µm in J), else along the image
 rows (biased high where the Airy rings are not smooth on the sample step), so a coarser
 image, or one that is not on rows of >= 5 samples, should give ``noise_rel``.
+Surfaces may also give ``wavelength_um`` (for a NetCDF map in ``units = "waves"``);
+``spacing_mm`` / ``extent_mm`` / ``wavelength_um`` go to the sag-map reader, which
+refuses those its format does not use. Profiles and images may be in counts, with a
+pedestal, negative (background-subtracted) samples, any centring and any offset grid;
+they are handed to the fit with a robust floor (20th percentile) removed and scaled to
+unit line peak, so ``noise_rel`` is a fraction of the line's peak above background, and
+a line far from the origin (in detector coordinates) is moved to it (``origin_um``).
 Relative paths are relative to the manifest. Every error names the measurement and
-the field.
+the field; unknown fields are refused with the valid ones.
 """
 
 from __future__ import annotations
 
+import difflib
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -54,12 +65,25 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["Simulation", "Measurement", "Manifest", "SurfaceData", "ProfileData", "PsfImageData",
+           "MEASUREMENT_KEYS", "SIMULATION_KEYS", "recentre", "unit_line_peak", "unknown_keys_error",
            "load_manifest", "parse_manifest", "load_data"]
 
 _COVERAGES = ("all", "holes", "surfaces")
 _MESHES = ("coarse", "default", "refined")
 _KINDS = ("surface", "line_profile", "psf_image")
 _PIXEL_SCALES = (25, 100, 250)
+_COMMON_KEYS = ("name", "kind", "file", "blank")
+#: Valid fields of a [[measurement]] table, per kind.
+MEASUREMENT_KEYS = {
+    "surface": _COMMON_KEYS + ("grating", "temperature_K", "aperture_diameter_mm", "noise_um", "spacing_mm",
+                               "extent_mm", "wavelength_um"),
+    "line_profile": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_scale_mas", "slit_position",
+                                    "noise_rel"),
+    "psf_image": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_um", "noise_rel"),
+}
+SIMULATION_KEYS = ("coverage", "t0_um", "polish", "cold_K", "warm_K", "mesh", "sag_file")
+#: Fraction of a profile's or image's samples at or below its floor (background estimate).
+FLOOR_PERCENTILE = 20.0
 
 
 @dataclass(frozen=True)
@@ -106,6 +130,16 @@ class Measurement:
     noise_um: float | None = None
     noise_rel: float | None = None
     pixel_um: float | None = None
+    spacing_mm: float | tuple[float, float] | None = None
+    extent_mm: tuple[float, float, float, float] | None = None
+
+    @property
+    def read_options(self) -> dict:
+        """Keyword options for :func:`pipeline.interchange.read_sag_map` (surfaces)."""
+        if self.kind != "surface":
+            return {}
+        opts = {"spacing_mm": self.spacing_mm, "extent_mm": self.extent_mm, "wavelength_um": self.wavelength_um}
+        return {k: v for k, v in opts.items() if v is not None}
 
 
 @dataclass(frozen=True)
@@ -131,22 +165,27 @@ class SurfaceData:
 
 @dataclass(frozen=True, eq=False)
 class ProfileData:
-    """A measured line profile sorted by offset (µm), intensity scaled to unit peak."""
+    """A measured line profile sorted by offset (µm), intensity minus its floor scaled to
+    unit line peak (:func:`unit_line_peak`)."""
 
     measurement: Measurement
     offset_um: np.ndarray
     intensity: np.ndarray
+    #: offset (µm, file's frame) subtracted from the file's offsets (:func:`recentre`)
+    origin_um: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
 class PsfImageData:
     """A measured point-source image (detector µm, x dispersion, y along the slit),
-    intensity scaled to unit peak."""
+    intensity minus its floor scaled to unit peak (:func:`unit_line_peak`)."""
 
     measurement: Measurement
     x_um: np.ndarray
     y_um: np.ndarray
     intensity: np.ndarray
+    #: (x, y) µm subtracted from the file's coordinates (:func:`recentre`)
+    origin_um: tuple[float, float] = (0.0, 0.0)
 
 
 def _err(name: str, fld: str, value, valid: str) -> ValueError:
@@ -164,11 +203,51 @@ def _number(entry: dict, key: str, name: str, default=None, required: bool = Fal
     return v
 
 
+def unknown_keys_error(where: str, unknown, valid) -> ValueError:
+    """Unknown fields named with a did-you-mean and the valid list."""
+    parts = []
+    for k in sorted(map(str, unknown)):
+        close = difflib.get_close_matches(k, valid, n=1)
+        parts.append(f"{k!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    return ValueError(f"{where}: unknown field(s) {', '.join(parts)}; valid: {list(valid)}")
+
+
+def _numbers(entry: dict, key: str, name: str, sizes: tuple[int, ...]):
+    """A number or a list of ``sizes`` finite numbers (``spacing_mm``, ``extent_mm``)."""
+    if key not in entry:
+        return None
+    v = entry[key]
+    if 1 in sizes and isinstance(v, (int, float)) and not isinstance(v, bool):
+        v = [v]
+    ok = (isinstance(v, list) and len(v) in sizes
+          and all(isinstance(a, (int, float)) and not isinstance(a, bool) and np.isfinite(a) for a in v))
+    if not ok:
+        raise _err(name, key, v, f"must be {' or '.join(('a number' if s == 1 else f'a list of {s} numbers') for s in sizes)} (mm)")
+    return tuple(float(a) for a in v)
+
+
+def _grid_options(entry: dict, name: str) -> tuple:
+    sp = _numbers(entry, "spacing_mm", name, (1, 2))
+    if sp is not None and not all(a > 0 for a in sp):
+        raise _err(name, "spacing_mm", entry["spacing_mm"], "must be > 0 mm")
+    ext = _numbers(entry, "extent_mm", name, (4,))
+    if ext is not None and not (ext[1] > ext[0] and ext[3] > ext[2]):
+        raise _err(name, "extent_mm", entry["extent_mm"], "must be [x0, x1, y0, y1] with x1 > x0 and y1 > y0 (mm)")
+    if sp is not None and ext is not None:
+        raise ValueError(f"measurement {name!r}: give spacing_mm or extent_mm, not both")
+    return (sp[0] if sp is not None and len(sp) == 1 else sp), ext
+
+
 def _measurement(entry: dict, index: int, base: Path) -> Measurement:
+    if not isinstance(entry, dict):
+        raise ValueError(f"[[measurement]] #{index + 1} is a {type(entry).__name__}, not a table")
     name = str(entry.get("name", Path(str(entry.get("file", f"#{index}"))).stem))
     kind = entry.get("kind")
     if kind not in _KINDS:
         raise _err(name, "kind", kind, f"is unknown; valid: {list(_KINDS)}")
+    unknown = set(entry) - set(MEASUREMENT_KEYS[kind])
+    if unknown:
+        raise unknown_keys_error(f"measurement {name!r} (kind {kind!r})", unknown, MEASUREMENT_KEYS[kind])
     if "file" not in entry:
         raise ValueError(f"measurement {name!r}: field 'file' is required")
     path = Path(str(entry["file"]))
@@ -189,8 +268,13 @@ def _measurement(entry: dict, index: int, base: Path) -> Measurement:
             raise _err(name, "aperture_diameter_mm", ap, "must be in (0, 300] mm")
         grating = entry.get("grating")
         blank = str(entry.get("blank", grating or "spare"))
+        spacing, extent = _grid_options(entry, name)
+        wl = _number(entry, "wavelength_um", name)
+        if wl is not None and not wl > 0:
+            raise _err(name, "wavelength_um", wl, "must be > 0 µm")
         return Measurement(name, kind, path, blank, temperature_K=float(t), aperture_diameter_mm=float(ap),
-                           grating=grating, noise_um=noise_um)
+                           grating=grating, noise_um=noise_um, spacing_mm=spacing, extent_mm=extent,
+                           wavelength_um=None if wl is None else float(wl))
     from optics.grating import GRATINGS
 
     g = entry.get("grating")
@@ -225,10 +309,13 @@ def _measurement(entry: dict, index: int, base: Path) -> Measurement:
 def parse_manifest(data: dict, base_dir: str | Path = ".", source: str = "") -> Manifest:
     """Validate a manifest given as a dict (the parsed TOML); paths relative to ``base_dir``."""
     base = Path(base_dir)
+    top = set(data) - {"simulation", "measurement"}
+    if top:
+        raise unknown_keys_error("manifest", top, ("simulation", "measurement"))
     sim = dict(data.get("simulation", {}))
-    unknown = set(sim) - {"coverage", "t0_um", "polish", "cold_K", "warm_K", "mesh", "sag_file"}
+    unknown = set(sim) - set(SIMULATION_KEYS)
     if unknown:
-        raise ValueError(f"[simulation] unknown fields {sorted(unknown)}")
+        raise unknown_keys_error("[simulation]", unknown, SIMULATION_KEYS)
     if "sag_file" in sim:
         p = Path(str(sim["sag_file"]))
         sim["sag_file"] = p if p.is_absolute() else base / p
@@ -255,8 +342,16 @@ def load_manifest(path_or_obj) -> Manifest:
     path = Path(path_or_obj)
     if not path.is_file():
         raise ValueError(f"manifest {path} does not exist")
+    raw = path.read_bytes()
+    if raw[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise ValueError(f"manifest {path}: is UTF-16 text; a TOML manifest must be UTF-8 (save it as UTF-8)")
     try:
-        data = tomllib.loads(path.read_text())
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"manifest {path}: is not UTF-8 text (undecodable byte 0x{raw[exc.start]:02x} at offset "
+                         f"{exc.start}); a TOML manifest must be UTF-8") from None
+    try:
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"manifest {path}: invalid TOML: {exc}") from None
     return parse_manifest(data, path.parent, str(path))
@@ -266,7 +361,7 @@ def _read_surface(m: Measurement) -> SurfaceData:
     from pipeline.interchange import read_sag_map
 
     try:
-        sm = read_sag_map(m.file)
+        sm = read_sag_map(m.file, **m.read_options)
     except ValueError as exc:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
     X, Y = sm.grid()
@@ -278,6 +373,35 @@ def _read_surface(m: Measurement) -> SurfaceData:
     return SurfaceData(m, X[inside], Y[inside], sm.sag_um[inside], sm)
 
 
+def unit_line_peak(intensity: np.ndarray, what: str, name: str, file: Path) -> np.ndarray:
+    """Intensity minus its floor (the :data:`FLOOR_PERCENTILE` percentile, a background
+    estimate) over the line's peak above it. The fit's flux and background nuisances
+    absorb any error in the floor; removing it makes ``noise_rel`` a fraction of the
+    line's peak whatever the pedestal, and keeps a centroid from being pulled to the
+    middle of the window by it."""
+    v = np.asarray(intensity, float)
+    floor = float(np.percentile(v, FLOOR_PERCENTILE))
+    peak = float(v.max()) - floor
+    if not peak > 0:
+        raise _err(name, "file", str(file), f"has no {what} above its background: every sample equals {floor:g}")
+    return (v - floor) / peak
+
+
+#: Lines found farther than this from the origin (µm) are moved to it: half the range of
+#: the fits' initial position search (profiles +-40 µm, PSF images +-20 µm), whose
+#: position nuisance is bounded (+-45 µm), so a profile in detector coordinates fits.
+RECENTRE_BEYOND_UM = {"line_profile": 20.0, "psf_image": 10.0}
+
+
+def recentre(coords: np.ndarray, unit_peak: np.ndarray, beyond_um: float) -> float:
+    """Centre of the samples above half the peak (their intensity-weighted mean), rounded
+    to 0.1 µm, when it lies farther than ``beyond_um`` from 0; else 0. The position is a
+    fitted nuisance in every model, so moving the data changes no finding."""
+    hi = unit_peak >= 0.5
+    c = float(np.sum(unit_peak[hi] * coords[hi]) / np.sum(unit_peak[hi]))
+    return round(c, 1) if abs(c) > beyond_um else 0.0
+
+
 def _read_profile(m: Measurement) -> ProfileData:
     from pipeline.interchange import read_line_profile
 
@@ -285,13 +409,12 @@ def _read_profile(m: Measurement) -> ProfileData:
         u, y = read_line_profile(m.file, normalise=False)
     except ValueError as exc:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
-    if (y < 0).any():
-        raise _err(m.name, "file", str(m.file), "has negative intensities")
-    if not y.max() > 0:
-        raise _err(m.name, "file", str(m.file), "has no flux (all intensities are 0)")
     if u.size < 10:
         raise _err(m.name, "file", str(m.file), f"has {u.size} samples; need >= 10")
-    return ProfileData(m, np.asarray(u, float), np.asarray(y, float) / y.max())
+    v = unit_line_peak(y, "line", m.name, m.file)
+    u = np.asarray(u, float)
+    c = recentre(u, v, RECENTRE_BEYOND_UM["line_profile"])
+    return ProfileData(m, u - c, v, c)
 
 
 def _read_psf_image(m: Measurement) -> PsfImageData:
@@ -306,7 +429,9 @@ def _read_psf_image(m: Measurement) -> PsfImageData:
         if (counts >= 5).sum() < 5:
             raise _err(m.name, "noise_rel", None, f"is required: the {x.size} samples of {m.file.name} are not on "
                        "rows of >= 5 points, so the noise cannot be estimated from the image")
-    return PsfImageData(m, x, y, v / v.max())
+    v = unit_line_peak(v, "image", m.name, m.file)
+    cx, cy = (recentre(a, v, RECENTRE_BEYOND_UM["psf_image"]) for a in (x, y))
+    return PsfImageData(m, x - cx, y - cy, v, (cx, cy))
 
 
 _READERS = {"surface": _read_surface, "line_profile": _read_profile, "psf_image": _read_psf_image}

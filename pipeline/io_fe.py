@@ -1,0 +1,240 @@
+"""FE results from other solvers: read a mesh with nodal displacements, return the face's sag map.
+
+Formats (read with meshio): VTU/VTK, XDMF (XML data; HDF5 data needs h5py), Exodus II
+(``.exo``/``.e``), gmsh ``.msh`` — with the displacement as point data — and Abaqus
+``.inp`` / Nastran ``.bdf``/``.nas`` meshes with the displacements in a CSV
+``node_id,ux,uy,uz`` (header optional, ``#`` comments) keyed by the solver's node IDs.
+A CSV next to another format is keyed by 1-based point number.
+
+The displacement field is the point-data array named ``field``, or, by default, the one
+3-component array called displacement/displacements/disp/u/depl (any case); three
+scalar arrays ``NAMEX, NAMEY, NAMEZ`` (or ``NAME_x`` …, as Exodus writes them) are
+joined. Positions, displacements and plane values are in ``length_unit`` (mm, m, in).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["LENGTH_UNITS_MM", "FEResultData", "read_fe_result", "import_fe"]
+
+#: Solver length units -> mm.
+LENGTH_UNITS_MM = {"mm": 1.0, "m": 1000.0, "in": 25.4}
+_DISP_NAMES = ("displacement", "displacements", "disp", "u", "depl", "displ")
+_ID_SUFFIXES = (".inp", ".bdf", ".nas")
+
+
+@dataclass(frozen=True)
+class FEResultData:
+    """A mesh with nodal displacements, in mm (meshio's cell blocks and sets kept).
+
+    Attributes
+    ----------
+    points_mm, displacement_mm : ndarray, shape (n, 3)
+    blocks : list of (str, ndarray)
+    point_sets, cell_sets, cell_data, field_data : dict
+        As meshio reads them (for face selection by name).
+    source : str
+    """
+
+    points_mm: np.ndarray
+    displacement_mm: np.ndarray
+    blocks: list
+    point_sets: dict = field(default_factory=dict)
+    cell_sets: dict = field(default_factory=dict)
+    cell_data: dict = field(default_factory=dict)
+    field_data: dict = field(default_factory=dict)
+    source: str = ""
+
+
+def _unit_scale(length_unit: str) -> float:
+    try:
+        return LENGTH_UNITS_MM[length_unit]
+    except (KeyError, TypeError):
+        raise ValueError(f"length_unit={length_unit!r} is unknown; valid units are {list(LENGTH_UNITS_MM)}") from None
+
+
+def _node_ids(path: Path) -> np.ndarray | None:
+    """Solver node IDs in meshio's point order (Abaqus first *NODE block, Nastran GRID cards)."""
+    suffix = path.suffix.lower()
+    if suffix not in _ID_SUFFIXES:
+        return None
+    ids = []
+    with path.open(encoding="utf-8", errors="replace") as fh:
+        if suffix == ".inp":
+            inside = False
+            for line in fh:
+                s = line.strip()
+                if s.startswith("**"):
+                    continue
+                if s.startswith("*"):
+                    if inside:
+                        break  # meshio keeps the first *NODE block's order
+                    inside = s.partition(",")[0].replace("*", "").strip().upper() == "NODE"
+                    continue
+                if inside and s:
+                    ids.append(int(s.split(",")[0]))
+        else:
+            for line in fh:
+                if line.upper().startswith("GRID"):
+                    if "," in line:
+                        ids.append(int(line.split(",")[1]))
+                    elif line.upper().startswith("GRID*"):
+                        ids.append(int(line[8:24]))
+                    else:
+                        ids.append(int(line[8:16]))
+    return np.array(ids, dtype=np.int64)
+
+
+def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    rows = []
+    with path.open(encoding="utf-8") as fh:
+        for lineno, line in enumerate(fh, 1):
+            s = line.split("#", 1)[0].strip()
+            if not s:
+                continue
+            parts = [p.strip() for p in s.split(",")]
+            try:
+                rows.append((int(float(parts[0])), *map(float, parts[1:4])))
+                if len(parts) < 4:
+                    raise ValueError
+            except (ValueError, IndexError):
+                if rows:  # a header is allowed on the first data line only
+                    raise ValueError(f"{path}:{lineno}: expected 'node_id,ux,uy,uz', got {s!r}") from None
+    if not rows:
+        raise ValueError(f"{path}: no rows 'node_id,ux,uy,uz'")
+    a = np.array(rows)
+    return a[:, 0].astype(np.int64), a[:, 1:4]
+
+
+def _pick_field(point_data: dict, name: str | None, source: str) -> np.ndarray:
+    vectors = {k: np.asarray(v, float) for k, v in point_data.items()
+               if np.ndim(v) == 2 and np.shape(v)[1] in (2, 3)}
+    scalars = {k: np.asarray(v, float).ravel() for k, v in point_data.items()
+               if np.ndim(v) == 1 or (np.ndim(v) == 2 and np.shape(v)[1] == 1)}
+    for base, comps in ((b, tuple(b + s for s in sfx)) for b in {re.sub(r"_?[xyzXYZ]$", "", k) for k in scalars}
+                        for sfx in (("x", "y", "z"), ("X", "Y", "Z"), ("_x", "_y", "_z"), ("_X", "_Y", "_Z"))):
+        if all(c in scalars for c in comps):
+            vectors.setdefault(base, np.column_stack([scalars[c] for c in comps]))
+    if name is not None:
+        if name not in vectors:
+            raise ValueError(f"field={name!r} is not a nodal vector of {source}; valid names are {sorted(vectors)} "
+                             f"(point data present: {sorted(point_data)})")
+        v = vectors[name]
+    else:
+        hits = [k for k in vectors if k.lower() in _DISP_NAMES]
+        if len(hits) != 1:
+            raise ValueError(f"field=None: {source} has {'no' if not hits else 'several'} nodal displacement "
+                             f"array(s) named {list(_DISP_NAMES)} (any case); nodal vectors present: "
+                             f"{sorted(vectors)}, point data present: {sorted(point_data)}; give field=NAME, "
+                             "or displacement_csv for a mesh without results")
+        v = vectors[hits[0]]
+    if v.shape[1] == 2:
+        v = np.column_stack([v, np.zeros(len(v))])
+    return v
+
+
+def read_fe_result(path, *, displacement_csv=None, field: str | None = None,
+                   length_unit: str = "mm") -> FEResultData:
+    """Read a mesh and its nodal displacements (module docstring), converted to mm.
+
+    Parameters
+    ----------
+    path : str or Path
+        Mesh or result file.
+    displacement_csv : str or Path, optional
+        ``node_id,ux,uy,uz`` in ``length_unit``; required for meshes without results.
+    field : str, optional
+        Point-data name of the displacement.
+    length_unit : {"mm", "m", "in"}
+        Length unit of the solver model.
+    """
+    import meshio
+
+    scale = _unit_scale(length_unit)
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: file does not exist")
+    try:
+        mesh = meshio.read(path)
+    except ModuleNotFoundError as exc:  # e.g. h5py for XDMF with HDF5 data
+        raise ValueError(f"{path}: reading this format needs the Python package {exc.name!r} "
+                         "(pip install 'cryograting[xdmf]' for h5py)") from None
+    except Exception as exc:  # meshio raises many types (ReadError, KeyError, ...) for files it cannot read
+        raise ValueError(f"{path}: meshio cannot read it as an FE mesh ({type(exc).__name__}: {exc})") from None
+    points = np.asarray(mesh.points, float)
+    if points.shape[1] == 2:
+        points = np.column_stack([points, np.zeros(len(points))])
+    if displacement_csv is not None:
+        ids, u = _read_csv(Path(displacement_csv))
+        known = _node_ids(path)
+        if known is None:
+            known = np.arange(1, len(points) + 1)
+        if known.size != len(points):
+            raise ValueError(f"{path}: read {known.size} node IDs but meshio has {len(points)} points")
+        order = np.argsort(known)
+        pos = np.searchsorted(known[order], ids)
+        bad = (pos >= known.size) | (known[order][np.minimum(pos, known.size - 1)] != ids)
+        if bad.any():
+            raise ValueError(f"{displacement_csv}: node_id(s) {ids[bad][:10].tolist()} are not nodes of {path}")
+        disp = np.full((len(points), 3), np.nan)
+        disp[order[pos]] = u
+    else:
+        disp = _pick_field(mesh.point_data, field, str(path))
+    return FEResultData(points * scale, disp * scale, [(c.type, np.asarray(c.data)) for c in mesh.cells],
+                        dict(mesh.point_sets), dict(mesh.cell_sets), dict(mesh.cell_data),
+                        dict(mesh.field_data), str(path))
+
+
+def import_fe(path, surface: str, *, displacement_csv=None, field: str | None = None, length_unit: str = "mm",
+              tol: float | None = None, angle_tol_deg: float = 1.0, sag_along: str = "z",
+              axes: str = "x,y,z", origin=None, spacing_mm: float = 0.5):
+    """The optical face's sag map and rigid-body motion of an FE result from any solver.
+
+    Parameters
+    ----------
+    path, displacement_csv, field, length_unit
+        See :func:`read_fe_result`.
+    surface : str
+        Face selection (:func:`fea.fe_face.parse_surface`): a set/physical-group name,
+        a plane ``z=VALUE`` (``length_unit``) or an outward normal ``+z``/``normal:nx,ny,nz``.
+    tol : float, optional
+        Plane tolerance (``length_unit``); default 1e-6 of the model's size.
+    angle_tol_deg : float
+        Tolerance of a normal-direction selection (degrees).
+    sag_along : {"z", "normal"}
+    axes : str
+        Optical x, y, z as signed solver axes (:func:`fea.external.axes_matrix`).
+    origin : (3,) sequence, optional
+        Optical origin in the solver's frame (``length_unit``); default the face centre.
+    spacing_mm : float
+        Grid spacing of the map (mm).
+
+    Returns
+    -------
+    fea.external.FaceSagResult
+        ``.sag_map`` (a SagMap for fits, exports, optics), ``.rigid_body``, ``.stats``.
+    """
+    from fea.external import face_sag_map
+    from fea.fe_face import parse_surface, select_face
+
+    scale = _unit_scale(length_unit)
+    data = read_fe_result(path, displacement_csv=displacement_csv, field=field, length_unit=length_unit)
+    spec = parse_surface(surface)
+    pts = data.points_mm / scale  # selection in the solver's own unit
+    if tol is None:
+        tol = 1e-6 * float(np.ptp(pts, axis=0).max() or 1.0)
+    face = select_face(pts, data.blocks, spec, tol=tol, angle_tol_deg=angle_tol_deg,
+                       point_sets=data.point_sets, cell_sets=data.cell_sets, cell_data=data.cell_data,
+                       field_data=data.field_data)
+    if not np.isfinite(data.displacement_mm[face.node_index]).all():
+        raise ValueError(f"{displacement_csv or path}: no displacement for some nodes of the face {surface!r}")
+    res = face_sag_map(data.points_mm, np.nan_to_num(data.displacement_mm), face, axes=axes,
+                       origin_mm=None if origin is None else scale * np.asarray(origin, float),
+                       sag_along=sag_along, spacing_mm=spacing_mm, label=f"{Path(path).name} {surface}")
+    res.sag_map.meta.update({"source": str(path), "surface": surface, "length_unit": length_unit})
+    return res

@@ -1,0 +1,135 @@
+"""Measured spectrograph data: line profiles (``offset_um,intensity``) and point-source
+images (``x_um,y_um,intensity``), read the way laboratories deliver them — counts in any
+normalisation, a pedestal or background-subtracted negative samples, any grid, any row
+order. Only non-finite values, duplicate samples and a total flux <= 0 are refused.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.io_common import atomic_write, parse_error, read_csv_columns
+
+__all__ = ["read_line_profile", "read_psf_image", "write_psf_image_csv"]
+
+
+def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Read a measured line profile from a CSV with columns ``offset_um,intensity``.
+
+    Measured profiles come in counts (any normalisation), background-subtracted (so
+    with negative noise samples) or on a constant pedestal, on any grid of offsets
+    (non-uniform, any range, line centred anywhere) and in any row order: all are
+    accepted. Flux, background and centring are nuisances of the diagnosis fit.
+
+    Parameters
+    ----------
+    path : str or Path
+        CSV file with a header naming ``offset_um`` and ``intensity`` (any order,
+        case-insensitive, other columns ignored).
+    normalise : bool
+        Divide the intensity by its total flux (trapezoid rule over ``offset_um``),
+        the unit-area normalisation of :mod:`optics.imaging` profiles.
+
+    Returns
+    -------
+    offset_um, intensity : ndarray, shape (n,)
+        Sorted by increasing offset.
+
+    Raises
+    ------
+    ValueError
+        Naming file and (where it applies) line: missing columns, non-numeric or
+        non-finite values, fewer than 5 samples, duplicate offsets, total flux <= 0.
+    """
+    path = Path(path)
+    v, lines = read_csv_columns(path, "line profile", ("offset_um", "intensity"))
+    if v.shape[0] < 5:
+        raise parse_error(path, None, f"needs >= 5 samples, found {v.shape[0]}")
+    nonfinite = ~np.isfinite(v).all(axis=1)
+    if nonfinite.any():
+        raise parse_error(path, int(lines[nonfinite][0]), "offset_um and intensity must be finite numbers")
+    order = np.argsort(v[:, 0], kind="stable")
+    x, y, ln = v[order, 0], v[order, 1], lines[order]
+    dup = np.flatnonzero(np.diff(x) == 0)
+    if dup.size:
+        raise parse_error(path, int(ln[dup[0] + 1]), f"duplicate offset_um {x[dup[0]]:g}")
+    flux = float(np.trapezoid(y, x))
+    if not flux > 0:
+        raise parse_error(path, None, f"no flux: the total flux (integral of intensity over offset_um) "
+                          f"is {flux:g}, must be > 0")
+    return x, (y / flux if normalise else y)
+
+
+def _load_npz_columns(path: Path, names: tuple[str, ...]) -> np.ndarray:
+    """Arrays ``names`` of an ``.npz`` flattened into columns; errors name the file."""
+    import zipfile
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            missing = [k for k in names if k not in z.files]
+            if missing:
+                raise parse_error(path, None, f"lacks arrays {missing}; has {sorted(z.files)}")
+            cols = [np.ravel(z[k]) for k in names]
+    except FileNotFoundError:
+        raise parse_error(path, None, "file does not exist") from None
+    except (OSError, EOFError, zipfile.BadZipFile, ValueError) as exc:
+        if isinstance(exc, ValueError) and str(path) in str(exc):
+            raise
+        raise parse_error(path, None, f"is not a readable .npz: {exc}") from None
+    for k, c in zip(names, cols):
+        if np.iscomplexobj(c) or not np.issubdtype(c.dtype, np.number):
+            raise parse_error(path, None, f"array {k!r} has dtype {c.dtype}; expected real numbers")
+    if len({c.size for c in cols}) != 1:
+        raise parse_error(path, None, f"arrays {list(names)} have different sizes {[c.size for c in cols]}")
+    return np.column_stack([c.astype(float) for c in cols])
+
+
+def read_psf_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Read a measured point-source image: CSV ``x_um,y_um,intensity`` (header, any
+    column order, other columns ignored) or ``.npz`` with arrays ``x_um``, ``y_um``,
+    ``intensity``. ``x`` is along the dispersion, ``y`` along the slit (detector µm).
+    Like line profiles: counts, negative (background-subtracted) samples, a pedestal and
+    any grid are accepted.
+
+    Returns
+    -------
+    x_um, y_um, intensity : ndarray, shape (n,)
+        Sorted by (y, x); intensities as given.
+
+    Raises
+    ------
+    ValueError
+        Naming file and (where it applies) line: missing columns or arrays, non-finite
+        values, fewer than 25 samples, duplicate points, total flux (sum) <= 0.
+    """
+    path = Path(path)
+    if path.suffix.lower() == ".npz":
+        v = _load_npz_columns(path, ("x_um", "y_um", "intensity"))
+        lines = np.zeros(v.shape[0], int)
+    else:
+        v, lines = read_csv_columns(path, "PSF image", ("x_um", "y_um", "intensity"))
+    line = (lambda k: int(lines[k]) if lines[k] else None)
+    if v.shape[0] < 25:
+        raise parse_error(path, None, f"needs >= 25 samples, found {v.shape[0]}")
+    bad = ~np.isfinite(v).all(axis=1)
+    if bad.any():
+        raise parse_error(path, line(int(np.flatnonzero(bad)[0])), "x_um, y_um and intensity must be finite numbers")
+    order = np.lexsort((v[:, 0], v[:, 1]))
+    v, lines = v[order], lines[order]
+    dup = np.flatnonzero((np.diff(v[:, 0]) == 0) & (np.diff(v[:, 1]) == 0))
+    if dup.size:
+        raise parse_error(path, line(dup[0] + 1), f"duplicate point x_um={v[dup[0], 0]:g}, y_um={v[dup[0], 1]:g}")
+    flux = float(v[:, 2].sum())
+    if not flux > 0:
+        raise parse_error(path, None, f"no flux: the total flux (sum of intensity) is {flux:g}, must be > 0")
+    return v[:, 0], v[:, 1], v[:, 2]
+
+
+def write_psf_image_csv(path: str | Path, x_um: np.ndarray, y_um: np.ndarray, intensity: np.ndarray) -> None:
+    """CSV ``x_um,y_um,intensity`` (header, one sample per line), written atomically."""
+    with atomic_write(Path(path)) as fh:
+        fh.write("x_um,y_um,intensity\n")
+        for a, b, c in zip(np.ravel(x_um), np.ravel(y_um), np.ravel(intensity)):
+            fh.write(f"{a:.3f},{b:.3f},{c:.6g}\n")
