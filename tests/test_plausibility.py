@@ -11,6 +11,8 @@ analytic sum quilt (no FEA)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -19,12 +21,11 @@ from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.campaign import CampaignConfig
 from pipeline.diagnosis.cli import main
 from pipeline.diagnosis.manifest import load_data, load_manifest
-from pipeline.diagnosis.nominal import thermal_factor
-from pipeline.diagnosis.plausibility import (Plausibility, at_prior_bound, check_measurements, line_fwhm,
-                                             measurement_problems, profile_problems, unit_hint)
+from pipeline.diagnosis.plausibility import (Plausibility, at_prior_bound, check_measurements, image_problems,
+                                             line_fwhm, measurement_problems, profile_problems, unit_hint)
 from pipeline.interchange import write_sag_map
 
-SCEN = __import__("pathlib").Path(__file__).resolve().parents[1] / "pipeline" / "scenarios"
+SCEN = Path(__file__).resolve().parents[1] / "pipeline" / "scenarios"
 OFFSETS_UM = np.arange(-120.0, 120.01, 1.5)
 
 
@@ -121,6 +122,16 @@ def test_stated_noise_is_used():
     (p,) = profile_problems("p", OFFSETS_UM, y, 40.0, noise_rel=0.2)
     # peak 1 above a median at the 0.02 background (+0.002 of line wing at |x| = 60 µm): 0.998 / 0.2
     assert p.code == "no_line" and "peak 5.0 sigma" in p.message
+
+
+def test_point_source_image_needs_a_peak():
+    """A 2-D Gaussian spot (3 µm sigma, 1 % noise, 1 µm steps) passes; pure noise is refused."""
+    rng = np.random.default_rng(9)
+    X, Y = np.meshgrid(np.arange(-30.0, 30.01, 1.0), np.arange(-30.0, 30.01, 1.0))
+    spot = np.exp(-(X**2 + Y**2) / (2 * 3.0**2)) + rng.normal(0, 0.01, X.shape)
+    assert image_problems("img", X.ravel(), Y.ravel(), spot.ravel()) == []
+    (p,) = image_problems("img", X.ravel(), Y.ravel(), rng.normal(0, 0.01, X.size))
+    assert p.code == "no_line" and "no point-source image found" in p.message
 
 
 # --- surface maps ------------------------------------------------------------------------

@@ -162,7 +162,8 @@ def profile_problems(name: str, offset_um: np.ndarray, intensity: np.ndarray, no
     w = line_fwhm(x, y)
     ratio = w / nominal_fwhm_um
     if not rules.width_range[0] <= ratio <= rules.width_range[1]:
-        return [Problem(name, "width", f"line FWHM {w:.3g} µm is {ratio:.2g}x the nominal's {nominal_fwhm_um:.1f} µm; "
+        return [Problem(name, "width", f"line FWHM {w:.3g} µm is {ratio:.2g}x the nominal's "
+                        f"{nominal_fwhm_um:.1f} µm; "
                         f"a line the model can produce has {rules.width_range[0]:g}-{rules.width_range[1]:g}x")]
     return []
 
@@ -188,8 +189,9 @@ def map_problems(name: str, x_mm: np.ndarray, y_mm: np.ndarray, sag_um: np.ndarr
     if not math.isfinite(sigma):
         sigma = 0.0
     if not (rms > rules.min_signal_ratio * sigma and rms > 0):
+        ratio = rms / sigma if sigma > 0 else 0.0
         return [Problem(name, "no_signal", f"no signal: map RMS {rms:.3g} µm about piston and tilt is "
-                        f"{rms / sigma if sigma > 0 else 0.0:.2f}x its noise {sigma:.3g} µm, "
+                        f"{ratio:.2f}x its noise {sigma:.3g} µm, "
                         f"need > {rules.min_signal_ratio:g}x", fatal=False)]
     nom = np.asarray(nominal_sag_um, float)
     ok = np.isfinite(nom)
