@@ -84,7 +84,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .effects import LIBRARY, applicable_effects, effect_parameters
+from .effects import (LIBRARY, SummaryContext, applicable_effects, effect_parameters, library_rows, parameter_units,
+                      physical_summary)
 from .fitting import FitOutcome, Problem, fit
 from .noise import effective_samples
 from .forward import ProfileForward, SurfaceForward
@@ -93,7 +94,7 @@ from .manifest import Manifest, load_data, load_manifest
 from .nominal import nominal_sag_map
 from .where import measurement_parts, profile_parts, psf_image_parts, satellite_spacing_um, surface_parts
 
-__all__ = ["Criteria", "N_EFF_SOURCES", "post_fit_n_eff", "recounted", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects", "all_effects", "parameters_of", "unconstrained", "acting_on", "gap_statistics", "gaps"]
+__all__ = ["Criteria", "N_EFF_SOURCES", "post_fit_n_eff", "recounted", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects", "all_effects", "parameters_of", "summary_context", "unconstrained", "acting_on", "gap_statistics", "gaps"]
 
 
 N_EFF_SOURCES = ("nominal", "best_fit")
@@ -162,6 +163,13 @@ class Finding:
     companions: tuple = ()
     absorbs: dict = field(default_factory=dict)
     unconstrained: tuple = ()
+    #: ``{parameter: unit}`` of every parameter in ``parameters`` (from :mod:`.effects`).
+    parameter_units: dict = field(default_factory=dict)
+    #: Physically absolute summaries per effect (:func:`.effects.physical_summary`):
+    #: ``temperature_K`` beside the offset, ``scale`` where one blank is measured,
+    #: ``rms_um`` of Zernike-type effects with the ``aperture`` it refers to, the quilt's
+    #: component amplitudes.
+    summary: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True, eq=False)
@@ -207,7 +215,8 @@ class Diagnosis:
                       "findings": [asdict(f) for f in self.findings],
                       "where": list(self.where), "where_after_best": list(self.where_after),
                       "baseline": self.baseline, "measurements": list(self.measurements),
-                      "criteria": asdict(self.criteria), "timings_s": self.timings_s, "manifest": self.manifest})
+                      "criteria": asdict(self.criteria), "timings_s": self.timings_s, "manifest": self.manifest,
+                      "effect_library": library_rows()})
 
 
 def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, FitOutcome]:
@@ -225,6 +234,14 @@ def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, Fi
         s = max(math.sqrt(nom.rss[f.name] / f.n), 1e-12)
         prob.weights[f.name] = math.sqrt(prob.n_eff[f.name] / f.n) / s
     return prob, fit(prob, ())
+
+
+def summary_context(prob: Problem, cold_K: float) -> SummaryContext:
+    """What :func:`.effects.physical_summary` needs from the data and the simulation."""
+    quilt = next((f.quilt for f in prob.forwards if getattr(f, "quilt", None) is not None), None)
+    return SummaryContext(cold_K=float(cold_K), blanks=tuple(dict.fromkeys(f.blank for f in prob.forwards)),
+                          surface_radii_mm=tuple(f.radius_mm for f in prob.forwards if f.kind == "surface"),
+                          quilt_rms_um=quilt.amplitudes_um() if quilt is not None else None)
 
 
 def _residual_n_eff(f, r) -> float:
@@ -431,8 +448,9 @@ def _excesses(prob: Problem, ref: FitOutcome, fo: FitOutcome, effects) -> dict:
 def parameters_of(names, forwards) -> tuple:
     """The concrete parameters of library effects ``names`` for the data's forward models
     (a per-blank effect gets one copy per blank seen by a measurement kind it changes)."""
+    kinds = {f.kind for f in forwards}
     return tuple(q for n in names for q in effect_parameters(
-        LIBRARY[n], tuple(dict.fromkeys(f.blank for f in forwards if f.kind in LIBRARY[n].kinds))))
+        LIBRARY[n], tuple(dict.fromkeys(f.blank for f in forwards if f.kind in LIBRARY[n].kinds)), kinds))
 
 
 def fit_effects(prob: Problem, nom: FitOutcome, names: tuple, criteria: Criteria, start: dict | None = None,
@@ -812,6 +830,9 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
         for i, f in enumerate(findings[:criteria.heldout_top]):
             findings[i] = _with_heldout(prob, f, criteria)
     t["heldout_s"] = time.perf_counter() - t["start"] - t["load_s"] - t["fit_s"] - t["absorb_s"]
+    ctx = summary_context(prob, manifest.simulation.cold_K)
+    findings = [_replace(f, parameter_units=parameter_units(f.parameters),
+                         summary=physical_summary(all_effects(f), f.parameters, ctx)) for f in findings]
     gap = has_gap(prob, nom, criteria)
     note = ""
     if gap and findings and len(findings[0].effects) > 1 and not _explains(findings[0], criteria):
