@@ -53,8 +53,8 @@ from pipeline.interchange import write_psf_image_csv
 from .effects import LIBRARY
 from .engine import Criteria, diagnose
 from .nominal import fea_sag_map, thermal_factor
-from .synth import (quilt_shape_map, shape_discrepancy, synthetic_profile, synthetic_psf_image, synthetic_surface, unmodelled_shape,
-                    write_profile_csv)
+from .synth import (quilt_shape_map, shape_discrepancy, synthetic_profile, synthetic_psf_image, synthetic_surface,
+                    unmodelled_shape, write_profile_csv)
 
 __all__ = ["CASE_TYPES", "EXTRA_CASE_TYPES", "DISCREPANCIES", "PROFILE_SETS", "PSF_IMAGE_SPEC", "parse_types", "CampaignConfig", "recovery_errors", "make_case", "run_case", "run_campaign", "write_campaign"]
 

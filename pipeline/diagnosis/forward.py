@@ -61,11 +61,11 @@ def bow_um(x_mm: np.ndarray, y_mm: np.ndarray, defocus_um: float, spherical_um: 
 
 
 def quilt_parts(quilt: QuiltComponents | None, x_mm: np.ndarray, y_mm: np.ndarray) -> tuple | None:
-    """``(F_x, F_y, H)`` of the nominal's quilt (µm) at blank coordinates (:mod:`.quilt`);
-    None without a quilt fit."""
+    """``(F_y, H)`` of the nominal's quilt (µm) at blank coordinates (:mod:`.quilt`): the
+    parts ``quilt_shape`` changes (``F_x`` is held); None without a quilt fit."""
     if quilt is None:
         return None
-    return quilt.fundamental_x_um(x_mm, y_mm), quilt.fundamental_y_um(x_mm, y_mm), quilt.harmonics_um(x_mm, y_mm)
+    return quilt.fundamental_y_um(x_mm, y_mm), quilt.harmonics_um(x_mm, y_mm)
 
 
 def blank_shape_um(base_um: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, p: dict,
@@ -78,7 +78,7 @@ def blank_shape_um(base_um: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, p: d
     map and the spectrograph-image models."""
     rho, h = p.get("quilt_fund_xy_ratio", 1.0), p.get("quilt_harmonics_ratio", 1.0)
     if quilt is not None and (rho != 1.0 or h != 1.0):
-        _, fy, hh = quilt
+        fy, hh = quilt
         base_um = base_um + (rho - 1.0) * fy + (h - 1.0) * hh
     gx, gy = p.get("plating_grad_x", 0.0), p.get("plating_grad_y", 0.0)
     if gx or gy:
@@ -102,8 +102,9 @@ def plating_gradient_map(sag: SagMap, gx: float, gy: float) -> SagMap:
 
 
 class SurfaceForward:
-    """Cold-minus-warm surface map model: ``k * (g(q) * S0(q) + B(q)) + astigmatism`` with
-    ``q = R^-1(p - d)`` the blank coordinates of measured point ``p``,
+    """Cold-minus-warm surface map model: ``k * (g(q) * (S0(q) + Q(q)) + B(q)) + astigmatism``
+    with ``q = R^-1(p - d)`` the blank coordinates of measured point ``p``, ``Q`` the
+    quilt-shape change (:func:`blank_shape_um`),
     ``g(q) = 1 + (plating_grad_x q_x + plating_grad_y q_y) / 70 mm`` (plating gradient)
     and ``B`` the blank bow (:func:`bow_um`).
 
