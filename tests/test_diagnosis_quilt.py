@@ -209,3 +209,24 @@ def test_physical_summaries():
         "scale_J": "1", "temperature_offset_K": "K", "reg_rot_deg": "deg", "astig_0_um": "µm"}
     with pytest.raises(ValueError, match="not in the effect library"):
         parameter_units(["no_such_um"])
+
+
+def test_same_quilt_change_on_maps_and_spectrograph_images(tmp_path):
+    """One transform for every kind: the map model at its points and the sag the profile
+    and PSF-image models (their shared memo) build from are the reshaped nominal map."""
+    nominal = _map()
+    write_sag_map(nominal, tmp_path / "nominal.npz")
+    write_sag_map(synthetic_surface(nominal, np.random.default_rng(0)), tmp_path / "map.npz")
+    u = np.arange(-100.0, 100.1, 2.0)
+    write_profile_csv(tmp_path / "p.csv", u, np.exp(-0.5 * (u / 20.0) ** 2))
+    (tmp_path / "m.toml").write_text(
+        '[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\nkind = "surface"\nfile = "map.npz"\n'
+        'temperature_K = 80\naperture_diameter_mm = 137\n\n[[measurement]]\nkind = "line_profile"\nfile = "p.csv"\n'
+        'grating = "J"\norder = -2\nwavelength_um = 1.25\npixel_scale_mas = 250\n')
+    data = load_data(load_manifest(tmp_path / "m.toml"))
+    p = {"quilt_fund_xy_ratio": 1.3, "quilt_harmonics_ratio": 0.4}
+    expect = quilt_shape_map(nominal, 1.3, 0.4)
+    s = SurfaceForward(data[0], nominal, 80.0)
+    assert np.allclose(s.predict(p), expect.sample(s.x, s.y), atol=1e-9)
+    sag = ProfileForward(data[1], nominal, 80.0)._memo(p, lambda sag, p: sag)
+    assert np.allclose(sag.sag_um, expect.sag_um, atol=1e-12, equal_nan=True)
