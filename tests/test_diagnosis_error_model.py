@@ -65,6 +65,7 @@ def test_criteria_error_model_checked():
         Criteria(error_model="gls")
 
 
+@pytest.mark.slow
 def test_two_part_diagnosis_of_an_astigmatic_map(tmp_path):
     """The same map as test_diagnosis's astigmatism case: the astigmatism is still found and
     recovered; the errors are recorded (the truth's quilt mismatch is smooth: sigma_m > 0)."""
