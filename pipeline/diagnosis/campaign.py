@@ -65,10 +65,12 @@ from pipeline.interchange import write_psf_image_csv
 from .effects import LIBRARY
 from .engine import Criteria, diagnose
 from .nominal import fea_sag_map, thermal_factor
-from .synth import (shape_discrepancy, synthetic_profile, synthetic_psf_image, synthetic_surface, unmodelled_shape,
-                    write_profile_csv)
+from .synth import (quilt_shape_map, shape_discrepancy, synthetic_profile, synthetic_psf_image, synthetic_surface,
+                    unmodelled_shape, write_profile_csv)
 
-__all__ = ["CASE_TYPES", "DISCREPANCIES", "DISCREPANCY_PRESENT", "TRUTHS", "PROFILE_SETS", "PSF_IMAGE_SPEC", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "run_case", "run_campaign", "write_campaign"]
+__all__ = ["CASE_TYPES", "EXTRA_CASE_TYPES", "DISCREPANCIES", "DISCREPANCY_PRESENT", "TRUTHS", "PROFILE_SETS", "PSF_IMAGE_SPEC",
+           "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "run_case", "run_campaign",
+           "write_campaign"]
 
 CASE_TYPES = (
     ("surface", "astigmatism"), ("surface", "amplitude_scale"), ("surface", "temperature"),
@@ -77,6 +79,9 @@ CASE_TYPES = (
     ("line_profile", "collimator_wfe"), ("line_profile", "slit_width"),
     ("line_profile", "ool_ghost"), ("line_profile", "ool_distortion"),
 )
+#: Case types run only when asked for (``only_types`` / ``--types``), after CASE_TYPES in the
+#: cycle, so that the default campaign's cases keep their indices and draws.
+EXTRA_CASE_TYPES = (("surface", "quilt_shape"), ("line_profile", "quilt_shape"))
 #: (grating, wavelength µm, order, pixel scale mas) of the synthetic line profiles.
 #: "minimal": the three profiles of the first campaigns. "extended": what an instrument
 #: team measures in a J-band line-profile test (the paper's set: all three pixel scales at
@@ -154,7 +159,8 @@ class CampaignConfig:
                              "pixel_um) with pixel_um in [0, 100] (or None)")
         if self.discrepancy not in DISCREPANCIES:
             raise ValueError(f"CampaignConfig: discrepancy={self.discrepancy!r} is not one of {sorted(DISCREPANCIES)}")
-        unknown = set(self.only_types or ()) - set(self.case_types)
+        extra = EXTRA_CASE_TYPES if self.truth == "model" else ()  # the model truth's opt-in quilt_shape cases
+        unknown = set(self.only_types or ()) - set(self.case_types) - set(extra)
         if unknown:
             raise ValueError(f"CampaignConfig: only_types {sorted(unknown)} are not case types; valid: "
                              f"{[f'{k}:{e}' for k, e in self.case_types]}")
@@ -167,7 +173,7 @@ def parse_types(text: str | None, truth: str = "model") -> tuple | None:
         return None
     from .truth import CASE_TYPES as INDEPENDENT_TYPES
 
-    valid = INDEPENDENT_TYPES if truth == "independent" else CASE_TYPES
+    valid = INDEPENDENT_TYPES if truth == "independent" else CASE_TYPES + EXTRA_CASE_TYPES
     out = []
     for item in text.split(","):
         kind, sep, effect = item.strip().partition(":")
@@ -195,6 +201,10 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         elif effect == "temperature":
             dT = _signed(rng, 20.0, 50.0)
             T, truth = SURFACE_T_K + dT, {"temperature_offset_K": dT}
+        elif effect == "quilt_shape":
+            truth = {"quilt_fund_xy_ratio": float(rng.choice([rng.uniform(0.7, 0.85), rng.uniform(1.2, 1.4)])),
+                     "quilt_harmonics_ratio": float(rng.choice([rng.uniform(0.0, 0.4), rng.uniform(1.6, 2.5)]))}
+            base = quilt_shape_map(base, truth["quilt_fund_xy_ratio"], truth["quilt_harmonics_ratio"])
         t = DISCREPANCIES[cfg.discrepancy](base.scaled(scale * thermal_factor(T, 80.0)), rng)
         extra = None
         if effect == "astigmatism":
@@ -245,6 +255,9 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         a = _signed(rng, 0.1, 0.25)
         truth = {"tilt_rel": a}
         distortion = lambda u, y: y * (1.0 + a * np.tanh(u / 30.0))
+    elif effect == "quilt_shape":  # profiles do not see the y fundamental: only the harmonics
+        truth = {"quilt_harmonics_ratio": float(rng.choice([rng.uniform(0.0, 0.4), rng.uniform(1.6, 2.5)]))}
+        base = quilt_shape_map(base, 1.0, truth["quilt_harmonics_ratio"])
     t = DISCREPANCIES[cfg.discrepancy](base.scaled(scale), rng)
     meas = []
     for i, (g, wl, order, ps) in enumerate(cfg.profile_specs):
@@ -453,8 +466,9 @@ def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None, progres
                          "point-source images)")
     t0 = time.perf_counter()
     nominal, base = campaign_maps(cfg, cache_dir)
-    tasks = [(i, cfg.case_types[i % len(cfg.case_types)], cfg, nominal, base) for i in range(cfg.n_cases)
-             if cfg.only_types is None or cfg.case_types[i % len(cfg.case_types)] in cfg.only_types]
+    types = cfg.case_types + tuple(t for t in cfg.only_types or () if t not in cfg.case_types)
+    tasks = [(i, types[i % len(types)], cfg, nominal, base) for i in range(cfg.n_cases)
+             if cfg.only_types is None or types[i % len(types)] in cfg.only_types]
     t_maps = time.perf_counter() - t0
     if cfg.workers > 1:
         # One BLAS/FFT thread per worker: the workers already fill the cores.

@@ -18,7 +18,7 @@ __all__ = ["register", "main"]
 def _criteria(args, base=None):
     from .engine import Criteria
 
-    return replace(Criteria() if base is None else base, n_eff_from=args.n_eff_from)
+    return replace(Criteria() if base is None else base, n_eff_from=args.n_eff_from, error_model=args.error_model)
 
 
 def _run(args) -> int:
@@ -65,6 +65,9 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                    help="residual whose correlation sets the effective samples the score counts: nominal "
                         "(conservative, default) or best_fit (the best finding's residual: an optimistic bound on "
                         "the evidence; fits and error bars unchanged)")
+    p.add_argument("--error-model", default="n_eff", choices=("n_eff", "two_part"),
+                   help="n_eff (default): effective-sample counts; two_part: white noise plus a smooth mismatch "
+                        "measured from the post-fit residual (chi^2 score; pipeline/diagnosis/error_model.py)")
     p.add_argument("--validate", action="store_true", help="run the injection-recovery campaign instead")
     p.add_argument("--cases", type=int, default=200, help="campaign cases (with --validate)")
     p.add_argument("--seed", type=int, default=1, help="campaign seed (with --validate)")

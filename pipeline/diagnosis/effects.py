@@ -32,7 +32,25 @@ blank_bow           bow_defocus_um Z(2,0), bow_spherical_um      rotationally sy
                     a 70 mm radius disc in blank coordinates,    (front/back plating or polish
                     at the simulation's cold_K, scaled with the  imbalance bends it like a
                     deformation (companion, below)               bimetal; mount)
+quilt_shape         quilt_fund_xy_ratio (1; 0.3…3; maps and      the quilt's harmonic content
+                    PSF images only), quilt_harmonics_ratio      differs from the FEA's
+                    (1; -1…3; 0 = pure sinusoid)                 (:mod:`.quilt`, below)
 ==================  ===========================================  ============================
+
+``quilt_shape`` changes the nominal map ``S`` into ``S + (rho - 1) F_y + (h - 1) H`` with
+``F_x``, ``F_y`` the quilt's fundamentals (21 mm along x, 18 mm along y) and ``H`` its
+higher harmonics, from a Fourier fit of the nominal over the 82 x 72 mm centre
+(:mod:`.quilt`); ``rho = quilt_fund_xy_ratio``, ``h = quilt_harmonics_ratio``. The
+fundamentals' amplitude is not a parameter of it: separate scales of ``F_x``, ``F_y`` and
+``H`` would be degenerate with ``amplitude_scale`` on line profiles (measured, FEA map
+200 µm / 75 % at 80 K, J 1.25 µm at 250/100/25 mas jointly: correlation -0.999 between
+the scale of ``F_x`` and ``amplitude_scale``, -0.96 between ``H``'s scale and it, and a
+scale of ``F_y`` has no leverage at all — a phase periodic along the rulings scatters
+light along the slit, which a profile integrates). Held relative to the fundamentals,
+``h`` and ``amplitude_scale`` correlate at 0.50 on those profiles and 0.21 on a 137 mm
+map, so the amplitude of the quilt stays ``amplitude_scale``'s (or ``temperature``'s)
+and ``quilt_shape`` says how its shape differs. ``rho`` scales ``F_y`` with ``F_x`` held;
+it is only fitted where a map or a PSF image is in the data (``Parameter.kinds``).
 
 ``companion`` effects (``plating_gradient``, ``blank_bow``) are candidates on their own *and* are refitted
 jointly with the best-ranked other candidates (:class:`~pipeline.diagnosis.engine.Criteria`
@@ -65,9 +83,12 @@ measurement (one bow for all blanks: a per-blank bow would need one map per blan
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
-__all__ = ["Parameter", "Effect", "LIBRARY", "PLATING_GRADIENT_REF_MM", "BOW_REF_RADIUS_MM", "effect_parameters", "applicable_effects", "NOMINAL_SLIT_UM"]
+__all__ = ["Parameter", "Effect", "LIBRARY", "PLATING_GRADIENT_REF_MM", "BOW_REF_RADIUS_MM", "COLLIMATOR_PUPIL_RADIUS_MM",
+           "effect_parameters", "parameter_spec", "parameter_units", "applicable_effects", "NOMINAL_SLIT_UM",
+           "SummaryContext", "physical_summary", "library_rows", "library_markdown"]
 
 NOMINAL_SLIT_UM = 27.0
 
@@ -75,7 +96,10 @@ NOMINAL_SLIT_UM = 27.0
 @dataclass(frozen=True)
 class Parameter:
     """One fit parameter: name (with unit), null value, prior bounds, start values for a
-    coarse grid search, and the absolute recovery tolerance ``floor``."""
+    coarse grid search, the absolute recovery tolerance ``floor``, its ``unit`` (as
+    written in reports; "1" for a dimensionless ratio), a one-line ``meaning`` and the
+    measurement ``kinds`` it changes (empty: every kind of its effect; a parameter none
+    of whose kinds is in the data is not fitted: it has no leverage there)."""
 
     name: str
     null: float
@@ -83,6 +107,9 @@ class Parameter:
     hi: float
     starts: tuple[float, ...] = ()
     floor: float = 0.0
+    unit: str = "1"
+    meaning: str = ""
+    kinds: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.lo <= self.null <= self.hi:
@@ -132,46 +159,79 @@ class Effect:
     requires: tuple[str, ...] = ()
 
 
+_MAP_AND_IMAGE = ("surface", "psf_image")
+
 LIBRARY: dict[str, Effect] = {e.name: e for e in (
     Effect("astigmatism", ("surface",),
-           (Parameter("astig_0_um", 0.0, -1.0, 1.0, floor=0.02), Parameter("astig_45_um", 0.0, -1.0, 1.0, floor=0.02)),
+           (Parameter("astig_0_um", 0.0, -1.0, 1.0, floor=0.02, unit="µm",
+                      meaning="surface Zernike Z(2,2), RMS-normalised over the map's aperture disc"),
+            Parameter("astig_45_um", 0.0, -1.0, 1.0, floor=0.02, unit="µm",
+                      meaning="surface Zernike Z(2,-2), RMS-normalised over the map's aperture disc")),
            description="mount-induced surface astigmatism (Zernike (2,2) and (2,-2), RMS-normalised over the aperture)",
            vector=True),
     Effect("amplitude_scale", ("surface", "line_profile", "psf_image"),
-           (Parameter("scale", 1.0, 0.3, 3.0, floor=0.05),), per_blank=True,
+           (Parameter("scale", 1.0, 0.3, 3.0, floor=0.05, unit="1",
+                      meaning="deformation amplitude of blank <blank> relative to the simulation's"),), per_blank=True,
            description="deformation amplitude differs (NiP thickness or polish; e.g. a re-polished blank)"),
     Effect("temperature", ("surface", "line_profile", "psf_image"),
-           (Parameter("temperature_offset_K", 0.0, -60.0, 80.0, floor=5.0),),
+           (Parameter("temperature_offset_K", 0.0, -60.0, 80.0, floor=5.0, unit="K",
+                      meaning="true cold temperature minus the stated one (all measurements)"),),
            description="true cold temperature = stated + offset (exact rescaling by the mismatch strain)"),
     Effect("registration", ("surface",),
-           (Parameter("reg_dx_mm", 0.0, -10.0, 10.0, (-6.0, 0.0, 6.0), floor=0.5),
-            Parameter("reg_dy_mm", 0.0, -10.0, 10.0, (-5.0, 0.0, 5.0), floor=0.5),
-            Parameter("reg_rot_deg", 0.0, -5.0, 5.0, floor=0.3)),
+           (Parameter("reg_dx_mm", 0.0, -10.0, 10.0, (-6.0, 0.0, 6.0), floor=0.5, unit="mm",
+                      meaning="map shift d along x"),
+            Parameter("reg_dy_mm", 0.0, -10.0, 10.0, (-5.0, 0.0, 5.0), floor=0.5, unit="mm",
+                      meaning="map shift d along y"),
+            Parameter("reg_rot_deg", 0.0, -5.0, 5.0, floor=0.3, unit="deg",
+                      meaning="map rotation R against the model about the map origin (feature at p appears at R p + d)")),
            description="measured map shifted/rotated against the model (model feature at p appears at R p + d)"),
     Effect("pupil_shift", ("line_profile", "psf_image"),
-           (Parameter("pupil_x_mm", 0.0, -10.0, 10.0, (-7.0, -3.5, 0.0, 3.5, 7.0), floor=1.0),
-            Parameter("pupil_y_mm", 0.0, -10.0, 10.0, (0.0, 4.5), floor=3.0)),
+           (Parameter("pupil_x_mm", 0.0, -10.0, 10.0, (-7.0, -3.5, 0.0, 3.5, 7.0), floor=1.0, unit="mm",
+                      meaning="beam footprint offset on the grating along x (dispersion)"),
+            Parameter("pupil_y_mm", 0.0, -10.0, 10.0, (0.0, 4.5), floor=3.0, unit="mm",
+                      meaning="beam footprint offset on the grating along y (rulings)")),
            description="beam footprint offset on the grating (x dispersion, y ruling), common to all profiles",
            vector=True),
     Effect("collimator_wfe", ("line_profile", "psf_image"),
-           (Parameter("coll_coma_um", 0.0, -0.4, 0.4, floor=0.04), Parameter("coll_defocus_um", 0.0, -0.4, 0.4, floor=0.04),
-            Parameter("coll_astig45_um", 0.0, -0.4, 0.4, floor=0.06)),
+           (Parameter("coll_coma_um", 0.0, -0.4, 0.4, floor=0.04, unit="µm",
+                      meaning="extra wavefront Zernike Z(3,1), RMS-normalised over the 110 mm pupil"),
+            Parameter("coll_defocus_um", 0.0, -0.4, 0.4, floor=0.04, unit="µm",
+                      meaning="extra wavefront Zernike Z(2,0), RMS-normalised over the 110 mm pupil"),
+            Parameter("coll_astig45_um", 0.0, -0.4, 0.4, floor=0.06, unit="µm",
+                      meaning="extra wavefront Zernike Z(2,-2), RMS-normalised over the 110 mm pupil")),
            description="extra low-order spectrograph WFE (RMS-normalised Zernike over the 110 mm pupil)",
            vector=True),
     Effect("slit_width", ("line_profile",),
-           (Parameter("slit_image_width_um", NOMINAL_SLIT_UM, 15.0, 45.0, floor=1.0),),
+           (Parameter("slit_image_width_um", NOMINAL_SLIT_UM, 15.0, 45.0, floor=1.0, unit="µm",
+                      meaning="geometric slit image width on the detector (J, H, K; HK scaled alike from 29 µm)"),),
            description="geometric slit image width differs from 27 µm (29 µm for HK, scaled alike)"),
     Effect("plating_gradient", ("surface", "line_profile", "psf_image"),
-           (Parameter("plating_grad_x", 0.0, -0.1, 0.1, floor=0.01), Parameter("plating_grad_y", 0.0, -0.1, 0.1, floor=0.01)),
+           (Parameter("plating_grad_x", 0.0, -0.1, 0.1, floor=0.01, unit="1",
+                      meaning="relative deformation change at x = +70 mm (blank coordinates)"),
+            Parameter("plating_grad_y", 0.0, -0.1, 0.1, floor=0.01, unit="1",
+                      meaning="relative deformation change at y = +70 mm (blank coordinates)")),
            description="NiP thickness gradient across the blank: deformation x (1 + gx x/70 mm + gy y/70 mm) "
                        "(blank coordinates; gx, gy = relative amplitude change at the blank's half-width)",
            vector=True, companion=True),
     Effect("blank_bow", ("surface", "line_profile", "psf_image"),
-           (Parameter("bow_defocus_um", 0.0, -0.2, 0.2, floor=0.01), Parameter("bow_spherical_um", 0.0, -0.2, 0.2, floor=0.01)),
+           (Parameter("bow_defocus_um", 0.0, -0.2, 0.2, floor=0.01, unit="µm",
+                      meaning="surface Zernike Z(2,0), RMS-normalised over a 70 mm radius disc, at cold_K"),
+            Parameter("bow_spherical_um", 0.0, -0.2, 0.2, floor=0.01, unit="µm",
+                      meaning="surface Zernike Z(4,0), RMS-normalised over a 70 mm radius disc, at cold_K")),
            description="rotationally symmetric figure change of the cold blank: Zernike (2,0) and (4,0), "
                        "RMS-normalised over a 70 mm radius disc in blank coordinates, at the simulation's cold_K "
                        "(scaled with the deformation)",
            vector=True, companion=True, requires=("surface",)),
+    Effect("quilt_shape", ("surface", "line_profile", "psf_image"),
+           (Parameter("quilt_fund_xy_ratio", 1.0, 0.3, 3.0, (0.6, 1.0, 1.6), floor=0.05, unit="1",
+                      meaning="y fundamental (18 mm) relative to the x fundamental (21 mm), over the nominal's "
+                              "ratio (x fundamental held)", kinds=_MAP_AND_IMAGE),
+            Parameter("quilt_harmonics_ratio", 1.0, -1.0, 3.0, (0.0, 1.0, 2.0), floor=0.2, unit="1",
+                      meaning="quilt harmonics relative to the fundamentals, over the nominal's ratio "
+                              "(0: a pure sinusoidal quilt)")),
+           description="the quilt's harmonic content differs from the simulation's: the y fundamental relative "
+                       "to the x fundamental and the higher harmonics relative to both (the fundamentals' "
+                       "amplitude stays amplitude_scale's)"),
 )}
 
 #: Half-width (mm) at which ``plating_grad_x/y`` are the relative amplitude change.
@@ -179,15 +239,37 @@ PLATING_GRADIENT_REF_MM = 70.0
 #: Radius (mm, blank coordinates) of the disc over which the ``blank_bow`` Zernike terms
 #: are RMS-normalised: half the blank's 140 mm height, independent of any measurement.
 BOW_REF_RADIUS_MM = 70.0
+#: Radius (mm) of the collimator pupil over which ``collimator_wfe`` terms are RMS-normalised.
+COLLIMATOR_PUPIL_RADIUS_MM = 55.0
 
 
-def effect_parameters(effect: Effect, blanks: tuple[str, ...]) -> tuple[Parameter, ...]:
-    """The concrete parameters of ``effect`` for data seeing ``blanks``."""
+def effect_parameters(effect: Effect, blanks: tuple[str, ...], kinds=None) -> tuple[Parameter, ...]:
+    """The concrete parameters of ``effect`` for data seeing ``blanks``; with ``kinds`` (the
+    measurement kinds in the data), only the parameters that change one of them."""
+    params = effect.parameters
+    if kinds is not None:
+        params = tuple(p for p in params if set(p.kinds or effect.kinds) & set(kinds))
     if not effect.per_blank:
-        return effect.parameters
+        return params
     from dataclasses import replace
 
-    return tuple(replace(p, name=f"{p.name}_{b}") for p in effect.parameters for b in blanks)
+    return tuple(replace(p, name=f"{p.name}_{b}") for p in params for b in blanks)
+
+
+def parameter_spec(name: str) -> Parameter:
+    """The library parameter called ``name`` (a per-blank copy ``scale_<blank>`` resolves to
+    its template ``scale``)."""
+    for e in LIBRARY.values():
+        for p in e.parameters:
+            if name == p.name or (e.per_blank and name.startswith(p.name + "_")):
+                return p
+    raise ValueError(f"parameter {name!r} is not in the effect library; valid: "
+                     f"{[p.name for e in LIBRARY.values() for p in e.parameters]}")
+
+
+def parameter_units(names) -> dict:
+    """``{parameter name: unit}`` for library parameter names (per-blank copies included)."""
+    return {n: parameter_spec(n).unit for n in names}
 
 
 def applicable_effects(kinds: set[str], names: tuple[str, ...] | None = None) -> tuple[Effect, ...]:
@@ -197,3 +279,102 @@ def applicable_effects(kinds: set[str], names: tuple[str, ...] | None = None) ->
         raise ValueError(f"effects {sorted(unknown)} are unknown; valid: {sorted(LIBRARY)}")
     chosen = LIBRARY if names is None else {n: LIBRARY[n] for n in names}
     return tuple(e for e in chosen.values() if set(e.kinds) & kinds and set(e.requires) <= kinds)
+
+
+@dataclass(frozen=True)
+class SummaryContext:
+    """What the physical summaries of a finding need from the data and the simulation:
+    the simulation's cold temperature (K), the blanks seen, the surface maps' aperture
+    radii (mm, where the astigmatism is normalised) and the nominal quilt's RMS
+    amplitudes (µm, :meth:`.quilt.QuiltComponents.amplitudes_um`; None: no quilt fit)."""
+
+    cold_K: float
+    blanks: tuple = ()
+    surface_radii_mm: tuple = ()
+    quilt_rms_um: dict | None = None
+
+
+def _norm(p: dict, names) -> float:
+    return math.sqrt(sum(p.get(n, 0.0) ** 2 for n in names))
+
+
+def _disc(radii) -> str:
+    r = sorted(set(round(float(v), 2) for v in radii))
+    return "disc r=" + "/".join(f"{v:g}" for v in r) + " mm (map aperture)" if r else "map aperture disc"
+
+
+def _summary_temperature(p, ctx):
+    dT = p["temperature_offset_K"]
+    return {"temperature_K": ctx.cold_K + dT, "temperature_offset_K": dT,
+            "temperature_note": "simulation cold_K + offset; each map's own stated temperature + offset"}
+
+
+def _summary_scale(p, ctx):
+    scales = {k: v for k, v in p.items() if k.startswith("scale_")}
+    return {"scale": next(iter(scales.values()))} if len(scales) == 1 else {}
+
+
+def _summary_quilt(p, ctx):
+    out = {"quilt_fund_xy_ratio": p.get("quilt_fund_xy_ratio", 1.0), "quilt_harmonics_ratio": p["quilt_harmonics_ratio"]}
+    if ctx.quilt_rms_um:
+        q = ctx.quilt_rms_um
+        out.update({"fundamental_x_rms_um": q["fundamental_x"],
+                    "fundamental_y_rms_um": q["fundamental_y"] * p.get("quilt_fund_xy_ratio", 1.0),
+                    "harmonics_rms_um": q["harmonics"] * abs(p["quilt_harmonics_ratio"]),
+                    "quilt_note": f"RMS over a period at the simulation's {ctx.cold_K:g} K, before amplitude_scale "
+                                  "and temperature; fitted over the 82 x 72 mm centre"})
+    return out
+
+
+_SUMMARIES = {
+    "astigmatism": lambda p, ctx: {"rms_um": _norm(p, ("astig_0_um", "astig_45_um")),
+                                   "aperture": _disc(ctx.surface_radii_mm), "surface": "grating surface"},
+    "amplitude_scale": _summary_scale,
+    "temperature": _summary_temperature,
+    "registration": lambda p, ctx: {"shift_mm": _norm(p, ("reg_dx_mm", "reg_dy_mm")), "rotation_deg": p["reg_rot_deg"]},
+    "pupil_shift": lambda p, ctx: {"shift_mm": _norm(p, ("pupil_x_mm", "pupil_y_mm"))},
+    "collimator_wfe": lambda p, ctx: {"rms_um": _norm(p, ("coll_coma_um", "coll_defocus_um", "coll_astig45_um")),
+                                      "aperture": f"disc r={COLLIMATOR_PUPIL_RADIUS_MM:g} mm (collimator pupil)",
+                                      "surface": "wavefront"},
+    "slit_width": lambda p, ctx: {"slit_image_width_um": p["slit_image_width_um"]},
+    "plating_gradient": lambda p, ctx: {"max_relative_change": _norm(p, ("plating_grad_x", "plating_grad_y")),
+                                        "at_radius_mm": PLATING_GRADIENT_REF_MM},
+    "blank_bow": lambda p, ctx: {"rms_um": _norm(p, ("bow_defocus_um", "bow_spherical_um")),
+                                 "aperture": f"disc r={BOW_REF_RADIUS_MM:g} mm (blank coordinates)",
+                                 "surface": "grating surface at the simulation's cold_K"},
+    "quilt_shape": _summary_quilt,
+}
+
+
+def physical_summary(effects, parameters: dict, ctx: SummaryContext) -> dict:
+    """Physically absolute summaries of a finding, per effect: ``{effect: {...}}`` (e.g.
+    ``temperature_K`` beside the offset, ``scale`` where one blank is measured,
+    ``rms_um`` of a Zernike-type effect with the ``aperture`` it refers to)."""
+    out = {}
+    for e in effects:
+        own = {q.name: parameters[q.name] for q in effect_parameters(LIBRARY[e], ctx.blanks) if q.name in parameters}
+        if own:
+            out[e] = _SUMMARIES[e](own, ctx)
+    return out
+
+
+def _prior_text(p: Parameter) -> str:
+    return f"{p.lo:g} … {p.hi:g}"
+
+
+def library_rows() -> list[dict]:
+    """One row per library parameter: effect, parameter, unit, null, prior, measurement
+    kinds and meaning (the README's parameter table and the report's are made from it)."""
+    return [{"effect": e.name, "parameter": p.name + ("_<blank>" if e.per_blank else ""), "unit": p.unit,
+             "null": p.null, "prior": _prior_text(p), "kinds": ", ".join(p.kinds or e.kinds), "meaning": p.meaning}
+            for e in LIBRARY.values() for p in e.parameters]
+
+
+def library_markdown() -> str:
+    """The parameter table as Markdown. The README's diagnosis section holds this text
+    (checked by a test); regenerate it with
+    ``python -c "from pipeline.diagnosis.effects import library_markdown as m; print(m(), end='')"``."""
+    out = ["| effect | parameter | unit | null | prior | measurements | meaning |", "|---|---|---|---|---|---|---|"]
+    out += [f"| {r['effect']} | `{r['parameter']}` | {r['unit']} | {r['null']:g} | {r['prior']} | {r['kinds']} | "
+            f"{r['meaning']} |" for r in library_rows()]
+    return "\n".join(out) + "\n"

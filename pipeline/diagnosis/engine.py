@@ -84,7 +84,9 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .effects import LIBRARY, applicable_effects, effect_parameters
+from .effects import (LIBRARY, SummaryContext, applicable_effects, effect_parameters, library_rows, parameter_units,
+                      physical_summary)
+from .error_model import ERROR_MODELS, errors_summary, measure_errors, sign_is_claimed, two_part_problem, weights_settled
 from .fitting import FitOutcome, Problem, fit
 from .noise import effective_samples
 from .forward import ProfileForward, SurfaceForward
@@ -94,7 +96,7 @@ from .nominal import nominal_sag_map
 from .plausibility import check_measurements
 from .where import measurement_parts, profile_parts, psf_image_parts, satellite_spacing_um, surface_parts
 
-__all__ = ["Criteria", "N_EFF_SOURCES", "post_fit_n_eff", "recounted", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects", "all_effects", "parameters_of", "unconstrained", "acting_on", "gap_statistics", "gaps"]
+__all__ = ["Criteria", "N_EFF_SOURCES", "post_fit_n_eff", "recounted", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects", "all_effects", "parameters_of", "summary_context", "unconstrained", "acting_on", "gap_statistics", "gaps"]
 
 
 N_EFF_SOURCES = ("nominal", "best_fit")
@@ -118,10 +120,16 @@ class Criteria:
     companion_bic: float = 6.0
     absorb_test_bic: float = 25.0
     n_eff_from: str = "nominal"
+    #: "n_eff": effective-sample counts (``n_eff_from``); "two_part": white noise plus a
+    #: smooth mismatch measured from the post-fit residual (:mod:`.error_model`; then
+    #: ``n_eff_from`` is not used).
+    error_model: str = "n_eff"
 
     def __post_init__(self) -> None:
         if self.n_eff_from not in N_EFF_SOURCES:
             raise ValueError(f"Criteria: n_eff_from={self.n_eff_from!r} must be one of {N_EFF_SOURCES}")
+        if self.error_model not in ERROR_MODELS:
+            raise ValueError(f"Criteria: error_model={self.error_model!r} must be one of {ERROR_MODELS}")
         ranges = {"min_delta_bic": (0.0, math.inf), "min_variance_explained": (0.0, 1.0),
                   "heldout_ratio": (0.0, 1.0), "pair_extra_bic": (0.0, math.inf), "pair_from": (0, 20),
                   "degenerate_bic": (0.0, math.inf), "degenerate_prediction": (0.0, 1.0),
@@ -163,6 +171,13 @@ class Finding:
     companions: tuple = ()
     absorbs: dict = field(default_factory=dict)
     unconstrained: tuple = ()
+    #: ``{parameter: unit}`` of every parameter in ``parameters`` (from :mod:`.effects`).
+    parameter_units: dict = field(default_factory=dict)
+    #: Physically absolute summaries per effect (:func:`.effects.physical_summary`):
+    #: ``temperature_K`` beside the offset, ``scale`` where one blank is measured,
+    #: ``rms_um`` of Zernike-type effects with the ``aperture`` it refers to, the quilt's
+    #: component amplitudes.
+    summary: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True, eq=False)
@@ -208,7 +223,8 @@ class Diagnosis:
                       "findings": [asdict(f) for f in self.findings],
                       "where": list(self.where), "where_after_best": list(self.where_after),
                       "baseline": self.baseline, "measurements": list(self.measurements),
-                      "criteria": asdict(self.criteria), "timings_s": self.timings_s, "manifest": self.manifest})
+                      "criteria": asdict(self.criteria), "timings_s": self.timings_s, "manifest": self.manifest,
+                      "effect_library": library_rows()})
 
 
 def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, FitOutcome]:
@@ -226,6 +242,14 @@ def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, Fi
         s = max(math.sqrt(nom.rss[f.name] / f.n), 1e-12)
         prob.weights[f.name] = math.sqrt(prob.n_eff[f.name] / f.n) / s
     return prob, fit(prob, ())
+
+
+def summary_context(prob: Problem, cold_K: float) -> SummaryContext:
+    """What :func:`.effects.physical_summary` needs from the data and the simulation."""
+    quilt = next((f.quilt for f in prob.forwards if getattr(f, "quilt", None) is not None), None)
+    return SummaryContext(cold_K=float(cold_K), blanks=tuple(dict.fromkeys(f.blank for f in prob.forwards)),
+                          surface_radii_mm=tuple(f.radius_mm for f in prob.forwards if f.kind == "surface"),
+                          quilt_rms_um=quilt.amplitudes_um() if quilt is not None else None)
 
 
 def _residual_n_eff(f, r) -> float:
@@ -432,8 +456,9 @@ def _excesses(prob: Problem, ref: FitOutcome, fo: FitOutcome, effects) -> dict:
 def parameters_of(names, forwards) -> tuple:
     """The concrete parameters of library effects ``names`` for the data's forward models
     (a per-blank effect gets one copy per blank seen by a measurement kind it changes)."""
+    kinds = {f.kind for f in forwards}
     return tuple(q for n in names for q in effect_parameters(
-        LIBRARY[n], tuple(dict.fromkeys(f.blank for f in forwards if f.kind in LIBRARY[n].kinds))))
+        LIBRARY[n], tuple(dict.fromkeys(f.blank for f in forwards if f.kind in LIBRARY[n].kinds)), kinds))
 
 
 def fit_effects(prob: Problem, nom: FitOutcome, names: tuple, criteria: Criteria, start: dict | None = None,
@@ -607,7 +632,6 @@ def _sign_test(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, eff
     parameters of ``effects`` free (reference fit ``fo``); see :func:`_sign_degeneracies`."""
     out = []
     start = finding.parameters if start is None else start
-    neff = max(sum(fo.counts.values()), 2.0)
     cost = fo.weighted_rss(prob.weights)
     params = parameters_of(effects, prob.forwards)
     own = {q.name for q in parameters_of(finding.effects, prob.forwards)}
@@ -623,7 +647,10 @@ def _sign_test(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, eff
         others = tuple(o for o in params if o.name != name)
         flip = fit(prob, others, fixed={name: -v}, start={o.name: start[o.name] for o in others if o.name in start})
         cflip = flip.weighted_rss(prob.weights)
-        if cost > 0 and neff * math.log(max(cflip, 1e-300) / cost) < c.degenerate_bic:
+        if prob.absolute:  # two-part error model: the flip must cost more than the errors could
+            if not sign_is_claimed(prob, fo, flip, _predictions(prob, fo), _predictions(prob, flip)):
+                out.append(name)
+        elif cost > 0 and fo.score_change(cflip, prob.weights) < c.degenerate_bic:
             out.append(name)
     return tuple(out)
 
@@ -653,7 +680,6 @@ def _absorbed(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, kind
     own = parameters_of(finding.effects + tuple(finding.companions), prob.forwards)
     have = {q.name for q in own}
     untried = [e for e in LIBRARY.values() if set(e.kinds) & kinds and not set(e.requires) <= kinds]
-    neff = max(sum(fo.counts.values()), 2.0)
     w = prob.weights
     cost0 = fo.weighted_rss(w)
     if not cost0 > 0:
@@ -662,7 +688,7 @@ def _absorbed(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, kind
     start = {q.name: base[q.name] for q in own if q.name in base}
 
     def dbic(o):
-        return neff * math.log(max(o.weighted_rss(w), 1e-300) / cost0)
+        return fo.score_change(o.weighted_rss(w), w)
 
     out, effects = {}, []
     for e in untried:
@@ -786,9 +812,23 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     prob, nom = build_problem(manifest, data, nominal)
     kinds = {f.kind for f in prob.forwards}
     cands = applicable_effects(kinds, effects)
-    memo = {}
+    memo, errors = {}, {}
+    if criteria.error_model == "two_part":
+        base_prob = prob
+        errors = measure_errors(base_prob, nom)  # first pass: the nominal residual (signal counts as mismatch)
+        prob = two_part_problem(base_prob, errors)
+        nom = fit(prob, ())
     findings, fits, joint_fits = _rank(prob, nom, cands, criteria, memo)
-    if criteria.n_eff_from == "best_fit":
+    if criteria.error_model == "two_part":
+        for _ in range(_N_EFF_PASSES):
+            errs = measure_errors(base_prob, fits[findings[0].effect])
+            new = two_part_problem(base_prob, errs)
+            if weights_settled(prob, new, _N_EFF_RTOL):
+                break
+            prob, errors, memo = new, errs, {}  # new weights: every fit is redone
+            nom = fit(prob, ())
+            findings, fits, joint_fits = _rank(prob, nom, cands, criteria, memo)
+    elif criteria.n_eff_from == "best_fit":
         for _ in range(_N_EFF_PASSES):
             count = post_fit_n_eff(prob, fits[findings[0].effect])
             old = prob.n_count or prob.n_eff
@@ -814,6 +854,9 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
         for i, f in enumerate(findings[:criteria.heldout_top]):
             findings[i] = _with_heldout(prob, f, criteria)
     t["heldout_s"] = time.perf_counter() - t["start"] - t["load_s"] - t["fit_s"] - t["absorb_s"]
+    ctx = summary_context(prob, manifest.simulation.cold_K)
+    findings = [_replace(f, parameter_units=parameter_units(f.parameters),
+                         summary=physical_summary(all_effects(f), f.parameters, ctx)) for f in findings]
     gap = has_gap(prob, nom, criteria)
     note = ""
     if gap and findings and len(findings[0].effects) > 1 and not _explains(findings[0], criteria):
@@ -832,6 +875,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     baseline = {"bic": nom.bic(prob.weights), "offset_shift_um": nom.deltas_um,
                 "noise": dict(prob.noise), "n": dict(nom.n), "n_eff": dict(prob.n_eff),
                 "n_count": dict(prob.n_count or prob.n_eff), "n_eff_from": criteria.n_eff_from,
+                "error_model": criteria.error_model, "errors": errors_summary(errors),
                 "weights": dict(prob.weights), "nominal_map": nominal.label}
     ms = tuple({"name": m.name, "kind": m.kind, "file": str(m.file), "blank": m.blank, "grating": m.grating,
                 "wavelength_um": m.wavelength_um, "pixel_scale_mas": m.pixel_scale_mas,

@@ -79,6 +79,9 @@ class Problem:
     n_eff: dict = field(default_factory=dict)
     noise: dict = field(default_factory=dict)
     n_count: dict | None = None  # samples counted by the score, if not n_eff (engine.post_fit_n_eff)
+    #: The weights are absolute (1 / the errors' long-run sigma, :mod:`.error_model`): the
+    #: score is then a chi^2, not a likelihood with a common variance factor profiled out.
+    absolute: bool = False
 
     @property
     def names(self) -> list[str]:
@@ -108,6 +111,7 @@ class FitOutcome:
     nfev: int
     weighted_cost: float
     n_count: dict | None = None
+    absolute: bool = False
 
     @property
     def counts(self) -> dict:
@@ -119,10 +123,22 @@ class FitOutcome:
         return float(sum(weights[m] ** 2 * self.rss[m] for m in self.rss))
 
     def bic(self, weights: dict) -> float:
-        """``N_eff log(sum_i w_i^2 RSS_i / N_eff) + k log N_eff`` (consistent with the fit's objective)."""
+        """``N_eff log(sum_i w_i^2 RSS_i / N_eff) + k log N_eff`` (consistent with the fit's
+        objective); with absolute weights ``sum_i w_i^2 RSS_i + k log N_eff`` (a chi^2)."""
         neff = max(sum(self.counts.values()), 2.0)
         cost = self.weighted_rss(weights)
+        if self.absolute:
+            return float(cost + self.k * math.log(neff))
         return float(neff * math.log(max(cost, 1e-300) / neff) + self.k * math.log(neff))
+
+    def score_change(self, other_cost: float, weights: dict) -> float:
+        """How much worse the score would be with the weighted cost ``other_cost`` (same
+        parameter count): ``N_eff log(other / cost)``, or ``other - cost`` with absolute weights."""
+        cost = self.weighted_rss(weights)
+        if self.absolute:
+            return float(other_cost - cost)
+        neff = max(sum(self.counts.values()), 2.0)
+        return float(neff * math.log(max(other_cost, 1e-300) / max(cost, 1e-300)))
 
 
 def _shift_slots(fws) -> list:
@@ -260,4 +276,4 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
         for i, q in enumerate(params):
             errors[q.name] = float(math.sqrt(max(cov[i, i], 0.0)) * q.width) if np.isfinite(cov[i, i]) else float("inf")
     return FitOutcome({q.name: float(p[q.name]) for q in params}, errors, d, rss, n, neff, k, success, nfev,
-                      float(np.sum(res_vec**2)), problem.counts_for(n))
+                      float(np.sum(res_vec**2)), problem.counts_for(n), problem.absolute)

@@ -29,13 +29,15 @@ from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
 
-from .effects import BOW_REF_RADIUS_MM, NOMINAL_SLIT_UM, PLATING_GRADIENT_REF_MM
+from .effects import BOW_REF_RADIUS_MM, NOMINAL_SLIT_UM, PLATING_GRADIENT_REF_MM, parameter_spec
 from .manifest import ProfileData, SurfaceData
 from .noise import estimate_noise
 from .nominal import thermal_factor
+from .quilt import QuiltComponents, quilt_components
 
 __all__ = ["FIT_LSF_SETTINGS", "PROFILE_KEYS", "SurfaceForward", "SpectrographImageModel", "ProfileForward", "profile_curve", "collimator_terms", "plating_gradient_map", "bow_um",
-           "blank_bow_map", "blank_shape_um"]
+           "blank_bow_map", "blank_shape_um",
+           "quilt_parts"]
 
 #: Line-profile sampling used while fitting (measured: 0.1-0.45 % L1 from the defaults).
 FIT_LSF_SETTINGS = LsfSettings(detector_step_um=1.5, n_fft=256, source_step_mm=2.5, min_source_rows=5,
@@ -58,11 +60,26 @@ def bow_um(x_mm: np.ndarray, y_mm: np.ndarray, defocus_um: float, spherical_um: 
     return out
 
 
-def blank_shape_um(base_um: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, p: dict) -> np.ndarray:
+def quilt_parts(quilt: QuiltComponents | None, x_mm: np.ndarray, y_mm: np.ndarray) -> tuple | None:
+    """``(F_y, H)`` of the nominal's quilt (µm) at blank coordinates (:mod:`.quilt`): the
+    parts ``quilt_shape`` changes (``F_x`` is held); None without a quilt fit."""
+    if quilt is None:
+        return None
+    return quilt.fundamental_y_um(x_mm, y_mm), quilt.harmonics_um(x_mm, y_mm)
+
+
+def blank_shape_um(base_um: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, p: dict,
+                   quilt: tuple | None = None) -> np.ndarray:
     """Deformation ``base_um`` (µm, at blank coordinates ``x_mm``, ``y_mm``) changed by the
-    blank effects in ``p``: times ``1 + (plating_grad_x x + plating_grad_y y) / 70 mm``
-    (plating gradient), plus the blank bow (:func:`bow_um`). Shared by the map and the
-    line-profile models."""
+    blank effects in ``p``: the quilt's shape (``quilt`` = :func:`quilt_parts` at the same
+    points: ``+ (rho - 1) F_y + (h - 1) H``), then times
+    ``1 + (plating_grad_x x + plating_grad_y y) / 70 mm`` (plating gradient: it scales the
+    local deformation, quilt included), plus the blank bow (:func:`bow_um`). Shared by the
+    map and the spectrograph-image models."""
+    rho, h = p.get("quilt_fund_xy_ratio", 1.0), p.get("quilt_harmonics_ratio", 1.0)
+    if quilt is not None and (rho != 1.0 or h != 1.0):
+        fy, hh = quilt
+        base_um = base_um + (rho - 1.0) * fy + (h - 1.0) * hh
     gx, gy = p.get("plating_grad_x", 0.0), p.get("plating_grad_y", 0.0)
     if gx or gy:
         base_um = base_um * (1.0 + (gx * x_mm + gy * y_mm) / PLATING_GRADIENT_REF_MM)
@@ -85,8 +102,9 @@ def plating_gradient_map(sag: SagMap, gx: float, gy: float) -> SagMap:
 
 
 class SurfaceForward:
-    """Cold-minus-warm surface map model: ``k * (g(q) * S0(q) + B(q)) + astigmatism`` with
-    ``q = R^-1(p - d)`` the blank coordinates of measured point ``p``,
+    """Cold-minus-warm surface map model: ``k * (g(q) * (S0(q) + Q(q)) + B(q)) + astigmatism``
+    with ``q = R^-1(p - d)`` the blank coordinates of measured point ``p``, ``Q`` the
+    quilt-shape change (:func:`blank_shape_um`),
     ``g(q) = 1 + (plating_grad_x q_x + plating_grad_y q_y) / 70 mm`` (plating gradient)
     and ``B`` the blank bow (:func:`bow_um`).
 
@@ -119,6 +137,8 @@ class SurfaceForward:
         self.z2m2 = zernike_xy(2, -2, self.x, self.y, self.radius_mm)
         self.nuisance = np.column_stack([np.ones(self.n), self.x / self.radius_mm, self.y / self.radius_mm])
         self.noise_known = m.noise_um
+        self.quilt = quilt_components(nominal)
+        self._quilt_at = quilt_parts(self.quilt, self.x, self.y)
 
     def _sample(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         pts = np.column_stack([y, x])
@@ -137,10 +157,13 @@ class SurfaceForward:
             xr, yr = self.x - dx, self.y - dy
             qx, qy = c * xr + s * yr, -s * xr + c * yr
             base = self._sample(qx, qy)
-            base = np.where(np.isfinite(base), base, 0.0)  # points moved off the map: no deformation there
+            off = ~np.isfinite(base)
+            base = np.where(off, 0.0, base)  # points moved off the map: no deformation there
+            quilt = quilt_parts(self.quilt, qx, qy)
+            quilt = None if quilt is None else tuple(np.where(off, 0.0, c) for c in quilt)
         else:
-            base, qx, qy = self.base, self.x, self.y
-        base = blank_shape_um(base, qx, qy, p)
+            base, qx, qy, quilt = self.base, self.x, self.y, self._quilt_at
+        base = blank_shape_um(base, qx, qy, p, quilt)
         return self.factor(p) * base + p.get("astig_0_um", 0.0) * self.z22 + p.get("astig_45_um", 0.0) * self.z2m2
 
     def residual(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
@@ -164,7 +187,8 @@ class SurfaceForward:
 #: Parameters that change the spectrograph image (profiles and PSF images) beyond the
 #: deformation's overall factor: the memo key of the image models.
 PROFILE_KEYS = ("pupil_x_mm", "pupil_y_mm", "coll_coma_um", "coll_defocus_um", "coll_astig45_um", "slit_image_width_um",
-                "plating_grad_x", "plating_grad_y", "bow_defocus_um", "bow_spherical_um")
+                "plating_grad_x", "plating_grad_y", "bow_defocus_um", "bow_spherical_um", "quilt_fund_xy_ratio",
+                "quilt_harmonics_ratio")
 
 
 def collimator_terms(p: dict) -> dict:
@@ -206,6 +230,9 @@ class SpectrographImageModel:
         self.m, self.name, self.blank = m, m.name, m.blank
         self.nominal, self.cold_K, self.warm_K, self.settings = nominal, cold_K, warm_K, settings
         self._grid = nominal.grid()
+        self.quilt = quilt_components(nominal)
+        self._quilt_at = quilt_parts(self.quilt, *self._grid)
+        self._nulls = {q: parameter_spec(q).null for q in self._KEYS}
         self._cache: OrderedDict = OrderedDict()
         self._cache_size = cache_size
         self.noise_known = m.noise_rel
@@ -217,13 +244,12 @@ class SpectrographImageModel:
     def _memo(self, p: dict, build):
         """``build(sag, p)`` for the grating's deformed sag, memoised on the physical parameters."""
         k = self.factor(p)
-        key = (round(k, 12),) + tuple(round(float(p.get(q, NOMINAL_SLIT_UM if q.startswith("slit") else 0.0)), 12)
-                                      for q in self._KEYS)
+        key = (round(k, 12),) + tuple(round(float(p.get(q, self._nulls[q])), 12) for q in self._KEYS)
         hit = self._cache.get(key)
         if hit is not None:
             self._cache.move_to_end(key)
             return hit
-        out = build(self.nominal.with_sag(k * blank_shape_um(self.nominal.sag_um, *self._grid, p)), p)
+        out = build(self.nominal.with_sag(k * blank_shape_um(self.nominal.sag_um, *self._grid, p, self._quilt_at)), p)
         self._cache[key] = out
         if len(self._cache) > self._cache_size:
             self._cache.popitem(last=False)

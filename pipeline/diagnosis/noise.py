@@ -14,9 +14,11 @@ profiles and images); positions in µm or mm, only their spacing matters.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-__all__ = ["effective_samples", "estimate_noise", "estimate_noise_band_limited"]
+__all__ = ["effective_samples", "estimate_noise", "estimate_noise_band_limited", "TwoPartErrors", "two_part_errors"]
 
 
 def _standardised_errors(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -186,3 +188,46 @@ def effective_samples(residual: np.ndarray, x: np.ndarray, y: np.ndarray | None 
             bucket.append(r[sel[np.argsort(other[sel])]])
     L = _integral_scale(rows) * _integral_scale(cols)
     return float(np.clip(r.size / L, min(10.0, r.size), r.size))
+
+
+@dataclass(frozen=True)
+class TwoPartErrors:
+    """A residual's errors as white noise plus a smooth mismatch.
+
+    ``sigma_w`` white-noise sigma (given or estimated from the data); ``sigma_m`` the
+    mismatch's RMS, ``sqrt(max(var(r) - sigma_w^2, 0))``; ``corr_samples`` its integral
+    correlation length ``L_m`` in samples (an area in samples for a map or image: the
+    product of the lengths along rows and columns), from the residual's autocorrelation
+    at non-zero lags, where white noise does not contribute; ``long_run_var`` =
+    ``sigma_w^2 + sigma_m^2 L_m``: the variance per sample that a *smooth* change of the
+    model competes with (a change rough on the scale of ``L_m`` competes with ``sigma_w``
+    only, so this is the conservative one); ``n_samples`` the residual's size."""
+
+    sigma_w: float
+    sigma_m: float
+    corr_samples: float
+    long_run_var: float
+    n_samples: int
+
+    @property
+    def n_independent(self) -> float:
+        """Samples worth of independent information: ``n (sigma_w^2 + sigma_m^2) / long_run_var``."""
+        return self.n_samples * (self.sigma_w**2 + self.sigma_m**2) / self.long_run_var
+
+
+def two_part_errors(residual: np.ndarray, x: np.ndarray, y: np.ndarray | None, sigma_w: float) -> TwoPartErrors:
+    """Split a residual's errors into white noise ``sigma_w`` and a smooth mismatch
+    (:class:`TwoPartErrors`). The total residual's integral correlation length ``L``
+    (:func:`effective_samples`) gives its long-run variance ``var(r) L``; white noise
+    contributes ``sigma_w^2`` to it, the mismatch the rest, so ``L_m = (var(r) L -
+    sigma_w^2) / sigma_m^2`` (floored at 1 sample)."""
+    r = np.asarray(residual, float)
+    if not (np.isfinite(sigma_w) and sigma_w >= 0):
+        raise ValueError(f"two_part_errors: sigma_w={sigma_w} must be a finite number >= 0")
+    n = r.size
+    var = float(np.mean((r - np.mean(r)) ** 2)) if n else 0.0
+    L = n / effective_samples(r, x, y) if n else 1.0
+    sm2 = max(var - sigma_w**2, 0.0)
+    lrv = max(var * L, sigma_w**2, 1e-300)
+    Lm = max((lrv - sigma_w**2) / sm2, 1.0) if sm2 > 0 else 1.0
+    return TwoPartErrors(float(sigma_w), float(np.sqrt(sm2)), float(Lm), float(sigma_w**2 + sm2 * Lm), int(n))

@@ -13,6 +13,8 @@ import numpy as np
 
 from pipeline.io_common import atomic_write
 
+from .effects import library_rows
+
 __all__ = ["write_report"]
 
 
@@ -85,6 +87,13 @@ def _fmt(v):
     return f"{v:.4g}" if isinstance(v, float) else v
 
 
+def _param_text(f, k: str) -> str:
+    """'temperature_offset_K = 12.3 ± 1.1 K' (unit from the finding's parameter_units)."""
+    unit = f.parameter_units.get(k, "")
+    unit = "" if unit in ("", "1") else f" {unit}"
+    return f"{k} = {f.parameters[k]:.4g} ± {f.uncertainties.get(k, float('nan')):.2g}{unit}"
+
+
 def _absorbs_text(absorbed: str, k: dict) -> str:
     """'coll_defocus_um contains -1.7 x bow_defocus_um' (terms above 5 % of the largest)."""
     big = max((abs(m) for m in k.values()), default=0.0)
@@ -105,7 +114,7 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
     if d.best:
         b = d.best
         parts.append(f"<p>Best: <b>{html.escape(b.effect)}</b> — parameters "
-                     + ", ".join(f"{k} = {v:.4g} ± {b.uncertainties.get(k, float('nan')):.2g}" for k, v in b.parameters.items())
+                     + ", ".join(html.escape(_param_text(b, k)) for k in b.parameters)
                      + f"; residual RMS {b.residual_rms_before:.4g} → {b.residual_rms_after:.4g} (shrink {b.shrink_fraction:.2f}, "
                      f"held-out shrink {b.heldout_shrink_fraction if b.heldout_shrink_fraction is None else round(b.heldout_shrink_fraction, 2)})"
                      + (f"; degenerate with {', '.join(b.degenerate_with)}" if b.degenerate_with else "")
@@ -113,6 +122,10 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
                      + (f"; sign undetermined: {', '.join(b.sign_degenerate)}" if b.sign_degenerate else "")
                      + (f"; not constrained by these data (1σ beyond half the prior range): {', '.join(b.unconstrained)}"
                         if b.unconstrained else "") + "</p>")
+        if b.summary:
+            parts.append("<p>In physical terms: " + "; ".join(
+                f"{html.escape(e)}: " + html.escape(", ".join(f"{k} = {_fmt(v)}" for k, v in s.items()))
+                for e, s in b.summary.items()) + "</p>")
         if b.absorbs:
             parts.append("<p>These data cannot identify some effects on their own; the parameters above contain them: "
                          + "; ".join(html.escape(_absorbs_text(k, v)) for k, v in b.absorbs.items())
@@ -131,7 +144,7 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
              "overfit": f.overfit, "degenerate with": ", ".join(f.degenerate_with),
              "fitted with": ", ".join(f.companions), "sign undetermined": ", ".join(f.sign_degenerate),
              "unconstrained": ", ".join(f.unconstrained), "absorbs": ", ".join(f.absorbs),
-             "parameters": ", ".join(f"{k}={v:.4g}±{f.uncertainties.get(k, float('nan')):.2g}" for k, v in f.parameters.items())}
+             "parameters": ", ".join(_param_text(f, k) for k in f.parameters)}
             for f in d.findings]
     parts += ["<h2>Ranking</h2>", _png(_ranking_figure(d.findings)) if d.findings else "",
               _table(rows, list(rows[0]) if rows else [])]
@@ -152,6 +165,10 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
         parts.append("<h2>Per measurement (best finding)</h2>" + _table(
             [{k: _fmt(v) for k, v in p.items()} for p in d.best.per_measurement],
             ["measurement", "unit", "rms_before", "rms_after", "noise", "chi2_red_before", "chi2_red_after"]))
+    tried = {e for f in d.findings for e in tuple(f.effects) + tuple(f.companions)}
+    parts.append("<h2>Effect parameters</h2>" + _table(
+        [{k: _fmt(v) for k, v in r.items()} for r in library_rows() if r["effect"] in tried],
+        ["effect", "parameter", "unit", "null", "prior", "kinds", "meaning"]))
     parts.append(f"<p>timings (s): {html.escape(json.dumps(d.timings_s))}</p>")
     style = "<style>body{font-family:sans-serif;max-width:1100px} table{border-collapse:collapse;font-size:12px} td,th{border:1px solid #ccc;padding:2px 6px}</style>"
     hpath = out / "report.html"

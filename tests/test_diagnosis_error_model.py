@@ -1,0 +1,77 @@
+"""The two-part error model (white noise plus a smooth mismatch; ``Criteria.error_model =
+"two_part"``): the split of a residual, the sign rule, and a diagnosis with it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.ndimage import gaussian_filter1d
+
+from pipeline.diagnosis import diagnose
+from pipeline.diagnosis.engine import Criteria
+from pipeline.diagnosis.error_model import SIGN_Z, sign_is_claimed
+from pipeline.diagnosis.noise import two_part_errors
+from optics.zernike import zernike_xy
+
+from test_diagnosis import _map
+
+
+def test_two_part_split_of_a_residual():
+    """White noise plus Gaussian-filtered noise of filter width s samples: the mismatch's
+    integral correlation length is 2 sqrt(pi) s (the integral of its Gaussian
+    autocorrelation of width sqrt(2) s); its RMS is what the residual has beyond the noise."""
+    x = np.arange(4000.0)
+    s = 8.0
+    lengths = []
+    for seed in range(20):  # the integral-scale estimate scatters by ~15 % at 4000 samples
+        rng = np.random.default_rng(seed)
+        m = gaussian_filter1d(rng.normal(size=x.size), s)
+        m *= 0.03 / m.std()
+        e = two_part_errors(m + rng.normal(0.0, 0.01, x.size), x, None, 0.01)
+        assert e.sigma_m == pytest.approx(0.03, rel=0.05)
+        assert e.long_run_var == pytest.approx(0.01**2 + e.sigma_m**2 * e.corr_samples)
+        lengths.append(e.corr_samples)
+    assert np.mean(lengths) == pytest.approx(2 * np.sqrt(np.pi) * s, rel=0.1)
+    assert min(lengths) > 0.5 * 2 * np.sqrt(np.pi) * s and max(lengths) < 1.5 * 2 * np.sqrt(np.pi) * s
+    white = two_part_errors(rng.normal(0.0, 0.01, x.size), x, None, 0.01)
+    assert white.sigma_m < 0.003 and white.long_run_var == pytest.approx(1e-4, rel=0.3)
+    with pytest.raises(ValueError, match="sigma_w"):
+        two_part_errors(m, x, None, float("nan"))
+
+
+class _Fit:
+    def __init__(self, cost):
+        self.cost = cost
+
+    def weighted_rss(self, w):
+        return self.cost
+
+
+class _Prob:
+    weights = {"a": 1.0}
+
+
+def test_sign_claimed_only_beyond_what_the_errors_could_do():
+    """Flip separation D (chi^2 units): the errors move the flip's cost by 2 sqrt(D) per
+    standard deviation; a sign is claimed iff the observed extra cost exceeds SIGN_Z of them."""
+    d = np.full(100, 0.5)  # D = 25: the errors move the cost by 10 (1 sigma)
+    pred, flip = {"a": np.zeros(100)}, {"a": d}
+    assert sign_is_claimed(_Prob(), _Fit(100.0), _Fit(100.0 + 2 * SIGN_Z * 5.0 + 1.0), pred, flip)
+    assert not sign_is_claimed(_Prob(), _Fit(100.0), _Fit(100.0 + 2 * SIGN_Z * 5.0 - 1.0), pred, flip)
+
+
+def test_criteria_error_model_checked():
+    with pytest.raises(ValueError, match="error_model"):
+        Criteria(error_model="gls")
+
+
+@pytest.mark.slow
+def test_two_part_diagnosis_of_an_astigmatic_map(tmp_path):
+    """The same map as test_diagnosis's astigmatism case: the astigmatism is still found and
+    recovered; the errors are recorded (the truth's quilt mismatch is smooth: sigma_m > 0)."""
+    p = _map(tmp_path, lambda x, y: 0.08 * zernike_xy(2, -2, x, y, 68.5))
+    d = diagnose(p, criteria=Criteria(error_model="two_part"))
+    assert d.verdict == "explained" and "astigmatism" in d.best.effects
+    assert d.best.parameters["astig_45_um"] == pytest.approx(0.08, rel=0.1)
+    e = d.baseline["errors"]["map"]
+    assert e["sigma_w"] == pytest.approx(0.01, rel=0.2) and e["sigma_m"] > 0 and e["corr_samples"] > 1

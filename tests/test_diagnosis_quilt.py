@@ -1,0 +1,232 @@
+"""The ``quilt_shape`` effect: the quilt's harmonic content as a library effect.
+
+Fixtures are written with plain numpy: a nominal map whose quilt has the FEA's Fourier
+content (amplitudes of the default-mesh 200 µm / 75 % map at 80 K over the 82 x 72 mm
+centre: (1,0) 0.117, (0,1) 0.105, (1,±1) 0.032 in antiphase, (2,0) 0.014, (0,2) 0.010 µm)
+on a smooth figure, and truths whose quilt differs in shape; line profiles of the truths
+come straight from :func:`optics.lineprofile.line_profile`, not from the diagnosis's own
+forward model or transform."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from optics.grating import get_grating
+from optics.lineprofile import line_profile
+from optics.sagmap import SagMap
+from pipeline.diagnosis import diagnose
+from pipeline.diagnosis.effects import LIBRARY, effect_parameters
+from pipeline.diagnosis.forward import ProfileForward, SurfaceForward
+from pipeline.diagnosis.manifest import load_data, load_manifest
+from pipeline.diagnosis.nominal import thermal_factor
+from pipeline.diagnosis.quilt import quilt_components
+from pipeline.diagnosis.synth import quilt_shape_map, synthetic_surface, write_profile_csv
+from pipeline.interchange import write_sag_map
+
+DX, DY = 21.0, 18.0
+FUND_X_UM, FUND_Y_UM = 0.117, 0.105
+CROSS_UM, H20_UM, H02_UM = 0.032, 0.014, 0.010
+
+
+def _grid():
+    x = np.arange(-80.0, 80.01, 0.5)
+    y = np.arange(-70.0, 70.01, 0.5)
+    return x, y, *np.meshgrid(x, y)
+
+
+def _smooth(X, Y):
+    """A smooth, non-periodic figure (bowl and edge roll-off, µm): what amplitude_scale
+    scales and quilt_shape does not."""
+    r2 = (X / 70.0) ** 2 + (Y / 70.0) ** 2
+    return -0.12 * r2 + 0.05 * r2**2 + 0.02 * (X / 70.0) ** 2
+
+
+def _quilt(X, Y, fund_x=1.0, fund_y=1.0, harmonics=1.0):
+    cx, cy = np.cos(2 * np.pi * X / DX), np.cos(2 * np.pi * Y / DY)
+    h = -2 * CROSS_UM * cx * cy + H20_UM * np.cos(4 * np.pi * X / DX) + H02_UM * np.cos(4 * np.pi * Y / DY)
+    return fund_x * FUND_X_UM * cx + fund_y * FUND_Y_UM * cy + harmonics * h
+
+
+def _map(**kw) -> SagMap:
+    x, y, X, Y = _grid()
+    return SagMap(x, y, _smooth(X, Y) + _quilt(X, Y, **kw), "analytic FEA-like quilt")
+
+
+def test_decomposition_of_an_analytic_quilt():
+    """The Fourier split returns the fundamentals and harmonics that were written in (the
+    smooth figure leaks into them by what a finite aperture allows: < 2 nm)."""
+    x, y, X, Y = _grid()
+    q = quilt_components(_map())
+    fx = q.fundamental_x_um(X, Y)
+    fy = q.fundamental_y_um(X, Y)
+    h = q.harmonics_um(X, Y)
+    assert np.max(np.abs(fx - FUND_X_UM * np.cos(2 * np.pi * X / DX))) < 2e-3
+    assert np.max(np.abs(fy - FUND_Y_UM * np.cos(2 * np.pi * Y / DY))) < 2e-3
+    h_true = _quilt(X, Y) - FUND_X_UM * np.cos(2 * np.pi * X / DX) - FUND_Y_UM * np.cos(2 * np.pi * Y / DY)
+    assert np.max(np.abs(h - h_true)) < 2e-3
+    rms = q.amplitudes_um()
+    assert rms["fundamental_x"] == pytest.approx(FUND_X_UM / np.sqrt(2), rel=0.02)
+    assert rms["harmonics"] == pytest.approx(np.sqrt((2 * CROSS_UM**2 + H20_UM**2 + H02_UM**2) / 2), rel=0.05)
+
+
+def test_null_parameters_reproduce_the_nominal_exactly(tmp_path):
+    nominal = _map()
+    assert np.array_equal(quilt_shape_map(nominal, 1.0, 1.0).sag_um, nominal.sag_um, equal_nan=True)
+    write_sag_map(nominal, tmp_path / "nominal.npz")
+    write_sag_map(synthetic_surface(nominal, np.random.default_rng(0)), tmp_path / "map.npz")
+    u = np.arange(-100.0, 100.1, 2.0)
+    write_profile_csv(tmp_path / "p.csv", u, np.exp(-0.5 * (u / 20.0) ** 2))
+    (tmp_path / "m.toml").write_text(
+        '[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\nkind = "surface"\nfile = "map.npz"\n'
+        'temperature_K = 80\naperture_diameter_mm = 137\n\n[[measurement]]\nkind = "line_profile"\nfile = "p.csv"\n'
+        'grating = "J"\norder = -2\nwavelength_um = 1.25\npixel_scale_mas = 250\n')
+    data = load_data(load_manifest(tmp_path / "m.toml"))
+    null = {"quilt_fund_xy_ratio": 1.0, "quilt_harmonics_ratio": 1.0}
+    s = SurfaceForward(data[0], nominal, 80.0)
+    assert np.array_equal(s.predict(null), s.predict({}))
+    assert not np.allclose(s.predict({"quilt_harmonics_ratio": 0.0}), s.predict({}))
+    p = ProfileForward(data[1], nominal, 80.0)
+    a = p.predict(null)
+    p._cache.clear()  # recompute rather than hit the memo
+    assert np.array_equal(a, p.predict({}))
+
+
+def test_y_fundamental_is_fitted_only_where_data_can_see_it():
+    names = lambda kinds: [q.name for q in effect_parameters(LIBRARY["quilt_shape"], (), kinds)]
+    assert names({"line_profile"}) == ["quilt_harmonics_ratio"]
+    assert names({"surface"}) == names({"psf_image"}) == ["quilt_fund_xy_ratio", "quilt_harmonics_ratio"]
+
+
+def _write_map_case(tmp_path, truth: SagMap, seed=1):
+    write_sag_map(_map(), tmp_path / "nominal.npz")
+    write_sag_map(synthetic_surface(truth.scaled(thermal_factor(128, 80)), np.random.default_rng(seed), noise_um=0.01),
+                  tmp_path / "map.npz")
+    p = tmp_path / "m.toml"
+    p.write_text('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\nkind = "surface"\n'
+                 'file = "map.npz"\ntemperature_K = 128\naperture_diameter_mm = 137\n')
+    return p
+
+
+def test_pure_sinusoid_map_has_no_harmonics(tmp_path):
+    """A map whose quilt is a pure sinusoid at the nominal fundamentals' amplitudes (numpy,
+    not the effect's transform): quilt_shape explains it, with the harmonics ratio at its
+    'no harmonics' value 0 within 2 sigma (and sigma small enough to mean something) and
+    the x/y ratio at 1."""
+    x, y, X, Y = _grid()
+    truth = SagMap(x, y, _smooth(X, Y) + FUND_X_UM * np.cos(2 * np.pi * X / DX) + FUND_Y_UM * np.cos(2 * np.pi * Y / DY))
+    d = diagnose(_write_map_case(tmp_path, truth))
+    assert d.verdict == "explained" and d.best.effect == "quilt_shape", [(f.effect, f.delta_bic) for f in d.findings]
+    h, sh = d.best.parameters["quilt_harmonics_ratio"], d.best.uncertainties["quilt_harmonics_ratio"]
+    assert sh < 0.05 and abs(h) <= 2 * sh + 1e-3, (h, sh)
+    r, sr = d.best.parameters["quilt_fund_xy_ratio"], d.best.uncertainties["quilt_fund_xy_ratio"]
+    assert abs(r - 1.0) <= 2 * sr + 0.01, (r, sr)
+    assert all(set(f.parameter_units) == set(f.parameters) for f in d.findings)
+    assert d.best.parameter_units["quilt_harmonics_ratio"] == "1"
+    assert d.best.summary["quilt_shape"]["harmonics_rms_um"] < 0.005
+    # units and summaries reach diagnosis.json and the report
+    import json
+
+    from pipeline.diagnosis.report import write_report
+
+    jpath, hpath = write_report(d, tmp_path / "out")
+    j = json.loads(jpath.read_text())
+    assert j["findings"][0]["parameter_units"] == {"quilt_fund_xy_ratio": "1", "quilt_harmonics_ratio": "1"}
+    assert j["findings"][0]["summary"]["quilt_shape"]["fundamental_x_rms_um"] == pytest.approx(FUND_X_UM / np.sqrt(2),
+                                                                                             rel=0.02)
+    assert {r["parameter"] for r in j["effect_library"]} >= {"quilt_harmonics_ratio", "temperature_offset_K"}
+    page = hpath.read_text()
+    assert "Effect parameters" in page and "In physical terms" in page and "harmonics_rms_um" in page
+
+
+def _sample_profile(u, y, rng, noise_rel=0.01):
+    """A measured profile from a model curve: random offsets, a shift, counts, a
+    background pedestal and white noise (negative samples kept)."""
+    x = np.sort(rng.choice(np.arange(-120.0, 120.01, 0.5), size=160, replace=False))
+    shift = rng.uniform(-4.0, 4.0)
+    v = np.interp(x - shift, u, y, left=0.0, right=0.0)
+    peak = y.max()
+    return x, 5000.0 * (v + 0.03 * peak + rng.normal(0.0, noise_rel * peak, x.size))
+
+
+@pytest.mark.parametrize("harmonics", [0.0, pytest.param(2.0, marks=pytest.mark.slow)])
+def test_profiles_of_another_quilt_shape_are_named_quilt_shape(tmp_path, harmonics):
+    """Line profiles (J, 1.25 µm at 250 and 25 mas, 1.175 µm at 25 mas) of a blank whose
+    quilt is sum-form (no harmonics) or carries twice the nominal's harmonics, made with
+    optics.lineprofile.line_profile on numpy maps: attributed to quilt_shape (not to
+    pupil_shift, slit_width or collimator_wfe), harmonics ratio within 0.2 of the truth."""
+    write_sag_map(_map(), tmp_path / "nominal.npz")
+    truth = _map(harmonics=harmonics)
+    rng = np.random.default_rng(11)
+    lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
+    for i, (wl, ps) in enumerate(((1.25, 250), (1.25, 25), (1.175, 25))):
+        r = line_profile(get_grating("J"), wl, ps, truth, order=-2)
+        u, y = _sample_profile(r.detected.offset_um, r.detected.intensity, rng)
+        write_profile_csv(tmp_path / f"p{i}.csv", u, y)
+        lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{i}.csv"\ngrating = "J"\norder = -2\n'
+                     f'wavelength_um = {wl}\npixel_scale_mas = {ps}\n')
+    (tmp_path / "m.toml").write_text("\n".join(lines))
+    d = diagnose(tmp_path / "m.toml")
+    ranking = [(f.effect, round(f.delta_bic, 1)) for f in d.findings]
+    assert d.verdict == "explained" and d.best.effect == "quilt_shape", ranking
+    assert d.best.parameters["quilt_harmonics_ratio"] == pytest.approx(harmonics, abs=0.2), ranking
+
+
+def test_readme_lists_every_effect_and_parameter():
+    """The README's parameter table is the library's (generated by library_markdown)."""
+    from pathlib import Path
+
+    from pipeline.diagnosis.effects import library_markdown
+
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    table = library_markdown()
+    assert table in readme
+    for e in LIBRARY.values():
+        for q in e.parameters:
+            assert f"| {e.name} | `{q.name}" in table
+            assert q.unit and q.meaning, q.name
+
+
+def test_physical_summaries():
+    """Absolute numbers beside the parameters: the cold temperature, one blank's scale, the
+    RMS of Zernike-type effects (orthonormal terms: the norm of the coefficients) with the
+    aperture it refers to."""
+    from pipeline.diagnosis.effects import SummaryContext, parameter_units, physical_summary
+
+    ctx = SummaryContext(cold_K=80.0, blanks=("J",), surface_radii_mm=(68.5,))
+    s = physical_summary(("temperature", "amplitude_scale", "astigmatism", "collimator_wfe", "blank_bow"),
+                         {"temperature_offset_K": 12.5, "scale_J": 1.3, "astig_0_um": 0.03, "astig_45_um": -0.04,
+                          "coll_coma_um": 0.1, "coll_defocus_um": 0.2, "coll_astig45_um": -0.2,
+                          "bow_defocus_um": 0.01, "bow_spherical_um": 0.0}, ctx)
+    assert s["temperature"]["temperature_K"] == 92.5 and s["temperature"]["temperature_offset_K"] == 12.5
+    assert s["amplitude_scale"] == {"scale": 1.3}
+    assert s["astigmatism"]["rms_um"] == pytest.approx(0.05) and s["astigmatism"]["aperture"].startswith("disc r=68.5 mm")
+    assert s["collimator_wfe"]["rms_um"] == pytest.approx(0.3) and "r=55 mm" in s["collimator_wfe"]["aperture"]
+    assert "r=70 mm" in s["blank_bow"]["aperture"]
+    two = physical_summary(("amplitude_scale",), {"scale_H": 1.2, "scale_K": 1.1}, SummaryContext(80.0, ("H", "K")))
+    assert "scale" not in two.get("amplitude_scale", {})  # one number only where one blank is measured
+    assert parameter_units(["scale_J", "temperature_offset_K", "reg_rot_deg", "astig_0_um"]) == {
+        "scale_J": "1", "temperature_offset_K": "K", "reg_rot_deg": "deg", "astig_0_um": "µm"}
+    with pytest.raises(ValueError, match="not in the effect library"):
+        parameter_units(["no_such_um"])
+
+
+def test_same_quilt_change_on_maps_and_spectrograph_images(tmp_path):
+    """One transform for every kind: the map model at its points and the sag the profile
+    and PSF-image models (their shared memo) build from are the reshaped nominal map."""
+    nominal = _map()
+    write_sag_map(nominal, tmp_path / "nominal.npz")
+    write_sag_map(synthetic_surface(nominal, np.random.default_rng(0)), tmp_path / "map.npz")
+    u = np.arange(-100.0, 100.1, 2.0)
+    write_profile_csv(tmp_path / "p.csv", u, np.exp(-0.5 * (u / 20.0) ** 2))
+    (tmp_path / "m.toml").write_text(
+        '[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\nkind = "surface"\nfile = "map.npz"\n'
+        'temperature_K = 80\naperture_diameter_mm = 137\n\n[[measurement]]\nkind = "line_profile"\nfile = "p.csv"\n'
+        'grating = "J"\norder = -2\nwavelength_um = 1.25\npixel_scale_mas = 250\n')
+    data = load_data(load_manifest(tmp_path / "m.toml"))
+    p = {"quilt_fund_xy_ratio": 1.3, "quilt_harmonics_ratio": 0.4}
+    expect = quilt_shape_map(nominal, 1.3, 0.4)
+    s = SurfaceForward(data[0], nominal, 80.0)
+    assert np.allclose(s.predict(p), expect.sample(s.x, s.y), atol=1e-9)
+    sag = ProfileForward(data[1], nominal, 80.0)._memo(p, lambda sag, p: sag)
+    assert np.allclose(sag.sag_um, expect.sag_um, atol=1e-12, equal_nan=True)
