@@ -336,3 +336,25 @@ def test_truth_package_imports_no_forward_model_code():
                     assert [a.name for a in node.names] == ["DEFAULT_COLLIMATOR_ZERNIKE_UM"], f.name
             elif isinstance(node, ast.Import):
                 assert not {a.name for a in node.names} & forbidden, f.name
+
+
+def test_a_refused_case_attributes_nothing_and_the_campaign_goes_on(tmp_path, monkeypatch):
+    """A case the diagnosis refuses before any fit (implausible data) is scored as not
+    explained: wrong for a library effect, left unexplained for an out-of-library one."""
+    from pipeline.diagnosis import campaign
+
+    s = quilt_sag_map(0.6, "sum", spacing_mm=0.5)
+
+    def refuse(*a, **k):
+        raise ValueError("implausible data, nothing diagnosed: measurement 'map': no signal")
+
+    monkeypatch.setattr(campaign, "campaign_maps", lambda cfg, cache_dir=None: (s, s))
+    monkeypatch.setattr(campaign, "diagnose", refuse)
+    cfg = campaign.CampaignConfig(n_cases=7, workers=1, seed=3,
+                                  only_types=(("surface", "astigmatism"), ("surface", "ool_defect")))
+    res = campaign.run_campaign(cfg)
+    rows = res["cases"]
+    assert [r["verdict"] for r in rows] == ["refused", "refused"]
+    assert not any(r["correct"] for r in rows) and "no signal" in rows[0]["refusal"]
+    by = res["summary"]["by_measurement"]["map"]
+    assert (by["correct_top"], by["ool_unexplained"]) == (0, 1)

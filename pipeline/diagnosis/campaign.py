@@ -355,7 +355,14 @@ def run_case(args) -> dict:
         truth_info = truth.pop("_truth", None)
         from .manifest import parse_manifest
 
-        d = diagnose(parse_manifest(man, tmp), criteria=cfg.criteria, nominal=nominal, keep_curves=False)
+        try:
+            d = diagnose(parse_manifest(man, tmp), criteria=cfg.criteria, nominal=nominal, keep_curves=False)
+        except ValueError as exc:  # refused before any fit (implausible data): attributes nothing
+            return {"index": index, "kind": kind, "effect": effect, "truth": truth, "truth_info": truth_info,
+                    "truth_present": list(present), "measurement": _measurement_kind(kind, cfg),
+                    "false_companions": [], "verdict": "refused", "refusal": str(exc), "top": None,
+                    "correct": False, "recovery_error": None, "recovery_error_vector": None,
+                    "within_2sigma": None, "seconds": time.perf_counter() - t0}
     best = d.best
     in_lib = effect in LIBRARY
     rec = recovery_errors(d, effect, truth)
