@@ -14,8 +14,6 @@ Acceptance rules (fixed before the model numbers were looked at):
 
 from __future__ import annotations
 
-import numpy as np
-
 from optics.fitting import fit_fourier
 from optics.metrics import profile_metrics
 from optics.sagmap import SagMap

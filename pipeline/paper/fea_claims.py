@@ -209,7 +209,7 @@ def _surfaces(fea: PaperFEA) -> Claim:
               + f" µm (paper's own values {'inside' if all(inside) else 'outside'} these: "
               + ", ".join("in" if i else "out" for i in inside) + "); "
               f"Table 1's polish step (faces 100 µm) bounds PV of that difference from below by "
-              f"{paper_face_lb:.2f} µm, it does not equal it (model PV of the difference {faces100 * 1:.2f} µm); "
+              f"{paper_face_lb:.2f} µm, it does not equal it (model PV of the difference {faces100:.2f} µm); "
               f"model superposition residual PV(all - holes - surfaces) {superpos:.3f} µm")
     return Claim("table2_surfaces", "P/V_center with NiP only on the outer surfaces (faces and side faces)",
                  "Table 2 (appendix B)", ", ".join(f"{r.paper_pv_um:.2f}" for r in s) + " µm",

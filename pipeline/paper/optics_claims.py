@@ -52,7 +52,7 @@ import numpy as np
 from optics.lineprofile import line_profile, point_psf
 from optics.metrics import find_profile_peaks, fwhm_um, l1_distance, profile_metrics
 from optics.sagmap import SagMap, quilt_sag_map
-from pipeline.paper.claim import Claim, grade
+from pipeline.paper.claim import Claim
 from pipeline.paper.fea_claims import PaperFEA
 
 __all__ = ["ProfileBook", "optics_claims", "satellites", "double_peak_ok", "SCALES_MAS"]
@@ -302,8 +302,8 @@ def _perfect_r(book: ProfileBook) -> Claim:
 def _sinusoid(fea: PaperFEA, book: ProfileBook) -> Claim:
     book.sags.setdefault("sinusoid", quilt_sag_map(SINUSOID_PV_UM, "sum", spacing_mm=0.5, label="sinusoid 0.58"))
     ok = {m: double_peak_ok(book.get("sinusoid", "J", 1.25, m)) for m in (100, 250)}
-    w_s = fwhm_um(*(lambda p: (p.offset_um, p.intensity))(book.get("sinusoid", "J", 1.25, 250)))
-    w_f = fwhm_um(*(lambda p: (p.offset_um, p.intensity))(book.get("200/50", "J", 1.25, 250)))
+    ps, pf = book.get("sinusoid", "J", 1.25, 250), book.get("200/50", "J", 1.25, 250)
+    w_s, w_f = fwhm_um(ps.offset_um, ps.intensity), fwhm_um(pf.offset_um, pf.intensity)
     both, narrower = all(v[0] for v in ok.values()), w_s < w_f
     st = "reproduced" if both and narrower else ("partial" if both or narrower else "contradicted")
     return Claim("sinusoid_058", "A 0.58 µm P/V sinusoid at the hole pitch matches the J profiles, but narrower",
