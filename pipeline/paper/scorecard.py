@@ -71,11 +71,12 @@ def _figures(fea, book: ProfileBook, factor: float, out: Path) -> list[str]:
         sags = ["perfect", "200/50", "sinusoid"] + ([f"200/50 x{factor:.2f}"] if factor == factor else [])
         for s in sags:
             p = book.get(s, "J", 1.25, mas)
-            ax.plot(p.offset_um, p.intensity, label=s)
+            ax.plot(p.offset_um, p.intensity, label="sinusoid 0.58 µm P/V (analytic)" if s == "sinusoid" else s)
         ax.set_xlim(-80, 80)
         ax.set_title(f"J 1.25 µm, {mas} mas")
         ax.set_xlabel("offset (µm)")
     axes[0].legend(fontsize=8)
+    axes[0].set_ylabel("detected profile (unit area, 1/µm)")
     fig.tight_layout()
     with atomic_path(out / "j_double_peak.png") as tmp:
         fig.savefig(tmp, format="png", dpi=110)
