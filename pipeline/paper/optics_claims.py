@@ -55,7 +55,7 @@ from optics.sagmap import SagMap, quilt_sag_map
 from pipeline.paper.claim import Claim
 from pipeline.paper.fea_claims import PaperFEA
 
-__all__ = ["ProfileBook", "optics_claims", "satellites", "double_peak_ok", "SCALES_MAS"]
+__all__ = ["ProfileBook", "optics_claims", "satellites", "double_peak_ok", "pupil_variation", "SCALES_MAS"]
 
 SCALES_MAS = (25, 100, 250)
 SAT_J_UM, SAT_K_UM = (17.0, 22.0), (34.0, 38.0)
@@ -217,13 +217,15 @@ def _smaller_at_25(book: ProfileBook) -> Claim:
                  "min(100, 250) in both bands", "fea")
 
 
-def _pupil_variation(book, grating, wl, mas):
+def pupil_variation(book: ProfileBook, grating: str, wl: float, mas: int) -> float:
+    """Largest L1 distance (0-2) between the centred profile of ``book``'s "200/50" map and
+    the profiles with the footprint shifted along dispersion by :data:`PUPIL_SHIFTS_MM`."""
     c = book.get("200/50", grating, wl, mas)
     return max(l1_distance(c, book.get("200/50", grating, wl, mas, shift_x_mm=s)) for s in PUPIL_SHIFTS_MM)
 
 
 def _pupil_claims(book: ProfileBook) -> list[Claim]:
-    v = {(g, m): _pupil_variation(book, g, wl, m) for g, wl in (("J", 1.25), ("K", 2.20)) for m in SCALES_MAS}
+    v = {(g, m): pupil_variation(book, g, wl, m) for g, wl in (("J", 1.25), ("K", 2.20)) for m in SCALES_MAS}
     j25, j100, j250 = v["J", 25], v["J", 100], v["J", 250]
     if j25 >= PUPIL_FACTOR * j100 and j100 >= j250:
         st = "reproduced"
