@@ -31,6 +31,14 @@ def _cmd_tables(a) -> int:
     return 0
 
 
+def _cmd_paper(a) -> int:
+    from pipeline.paper import format_scorecard, scorecard
+
+    print(format_scorecard(scorecard(a.out, progress=not a.quiet)))
+    print(f"\nwritten: {Path(a.out) / 'scorecard.json'}, {Path(a.out) / 'scorecard.md'}")
+    return 0
+
+
 def _cmd_sweep(a) -> int:
     from pipeline.fea_cases import run_fea_sweep
 
@@ -164,6 +172,11 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--mesh-bulk-mm", type=float, default=None, help="element size in the bulk (mm)")
     q.add_argument("--quiet", action="store_true")
     q.set_defaults(func=_cmd_tables)
+
+    q = sub.add_parser("paper", help="the paper's claims, one by one, on the model: scorecard.json/.md + figures")
+    q.add_argument("--out", default="results/paper", help="output directory (FEA cases cached in OUT/fea)")
+    q.add_argument("--quiet", action="store_true", help="no progress bars")
+    q.set_defaults(func=_cmd_paper)
 
     q = sub.add_parser("sweep", help="FEA over every combination of the given values")
     q.add_argument("--t0-um", dest="t0_um", type=float, nargs="+", help="NiP thickness(es), µm")
