@@ -58,3 +58,35 @@ def test_row_modulated_quilt_suppresses_the_central_order_less():
     # mean central order: theory and the optics agree on the sign and on the size.
     assert expected["modulated"] > expected["uniform"]
     assert got["modulated"] - got["uniform"] == pytest.approx(expected["modulated"] - expected["uniform"], abs=leak)
+
+
+def _dft_amplitude(sag, i, j, half_x_mm=42.0, half_y_mm=36.0):
+    """Amplitude (µm) of the (i/Dx, j/Dy) quilt component by a plain DFT over the
+    half-open box [-42, 42) × [-36, 36) mm: exactly 4 × 4 periods, so no leakage and
+    no least squares (independent of :mod:`optics.fitting`)."""
+    kx = (sag.x_mm >= -half_x_mm - 1e-9) & (sag.x_mm < half_x_mm - 1e-9)
+    ky = (sag.y_mm >= -half_y_mm - 1e-9) & (sag.y_mm < half_y_mm - 1e-9)
+    h = sag.sag_um[np.ix_(ky, kx)]
+    X, Y = np.meshgrid(sag.x_mm[kx], sag.y_mm[ky])
+    return float(2 * abs(np.mean(h * np.exp(-2j * np.pi * (i * X / DX_MM + j * Y / DY_MM)))))
+
+
+@pytest.mark.slow
+def test_fea_quilt_has_less_x_fundamental_per_pv_than_a_sinusoid():
+    """The 200 µm / 50 % FEA quilt (coarse mesh): P/V_center / A(1,0) > 4 (a sum sinusoid's
+    ratio), egg-crate terms A(1,±1) >= 10 % of A(1,0) and equal by the blank's y mirror
+    symmetry; the least-squares quilt fit agrees with the DFT over whole periods."""
+    from fea.api import prepare, solve
+    from fea.mesh import MeshSpec
+    from optics.fitting import fit_fourier
+    from optics.sagmap import Region
+
+    sag = solve(t0_um=200, polish=0.5, prepared=prepare(mesh=MeshSpec.coarse())).sag.sag_map(spacing_mm=0.5)
+    a10, a11, a1m1 = (_dft_amplitude(sag, *k) for k in ((1, 0), (1, 1), (1, -1)))
+    assert sag.pv_um("center") / a10 > 4.0
+    assert min(a11, a1m1) >= 0.10 * a10
+    assert a11 == pytest.approx(a1m1, rel=0.01)
+    # one sample row/column of the closed box and out-of-basis content: <= 2 %
+    fit = fit_fourier(sag, DX_MM, DY_MM, harmonics=3, aperture=Region("p4", "rectangle", width_mm=84.0, height_mm=72.0))
+    assert fit.component(1, 0)[0] == pytest.approx(a10, rel=0.02)
+    assert fit.component(1, 1)[0] == pytest.approx(a11, rel=0.02)
