@@ -54,6 +54,8 @@ from optics.sagmap import Region, SagMap, quilt_sag_map
 
 PAPER_PV_UM = 0.82          # paper Table 1, 200 µm / 50 %
 PAPER_SINE_PV_UM = 0.58     # paper §5.3
+#: paper Table 2 surfaces-only 200 µm P/V 1.55 µm over the model's 1.024 µm (README, faces + side faces)
+PAPER_SURF_OVER_MODEL = 1.55 / 1.024
 DIP_MIN = 0.05
 SEPARATION_UM = (36.0, 45.0)
 S_SCAN = np.round(np.arange(0.30, 3.0001, 0.05), 4)
@@ -118,22 +120,28 @@ def amplitude_needed(profile_of_scale, key: str = "ok", dip_min: float = DIP_MIN
 
 
 # ----------------------------------------------------------------- maps
-def fea_map(cache: Path, mesh: str = "default") -> SagMap:
-    """Front-face sag map of the 200 µm / 50 % case on ``mesh`` (0.5 mm grid), cached as npz."""
+def fea_map(cache: Path, mesh: str = "default", coverage: str = "all") -> SagMap:
+    """Front-face sag map of the 200 µm / 50 % case on ``mesh`` (0.5 mm grid), cached as npz.
+
+    ``coverage`` "holes" is the hole film alone (200 µm), "surfaces" the outer-surface
+    film alone at the polished 100 µm, so that holes + surfaces ~ all."""
     size, bulk = MESHES[mesh]
-    path = cache / f"fea_200_50_{size:g}_{bulk:g}.npz"
+    tag = "" if coverage == "all" else f"{coverage}_"
+    path = cache / f"fea_200_50_{tag}{size:g}_{bulk:g}.npz"
     if not path.is_file():
         from fea.api import prepare, solve
         from fea.mesh import MeshSpec
 
-        r = solve(t0_um=200, polish=0.5, prepared=prepare(mesh=MeshSpec(size_mm=size, size_bulk_mm=bulk)))
+        t0 = 100.0 if coverage == "surfaces" else 200.0
+        r = solve(t0_um=t0, polish=0.5, coverage=coverage,
+                  prepared=prepare(mesh=MeshSpec(size_mm=size, size_bulk_mm=bulk)))
         s = r.sag.sag_map(spacing_mm=0.5)
         cache.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(".tmp.npz")
         np.savez(tmp, x_mm=s.x_mm, y_mm=s.y_mm, sag_um=s.sag_um)
         tmp.replace(path)
     with np.load(path) as d:
-        return SagMap(d["x_mm"], d["y_mm"], d["sag_um"], f"FEA 200/50 {mesh} mesh")
+        return SagMap(d["x_mm"], d["y_mm"], d["sag_um"], f"FEA 200/50 {coverage} {mesh} mesh")
 
 
 def harmonics(m: SagMap, region=CENTER) -> dict:
@@ -358,6 +366,26 @@ def main(argv=None):
     for name, pv in regions:
         print(f"| {name} | {pv:.3f} | {s250 * pv:.3f} | {s250 * pv / PAPER_PV_UM:.2f} | {s100 * pv:.3f} | "
               f"{s100 * pv / PAPER_PV_UM:.2f} |", flush=True)
+
+    # ---------------------------------------------------------------- film balance
+    print("\n## 4b. Film balance: holes vs outer-surface film (Table 2 reading)\n")
+    hol, sur = fea_map(cache, "default", "holes"), fea_map(cache, "default", "surfaces")
+    both = hol.with_sag(hol.sag_um + sur.sag_um)
+    print("Holes-only film (200 µm) and outer-surface film alone (faces and side faces at the polished "
+          f"100 µm; 'all' has 200 µm side faces), default mesh: P/V_center {hol.pv_um(CENTER):.3f} and "
+          f"{sur.pv_um(CENTER):.3f} µm; their sum {both.pv_um(CENTER):.3f} µm against the FEA map's "
+          f"{pv_c:.3f} µm (the side-face film and the film's own stiffness make it differ). The paper's Table 2 "
+          f"gives the surface film {PAPER_SURF_OVER_MODEL:.2f}× the model's P/V; the row "
+          f"'holes + {PAPER_SURF_OVER_MODEL:.2f} × surfaces' is that reading. Every map is rescaled to the "
+          "FEA map's P/V_center, so the rows compare shapes.\n")
+    print(head + "\n" + sep)
+    for label, k in (("holes + surfaces", 1.0), ("holes only (shape)", 0.0),
+                     (f"holes + {PAPER_SURF_OVER_MODEL:.2f} × surfaces", PAPER_SURF_OVER_MODEL)):
+        m = hol.with_sag(hol.sag_um + k * sur.sag_um, label)
+        m = m.scaled(pv_c / m.pv_um(CENTER))
+        hk = harmonics(m)
+        row(label, m, base, pv_c, f"rescaled to P/V_center {pv_c:.3f}; P/V/A(1,0) {pv_c / hk[(1, 0)]:.2f}, "
+            f"A(1,±1)/A(1,0) {hk[(1, 1)] / hk[(1, 0)]:.2f}")
 
     # ---------------------------------------------------------------- summary
     print("\n## Decomposition (computed from the rows above)\n")
