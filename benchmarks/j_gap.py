@@ -264,7 +264,7 @@ def main(argv=None):
 
     print("# J 1.25 µm amplitude gap (`benchmarks/j_gap.py`)\n")
     print("Regenerate: `PYTHONPATH=$PWD .venv/bin/python benchmarks/j_gap.py --cache /tmp/jgap > "
-          "benchmarks/results_j_gap.md` (~5 min on 2 busy cores with the three FEA maps cached; ~6 min more to solve them).\n")
+          "benchmarks/results_j_gap.md` (~5 min on 2 busy cores with the three FEA maps cached; ~9 min more to solve the five FEA maps).\n")
     print("Definitions (fixed in the script before the tables; the valley form below replaced a "
           "'two highest maxima' form that a 0.3 % ripple misled on the first scan, see the script docstring): "
           "double peak = a local minimum of the detected "
