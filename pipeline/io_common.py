@@ -23,7 +23,7 @@ from typing import Iterator
 
 import numpy as np
 
-__all__ = ["atomic_write", "atomic_path", "output_dir", "parse_error", "numbered_lines", "read_text",
+__all__ = ["atomic_write", "atomic_path", "parse_error", "numbered_lines", "read_text",
            "decode_text", "read_csv_columns"]
 
 
@@ -71,31 +71,6 @@ def atomic_write(path: str | Path, mode: str = "w") -> Iterator:
         except OSError:
             pass
         raise
-
-
-def output_dir(path: str | Path, option: str = "--out") -> Path:
-    """Create ``path`` (and parents) and prove it writable *before* any work is done.
-
-    A command that would compute for minutes first checks where its results go, so an
-    unwritable, full or mistyped output fails in one line that names the option.
-
-    Raises
-    ------
-    ValueError
-        ``"<option> <path>: <reason>"`` when the directory cannot be created or written.
-    """
-    path = Path(path)
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        fd, tmp = _create_tmp(path / "probe", ".tmp")
-        os.close(fd)
-        os.unlink(tmp)
-    except FileExistsError:
-        raise ValueError(f"{option} {path}: exists and is not a directory") from None
-    except (OSError, ValueError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        raise ValueError(f"{option} {path}: cannot write there ({reason})") from None
-    return path
 
 
 @contextmanager

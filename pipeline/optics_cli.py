@@ -16,7 +16,7 @@ __all__ = ["register", "main", "load_sag_map"]
 
 
 from pipeline.interchange import load_sag_map  # noqa: E402  (.npz/.nc/.int/.dat/.csv)
-from pipeline.io_common import atomic_path, atomic_write, output_dir  # noqa: E402
+from pipeline.io_common import atomic_path, atomic_write, ensure_writable_dir  # noqa: E402
 
 
 def _add_common(p: argparse.ArgumentParser) -> None:
@@ -57,7 +57,7 @@ def _run_lsf(a) -> int:
     from optics.lineprofile import line_profile
     from optics.metrics import profile_metrics
 
-    out = output_dir(a.out)
+    out = ensure_writable_dir(a.out, "--out")
     sag = _sag_from_args(a)
     kw = dict(order=a.order, pupil_shift_mm=tuple(a.pupil_shift_mm), torsion_shift_x_mm=a.torsion_shift_x_mm,
               slit_position=a.slit_position, collimator_zernike_um=_wfe(a))
@@ -97,7 +97,7 @@ def _run_psf(a) -> int:
 
     from optics.lineprofile import point_psf
 
-    out = output_dir(a.out)
+    out = ensure_writable_dir(a.out, "--out")
     p = point_psf(a.grating, a.wavelength_um, _sag_from_args(a), order=a.order,
                   pupil_shift_mm=tuple(a.pupil_shift_mm), collimator_zernike_um=_wfe(a),
                   detector_step_um=a.detector_step_um, window_um=a.window_um)

@@ -10,7 +10,7 @@ import pytest
 
 from optics.grating import MAX_GRATING_TURN_DEG, get_grating
 from optics.lineprofile import line_profile, point_psf
-from pipeline.io_common import output_dir
+from pipeline.io_common import ensure_writable_dir
 from pipeline.optics_cli import main as optics_main
 
 
@@ -84,9 +84,9 @@ def test_optics_commands_fail_in_one_line(args, needle, tmp_path, capsys):
 def test_output_dir_that_is_a_file_is_refused_before_any_work(tmp_path):
     f = tmp_path / "taken"
     f.write_text("x")
-    with pytest.raises(ValueError, match=r"--out .*taken: exists and is not a directory"):
-        output_dir(f)
-    assert output_dir(tmp_path / "a" / "b").is_dir()
+    with pytest.raises(NotADirectoryError, match=r"--out .*taken' exists and is not a directory"):
+        ensure_writable_dir(f, "--out")
+    assert ensure_writable_dir(tmp_path / "a" / "b", "--out").is_dir()
 
 
 def test_psf_npz_is_not_left_half_written(tmp_path, monkeypatch, capsys):
