@@ -57,6 +57,8 @@ def test_grade_and_claim_validation():
         Claim("x", "c", "s", "p", "m", "partial", "r", "guess")
 
 
+pytestmark = pytest.mark.xdist_group("paper_fea")  # shares paper_fea_dir with test_paper_tables
+
 def test_double_peak_rule_on_hand_written_profiles():
     x = np.arange(-100.0, 100.5, 0.5)
     pair = np.exp(-0.5 * ((x - 20) / 8) ** 2) + np.exp(-0.5 * ((x + 20) / 8) ** 2)  # 40 µm apart, deep dip
@@ -102,10 +104,10 @@ def test_stretched_map_has_twice_the_period():
 
 # ---------------------------------------------------------------- slow: the scorecard itself
 @pytest.fixture(scope="module")
-def card(request):
+def card(paper_fea_dir):
     from pipeline.paper import scorecard
 
-    out = request.config.cache.mkdir("paper_scorecard")  # FEA cases persist between runs
+    out = paper_fea_dir  # the FEA cases of test_paper_tables are reused (same worker, same session)
     claims = scorecard(out, progress=False)
     return out, {c.id: c for c in claims}
 

@@ -14,7 +14,7 @@ import pytest
 
 from fea.calibration import STRESS_SCALE, TABLE_SIGMA, fit_stress_scale, paper_cases
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("paper_fea")]
 DATA = Path(__file__).parent / "data" / "paper_pv_center.csv"
 
 
@@ -26,15 +26,16 @@ def test_reference_data_is_the_packaged_copy():
 
 
 @pytest.fixture(scope="module")
-def rows(tmp_path_factory):
-    """Solve through the CLI, then reload through the API (every case reused from the cache)."""
+def rows(paper_fea_dir):
+    """Solve through the CLI, then reload through the API (every case reused from the cache).
+    The directory is the one the paper scorecard solves its tables in (``fea/tables``)."""
     import contextlib
     import io
 
     from pipeline.cli import main
     from pipeline.fea_cases import run_tables
 
-    out = tmp_path_factory.mktemp("tables")
+    out = paper_fea_dir / "fea" / "tables"
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         assert main(["tables", "--out", str(out), "--quiet"]) == 0
