@@ -40,6 +40,26 @@ Acceptance rules (fixed before the model numbers were looked at):
 * Perfect grating R ~ 4000: the design R (2 pixels, geometry) at J/H/K band centre within
   ±15 % of 4000, and the perfect grating's FWHM-R >= 0.9 × design R at every scale:
   both ``reproduced``, one ``partial``.
+* Shoulder height (shape only, no reference profile): on one side of the profile
+  (right = +offset_um), the lower convex hull of the profile from its outermost
+  half-maximum crossing out to |x| = 60 µm; the height is the largest excess of the
+  profile over that hull for 15 <= |x| <= 45 µm, per unit profile peak
+  (:func:`shoulder_height`). A clean falling flank is convex there (height 0); a local
+  maximum or an inflection shoulder (plateau) stands above the hull. A shoulder is
+  *present* when its height is >= 2 % of the peak and more than twice the perfect
+  grating's at the same band, scale and pupil (slit-edge ringing is not a shoulder).
+* J 25 mas asymmetric shoulders (J 1.25 µm, 200/50, 25 mas): "right more distinct" =
+  right present, h_R >= 1.5 h_L and h_R - h_L >= 1 % of the peak; "left more distinct"
+  the mirror image. Graded at the paper's shifted pupil, 4 mm along dispersion (the paper
+  gives no sign: the better of +4 and -4 mm counts); the centred pupil is reported
+  beside it, ungraded. Single peak (not :func:`double_peak_ok`'s double peak, any
+  spacing) and right more distinct ``reproduced``; left more distinct, or no shoulder
+  present on either side, ``contradicted``; otherwise (shoulders nearly symmetric, or
+  right more distinct on a double peak) ``partial``.
+* H shoulders by scale (H 1.65 µm, 200/75, centred pupil): h(scale) = the larger of
+  the two sides. Not present at 250 mas and present at 100 and 25 mas ``reproduced``;
+  h250 < min(h25, h100) without that, or absent at 250 and present at one of the two
+  smaller scales, ``partial``; otherwise ``contradicted``.
 * 0.58 µm P/V sinusoid (analytic, separable "sum" quilt at 21 × 18 mm): double peak
   (rule above, spacing in [36, 45] µm) at 100 and 250 mas, and FWHM at 250 mas below the
   200/50 FEA map's: both ``reproduced``, one ``partial``.
