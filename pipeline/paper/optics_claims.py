@@ -41,13 +41,13 @@ Acceptance rules (fixed before the model numbers were looked at):
   ±15 % of 4000, and the perfect grating's FWHM-R >= 0.9 × design R at every scale:
   both ``reproduced``, one ``partial``.
 * Shoulder height (shape only, no reference profile): on one side of the profile
-  (right = +offset_um), the lower convex hull of the profile from its outermost
-  half-maximum crossing out to |x| = 60 µm; the height is the largest excess of the
-  profile over that hull for 15 <= |x| <= 45 µm, per unit profile peak
-  (:func:`shoulder_height`). A clean falling flank is convex there (height 0); a local
-  maximum or an inflection shoulder (plateau) stands above the hull. A shoulder is
-  *present* when its height is >= 2 % of the peak and more than twice the perfect
-  grating's at the same band, scale and pupil (slit-edge ringing is not a shoulder).
+  (right = +offset_um), going outward from its outermost half-maximum crossing, the
+  falling slope of a clean flank only flattens; the height is the integral, over
+  15 <= |x| <= 45 µm, of the slope's excess over its running minimum, per unit profile
+  peak (:func:`shoulder_height`): a plateau (inflection shoulder) gives its drop, a local
+  maximum its rise and fall, a clean flank 0. A shoulder is *present* when its height is
+  >= 2 % of the peak and more than twice the perfect grating's at the same band, scale
+  and pupil (slit-edge ringing is not a shoulder).
 * J 25 mas asymmetric shoulders (J 1.25 µm, 200/50, 25 mas): "right more distinct" =
   right present, h_R >= 1.5 h_L and h_R - h_L >= 1 % of the peak; "left more distinct"
   the mirror image. Graded at the paper's shifted pupil, 4 mm along dispersion (the paper
@@ -72,10 +72,11 @@ import numpy as np
 from optics.lineprofile import line_profile, point_psf
 from optics.metrics import find_profile_peaks, fwhm_um, l1_distance, profile_metrics
 from optics.sagmap import SagMap, quilt_sag_map
-from pipeline.paper.claim import Claim
+from pipeline.paper.claim import STATUSES, Claim
 from pipeline.paper.fea_claims import PaperFEA
 
-__all__ = ["ProfileBook", "optics_claims", "satellites", "double_peak_ok", "pupil_variation", "SCALES_MAS"]
+__all__ = ["ProfileBook", "optics_claims", "satellites", "double_peak_ok", "pupil_variation", "shoulder_height",
+           "SCALES_MAS"]
 
 SCALES_MAS = (25, 100, 250)
 SAT_J_UM, SAT_K_UM = (17.0, 22.0), (34.0, 38.0)
@@ -89,6 +90,10 @@ COLL_MIN_SHIFT = 0.005
 R_DESIGN, R_DESIGN_REL, R_REACH = 4000.0, 0.15, 0.9
 SINUSOID_PV_UM = 0.58
 BAND_CENTRE_UM = {"J": 1.25, "H": 1.65, "K": 2.20}
+FLANK_WINDOW_UM = (15.0, 45.0)
+FLANK_PRESENT, FLANK_OVER_PERFECT = 0.02, 2.0
+FLANK_RATIO, FLANK_MARGIN = 1.5, 0.01
+J25_SHIFT_MM = 4.0
 
 
 class ProfileBook:
@@ -116,6 +121,48 @@ def double_peak_ok(p) -> tuple[bool, float]:
     k = find_profile_peaks(p.offset_um, p.intensity)
     ok = k["double_peak"] and DOUBLE_SPACING_UM[0] <= k["peak_spacing_um"] <= DOUBLE_SPACING_UM[1]
     return bool(ok), float(k["peak_spacing_um"]) if k["double_peak"] else float("nan")
+
+
+def shoulder_height(offset_um, intensity, side: int, window_um: tuple[float, float] = FLANK_WINDOW_UM) -> float:
+    """Height of the shoulder on one side of a line profile, per unit profile peak.
+
+    Going outward from the outermost half-maximum crossing on that side, the falling
+    slope s = -dI/d|x| of a clean flank only flattens (s non-increasing). Wherever it
+    steepens again (the outer edge of a plateau, or the rise and fall of a local
+    maximum), s exceeds its running minimum m; the height is the integral of s - m over
+    the window, i.e. the intensity the profile drops in the window beyond what the
+    monotone-slope envelope allows. A plateau shoulder gives its own drop; a local
+    maximum its rise and its fall.
+
+    Parameters
+    ----------
+    offset_um, intensity : array_like
+        A uniformly sampled profile (any normalisation).
+    side : int
+        +1 for the right (+offset_um), -1 for the left.
+    window_um : (float, float)
+        |offset| range (µm) in which the shoulder is measured.
+
+    Returns
+    -------
+    float
+        The shoulder height divided by the profile peak (>= 0; 0 for a clean flank).
+    """
+    if side not in (1, -1):
+        raise ValueError(f"side={side!r} must be +1 (right, +offset_um) or -1 (left)")
+    x, y = np.asarray(offset_um, float), np.asarray(intensity, float)
+    order = np.argsort(side * x)
+    u, yy = (side * x)[order], y[order]
+    peak = y.max()
+    above = np.nonzero((yy >= 0.5 * peak) & (u >= 0))[0]
+    start = above.max() if above.size else int(np.searchsorted(u, 0.0))
+    u, yy = u[start:], yy[start:]
+    if u.size < 3:
+        return 0.0
+    slope = -np.gradient(yy, u)
+    excess = slope - np.minimum.accumulate(slope)
+    w = (u >= window_um[0]) & (u <= window_um[1])
+    return float(np.trapezoid(excess[w], u[w]) / peak) if w.sum() >= 2 else 0.0
 
 
 def _thin_slit(grating, wavelength_um, sag):
@@ -321,6 +368,61 @@ def _perfect_r(book: ProfileBook) -> Claim:
                  "grating's detected FWHM-R >= 0.9 x design at 25/100/250 mas", "fea")
 
 
+def _flank(book, sag, grating, wl, mas, shift_x_mm=0.0) -> dict:
+    """Shoulder heights (right, left) of a profile and of the perfect grating, and which are present."""
+    p = book.get(sag, grating, wl, mas, shift_x_mm=shift_x_mm)
+    q = book.get("perfect", grating, wl, mas, shift_x_mm=shift_x_mm)
+    h = {s: shoulder_height(p.offset_um, p.intensity, s) for s in (1, -1)}
+    h0 = {s: shoulder_height(q.offset_um, q.intensity, s) for s in (1, -1)}
+    present = {s: h[s] >= FLANK_PRESENT and h[s] > FLANK_OVER_PERFECT * h0[s] for s in (1, -1)}
+    double = find_profile_peaks(p.offset_um, p.intensity)["double_peak"]
+    return {"h": h, "h0": h0, "present": present, "double": bool(double)}
+
+
+def _more_distinct(f: dict, s: int) -> bool:
+    a, b = f["h"][s], f["h"][-s]
+    return f["present"][s] and a >= FLANK_RATIO * b and a - b >= FLANK_MARGIN
+
+
+def _j25_verdict(f: dict) -> str:
+    if _more_distinct(f, -1) or not any(f["present"].values()):
+        return "contradicted"
+    return "reproduced" if _more_distinct(f, 1) and not f["double"] else "partial"
+
+
+def _j25_shoulders(book: ProfileBook) -> Claim:
+    shifts = (0.0, J25_SHIFT_MM, -J25_SHIFT_MM)
+    fl = {s: _flank(book, "200/50", "J", 1.25, 25, s) for s in shifts}
+    verdict = {s: _j25_verdict(f) for s, f in fl.items()}
+    st = min((verdict[J25_SHIFT_MM], verdict[-J25_SHIFT_MM]), key=STATUSES.index)
+    model = "; ".join(f"pupil {s:+.0f} mm: right {100 * f['h'][1]:.1f} %, left {100 * f['h'][-1]:.1f} % of peak "
+                      f"(perfect {100 * f['h0'][1]:.1f} / {100 * f['h0'][-1]:.1f}){', double peak' if f['double'] else ''}"
+                      f" -> {verdict[s]}" for s, f in fl.items())
+    return Claim("j25_asymmetric_shoulders", "J 25 mas: a peak with asymmetric shoulders, the right one more distinct "
+                 "than the left", "Sec. 2, 5.3", "right shoulder more distinct (simulation: pupil shifted ~4 mm)",
+                 model, st, "J 1.25 µm, 200/50, 25 mas; shoulder = height above the flank's lower convex hull at "
+                 "15-45 µm; rule: right present, >= 1.5x and >= 1 % of peak above the left, single peak; graded "
+                 "at ±4 mm (better sign), 0 mm ungraded", "fea")
+
+
+def _h_shoulders(book: ProfileBook) -> Claim:
+    fl = {m: _flank(book, "200/75", "H", BAND_CENTRE_UM["H"], m) for m in SCALES_MAS}
+    h = {m: max(f["h"].values()) for m, f in fl.items()}
+    seen = {m: any(f["present"].values()) for m, f in fl.items()}
+    if not seen[250] and seen[100] and seen[25]:
+        st = "reproduced"
+    elif h[250] < min(h[25], h[100]) or (not seen[250] and (seen[100] or seen[25])):
+        st = "partial"
+    else:
+        st = "contradicted"
+    model = ", ".join(f"{m} mas {100 * h[m]:.1f} % of peak ({'present' if seen[m] else 'not present'}; perfect "
+                      f"{100 * max(fl[m]['h0'].values()):.1f} %)" for m in SCALES_MAS)
+    return Claim("h_shoulders_scales", "H band: shoulders nearly not seen at 250 mas, but present at 100 and 25 mas",
+                 "Sec. 2", "not seen at 250, seen at 100 and 25 mas", model, st,
+                 "H 1.65 µm, 200/75, centred pupil; larger side's height above the flank's lower convex hull at "
+                 "15-45 µm; present = >= 2 % of peak and > 2x the perfect grating's", "fea")
+
+
 def _sinusoid(fea: PaperFEA, book: ProfileBook) -> Claim:
     book.sags.setdefault("sinusoid", quilt_sag_map(SINUSOID_PV_UM, "sum", spacing_mm=0.5, label="sinusoid 0.58"))
     ok = {m: double_peak_ok(book.get("sinusoid", "J", 1.25, m)) for m in (100, 250)}
@@ -341,7 +443,8 @@ def optics_claims(fea: PaperFEA, book: ProfileBook | None = None) -> tuple[list[
     book = book or ProfileBook({"perfect": None, "200/75": fea.maps[("all", 200.0, 0.75)],
                                 "200/50": fea.maps[("all", 200.0, 0.5)]})
     dp, extra = _double_peak(fea, book)
-    claims = [*_satellite_claims(fea), dp, _k_shoulders(book), _smaller_at_25(book), *_pupil_claims(book),
+    claims = [*_satellite_claims(fea), dp, _j25_shoulders(book), _k_shoulders(book),
+              _h_shoulders(book), _smaller_at_25(book), *_pupil_claims(book),
               _multigrating(book), _collimator(book), _perfect_r(book), _sinusoid(fea, book)]
     extra["book"] = book
     return claims, extra
