@@ -13,11 +13,12 @@ import numpy as np
 import pytest
 
 from optics.imaging import Profile
+from optics.metrics import find_profile_peaks
 from optics.sagmap import SagMap, quilt_sag_map
 from pipeline.paper.claim import STATUSES, Claim, grade
 from pipeline.paper.design_claims import stretched
 from pipeline.paper.fea_claims import edge_pv_ratio
-from pipeline.paper.optics_claims import double_peak_ok, satellites
+from pipeline.paper.optics_claims import double_peak_ok, satellites, shoulder_height
 
 EXPECTED = {
     "table1": "reproduced",
@@ -31,7 +32,9 @@ EXPECTED = {
     "satellite_positions": "reproduced",
     "satellite_flux_wavelength": "reproduced",
     "j_double_peak": "contradicted",
+    "j25_asymmetric_shoulders": "partial",
     "k_shoulders": "partial",
+    "h_shoulders_scales": "partial",
     "shoulders_smaller_25mas": "partial",
     "pupil_shift_scales": "contradicted",
     "pupil_shift_band": "reproduced",
@@ -67,6 +70,28 @@ def test_double_peak_rule_on_hand_written_profiles():
     close = np.exp(-0.5 * ((x - 12) / 8) ** 2) + np.exp(-0.5 * ((x + 12) / 8) ** 2)  # 24 µm: outside 36-45
     assert not double_peak_ok(Profile(x, close))[0]
     assert not double_peak_ok(Profile(x, np.exp(-0.5 * (x / 15) ** 2)))[0]
+
+
+def test_shoulder_height_on_hand_written_profiles():
+    """A clean flank has none; a side bump or a plateau shows on its own side only (+ = right)."""
+    x = np.arange(-100.0, 100.5, 0.5)
+    core = np.exp(-0.5 * (x / 10) ** 2)
+    assert shoulder_height(x, core, 1) == 0.0 and shoulder_height(x, core, -1) == 0.0
+    # a local maximum 10 % high at +30 µm: counted by its rise and fall, about 2 x 10 %
+    bump = core + 0.1 * np.exp(-0.5 * ((x - 30) / 4) ** 2)
+    assert 0.15 < shoulder_height(x, bump, 1) < 0.25 and shoulder_height(x, bump, -1) == 0.0
+    assert shoulder_height(-x, bump, -1) == pytest.approx(shoulder_height(x, bump, 1))
+    # an inflection shoulder: a 12 % plateau ending at -35 µm, no local maximum
+    plateau = core + np.where(x < 0, 0.12 / (1 + np.exp((-x - 35) / 2.5)), 0.0)
+    assert not find_profile_peaks(x, plateau)["offset_um"][1:]
+    assert 0.01 < shoulder_height(x, plateau, -1) <= 0.12 and shoulder_height(x, plateau, 1) == 0.0
+    # the scale (counts) does not matter; a trapezoid (slit x pixel) has none
+    assert shoulder_height(x, 5e4 * bump, 1) == pytest.approx(shoulder_height(x, bump, 1), rel=1e-9)
+    trap = np.convolve(np.clip((22.5 - np.abs(x)) / 18, 0, 1), np.exp(-0.5 * (np.arange(-20, 20.5, 0.5) / 3) ** 2),
+                       mode="same")
+    assert shoulder_height(x, trap, 1) < 1e-9
+    with pytest.raises(ValueError, match="side=0"):
+        shoulder_height(x, core, 0)
 
 
 def test_satellites_of_an_analytic_quilt_sit_at_lambda_f_over_period():
