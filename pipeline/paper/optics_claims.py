@@ -396,8 +396,8 @@ def _j25_shoulders(book: ProfileBook) -> Claim:
     verdict = {s: _j25_verdict(f) for s, f in fl.items()}
     st = min((verdict[J25_SHIFT_MM], verdict[-J25_SHIFT_MM]), key=STATUSES.index)
     model = "; ".join(f"pupil {s:+.0f} mm: right {100 * f['h'][1]:.1f} %, left {100 * f['h'][-1]:.1f} % of peak "
-                      f"(perfect {100 * f['h0'][1]:.1f} / {100 * f['h0'][-1]:.1f}){', double peak' if f['double'] else ''}"
-                      f" -> {verdict[s]}" for s, f in fl.items())
+                      f"(perfect {100 * f['h0'][1]:.1f} / {100 * f['h0'][-1]:.1f})"
+                      f"{', double peak' if f['double'] else ''} -> {verdict[s]}" for s, f in fl.items())
     return Claim("j25_asymmetric_shoulders", "J 25 mas: a peak with asymmetric shoulders, the right one more distinct "
                  "than the left", "Sec. 2, 5.3", "right shoulder more distinct (simulation: pupil shifted ~4 mm)",
                  model, st, "J 1.25 µm, 200/50, 25 mas; shoulder = height above the flank's lower convex hull at "
