@@ -111,7 +111,10 @@ def test_small_whatif_end_to_end_on_a_coarse_mesh(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("preset", ["whatif_alsi40", "whatif_period_doubled", "whatif_no_lightweighting"])
+# The AlSi40 preset runs cut down in the fast tier; the physics of all three what-ifs (AlSi40 and a
+# solid blank remove the quilt, a doubled period) is checked on the default mesh by the paper
+# scorecard (tests/test_paper_claims.py). Here the full preset with a changed blank goes through the CLI.
+@pytest.mark.parametrize("preset", ["whatif_period_doubled"])
 def test_whatif_presets_run_from_the_cli_on_a_coarse_mesh(tmp_path, capsys, preset):
     out = tmp_path / preset
     assert main(["run", "--preset", preset, "--out", str(out), "--quiet", *COARSE]) == 0
