@@ -60,8 +60,6 @@ def test_grade_and_claim_validation():
         Claim("x", "c", "s", "p", "m", "partial", "r", "guess")
 
 
-pytestmark = pytest.mark.xdist_group("paper_fea")  # shares paper_fea_dir with test_paper_tables
-
 def test_double_peak_rule_on_hand_written_profiles():
     x = np.arange(-100.0, 100.5, 0.5)
     pair = np.exp(-0.5 * ((x - 20) / 8) ** 2) + np.exp(-0.5 * ((x + 20) / 8) ** 2)  # 40 µm apart, deep dip

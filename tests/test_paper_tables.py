@@ -14,7 +14,7 @@ import pytest
 
 from fea.calibration import STRESS_SCALE, TABLE_SIGMA, fit_stress_scale, paper_cases
 
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("paper_fea")]
+pytestmark = pytest.mark.slow
 DATA = Path(__file__).parent / "data" / "paper_pv_center.csv"
 
 
