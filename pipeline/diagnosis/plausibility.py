@@ -152,13 +152,9 @@ def profile_problems(name: str, offset_um: np.ndarray, intensity: np.ndarray, no
         return [Problem(name, "unit", f"offsets span {span:.3g} µm; expected {lo:.0f}..{hi:.0f} µm "
                         f"({rules.span_range[0]:g}-{rules.span_range[1]:g}x the nominal line's FWHM "
                         f"{nominal_fwhm_um:.1f} µm): {hint}")]
-    sigma = noise_rel if noise_rel is not None else estimate_noise(x, y)
-    if not math.isfinite(sigma):
-        sigma = 0.0
-    z = peak_sigma(y, sigma)
-    if not z >= rules.min_peak_sigma:
-        return [Problem(name, "no_line", f"no line found: peak {z:.1f} sigma above the median, "
-                        f"need >= {rules.min_peak_sigma:g}")]
+    missing = _no_peak(name, y, noise_rel if noise_rel is not None else estimate_noise(x, y), rules, "line")
+    if missing:
+        return missing
     w = line_fwhm(x, y)
     ratio = w / nominal_fwhm_um
     if not rules.width_range[0] <= ratio <= rules.width_range[1]:
@@ -216,11 +212,15 @@ def image_problems(name: str, x_um: np.ndarray, y_um: np.ndarray, intensity: np.
     v = np.asarray(intensity, float)
     sigma = noise_rel if noise_rel is not None else estimate_noise(np.asarray(x_um, float), v,
                                                                     rows=np.asarray(y_um, float))
-    if not math.isfinite(sigma):
-        sigma = 0.0
-    z = peak_sigma(v, sigma)
+    return _no_peak(name, v, sigma, rules, "point-source image")
+
+
+def _no_peak(name: str, values, sigma: float, rules, what: str) -> list:
+    """``[Problem]`` when the peak of ``values`` is less than ``rules.min_peak_sigma`` noise
+    sigmas above their median (a non-finite sigma counts as 0), else ``[]``."""
+    z = peak_sigma(values, sigma if math.isfinite(sigma) else 0.0)
     if not z >= rules.min_peak_sigma:
-        return [Problem(name, "no_line", f"no point-source image found: peak {z:.1f} sigma above the median, "
+        return [Problem(name, "no_line", f"no {what} found: peak {z:.1f} sigma above the median, "
                         f"need >= {rules.min_peak_sigma:g}")]
     return []
 
