@@ -48,7 +48,7 @@ def _figures(fea, book: ProfileBook, factor: float, out: Path) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from pipeline.io_common import atomic_path
+    from pipeline.plots import save
 
     names = []
     fig, ax = plt.subplots(figsize=(8, 4))
@@ -61,10 +61,7 @@ def _figures(fea, book: ProfileBook, factor: float, out: Path) -> list[str]:
     ax.set_ylabel("P/V_center (µm)")
     ax.legend()
     fig.tight_layout()
-    with atomic_path(out / "tables.png") as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
-    names.append("tables.png")
+    names.append(save(fig, out / "tables.png").name)
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
     for ax, mas in zip(axes, (100, 250)):
@@ -78,10 +75,7 @@ def _figures(fea, book: ProfileBook, factor: float, out: Path) -> list[str]:
     axes[0].legend(fontsize=8)
     axes[0].set_ylabel("detected profile (unit area, 1/µm)")
     fig.tight_layout()
-    with atomic_path(out / "j_double_peak.png") as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
-    names.append("j_double_peak.png")
+    names.append(save(fig, out / "j_double_peak.png").name)
 
     fig, axes = plt.subplots(1, 3, figsize=(12, 3.6), sharey=True)
     for ax, mas in zip(axes, (25, 100, 250)):
@@ -92,10 +86,7 @@ def _figures(fea, book: ProfileBook, factor: float, out: Path) -> list[str]:
         ax.set_title(f"K 2.2 µm, {mas} mas")
     axes[0].legend(fontsize=8)
     fig.tight_layout()
-    with atomic_path(out / "k_shoulders.png") as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
-    plt.close(fig)
-    names.append("k_shoulders.png")
+    names.append(save(fig, out / "k_shoulders.png").name)
     return names
 
 
