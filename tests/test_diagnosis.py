@@ -308,7 +308,10 @@ def test_evidence_counts_the_residual_after_the_best_fit(tmp_path):
     assert post.baseline["n_eff"] == nominal.baseline["n_eff"]
     a, b = nominal.finding("astigmatism"), post.finding("astigmatism")
     assert b.parameters == pytest.approx(a.parameters, rel=1e-6)
-    assert b.uncertainties == pytest.approx(a.uncertainties, rel=1e-6)
+    # The fit's own error bars are the same; the model-choice term (the move to a companion
+    # not adopted, engine._mismatch_errors) is added only to the findings refitted with
+    # companions, which the re-count can change: here the quilt shape's 0.0004 µm move.
+    assert b.uncertainties == pytest.approx(a.uncertainties, rel=0.01)
     ratio = post.baseline["n_count"]["map"] / nominal.baseline["n_count"]["map"]
     assert b.delta_bic < 0.9 * ratio * a.delta_bic < 0
 

@@ -33,14 +33,18 @@ blank_bow           bow_defocus_um Z(2,0), bow_spherical_um      rotationally sy
                     at the simulation's cold_K, scaled with the  imbalance bends it like a
                     deformation (companion, below)               bimetal; mount)
 quilt_shape         quilt_fund_xy_ratio (1; 0.3…3; maps and      the quilt's harmonic content
-                    PSF images only), quilt_harmonics_ratio      differs from the FEA's
-                    (1; -1…3; 0 = pure sinusoid)                 (:mod:`.quilt`, below)
+                    PSF images only), quilt_harmonics_ratio,     differs from the FEA's
+                    quilt_cross_ratio (1; -1…3; both 0 = pure    (:mod:`.quilt`, below;
+                    sinusoid), quilt_figure_ratio (1; -1…3)      background companion)
 ==================  ===========================================  ============================
 
-``quilt_shape`` changes the nominal map ``S`` into ``S + (rho - 1) F_y + (h - 1) H`` with
-``F_x``, ``F_y`` the quilt's fundamentals (21 mm along x, 18 mm along y) and ``H`` its
-higher harmonics, from a Fourier fit of the nominal over the 82 x 72 mm centre
-(:mod:`.quilt`); ``rho = quilt_fund_xy_ratio``, ``h = quilt_harmonics_ratio``. The
+``quilt_shape`` changes the nominal map ``S`` into
+``S + (rho - 1) F_y + (h - 1) H + (c - 1) C + (g - 1) R`` with ``F_x``, ``F_y`` the quilt's
+fundamentals (21 mm along x, 18 mm along y), ``C`` its (1, ±1) egg-crate cross terms, ``H``
+its other harmonics, from a Fourier fit of the nominal over the 82 x 72 mm centre
+(:mod:`.quilt`), and ``R = S - F_x - F_y - H - C`` the smooth figure the fit leaves;
+``rho = quilt_fund_xy_ratio``, ``h = quilt_harmonics_ratio``, ``c = quilt_cross_ratio``,
+``g = quilt_figure_ratio``. The
 fundamentals' amplitude is not a parameter of it: separate scales of ``F_x``, ``F_y`` and
 ``H`` would be degenerate with ``amplitude_scale`` on line profiles (measured, FEA map
 200 µm / 75 % at 80 K, J 1.25 µm at 250/100/25 mas jointly: correlation -0.999 between
@@ -76,6 +80,18 @@ a surface map is in the data (``requires``), which pins it down (on profiles alo
 finding that takes it up lists it in ``degenerate_with`` and reports how much of it its
 parameters contain, ``Finding.absorbs``); it then acts on every
 measurement (one bow for all blanks: a per-blank bow would need one map per blank).
+
+``quilt_shape`` is a ``background`` companion: a real grating's quilt never has exactly the
+FEA's shape (the paper's best J-band simulation is wider, with a shallower central dip,
+than the measurement), so the shape is refitted beside every finding, as the plating
+gradient and the bow are, and a finding is named for what it explains *beyond* the quilt's
+shape. It is never half of a pair (``X + quilt_shape`` is the finding ``X`` fitted with
+it). Its free ratios act on every periodic feature of a map and on the wings of every
+line, so it takes up part of almost any gap (measured on independent truths: periodic
+surface ripples and stray-light halos): read a ``quilt_shape`` verdict together with
+``Diagnosis.unexplained_in`` and the finding's ``remaining_gap``.
+Where several companions each lower the score, a larger set is adopted only if it beats
+the best smaller one by ``companion_bic`` (each companion adopted must be supported).
 
 ``floor`` is the absolute tolerance used when judging parameter recovery
 (relative error is ``|fit - true| / max(|true|, floor)``).
@@ -147,6 +163,9 @@ class Effect:
     requires : tuple of str
         Measurement kinds that must be in the data for the effect to be tried: the kinds
         that can identify it (it still changes every kind in ``kinds``).
+    background : bool
+        Present at some level on every real grating (a ``companion`` too): refitted beside
+        every finding and never half of a pair (module docstring).
     """
 
     name: str
@@ -157,6 +176,7 @@ class Effect:
     vector: bool = False
     companion: bool = False
     requires: tuple[str, ...] = ()
+    background: bool = False
 
 
 _MAP_AND_IMAGE = ("surface", "psf_image")
@@ -227,11 +247,18 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
                       meaning="y fundamental (18 mm) relative to the x fundamental (21 mm), over the nominal's "
                               "ratio (x fundamental held)", kinds=_MAP_AND_IMAGE),
             Parameter("quilt_harmonics_ratio", 1.0, -1.0, 3.0, (0.0, 1.0, 2.0), floor=0.2, unit="1",
-                      meaning="quilt harmonics relative to the fundamentals, over the nominal's ratio "
-                              "(0: a pure sinusoidal quilt)")),
+                      meaning="quilt harmonics other than the (1, ±1) cross terms relative to the fundamentals, "
+                              "over the nominal's ratio (0: none)"),
+            Parameter("quilt_cross_ratio", 1.0, -1.0, 3.0, floor=0.2, unit="1",
+                      meaning="the quilt's (1, ±1) egg-crate cross terms relative to the fundamentals, over the "
+                              "nominal's ratio (0: a sum-form quilt)"),
+            Parameter("quilt_figure_ratio", 1.0, -1.0, 3.0, floor=0.2, unit="1",
+                      meaning="the smooth figure that is not quilt (edge roll-off, bending) relative to the "
+                              "fundamentals, over the nominal's ratio")),
            description="the quilt's harmonic content differs from the simulation's: the y fundamental relative "
                        "to the x fundamental and the higher harmonics relative to both (the fundamentals' "
-                       "amplitude stays amplitude_scale's)"),
+                       "amplitude stays amplitude_scale's)",
+           companion=True, background=True),
 )}
 
 #: Half-width (mm) at which ``plating_grad_x/y`` are the relative amplitude change.
@@ -315,12 +342,14 @@ def _summary_scale(p, ctx):
 
 
 def _summary_quilt(p, ctx):
-    out = {"quilt_fund_xy_ratio": p.get("quilt_fund_xy_ratio", 1.0), "quilt_harmonics_ratio": p["quilt_harmonics_ratio"]}
+    out = {"quilt_fund_xy_ratio": p.get("quilt_fund_xy_ratio", 1.0), "quilt_harmonics_ratio": p["quilt_harmonics_ratio"],
+           "quilt_cross_ratio": p.get("quilt_cross_ratio", 1.0), "quilt_figure_ratio": p.get("quilt_figure_ratio", 1.0)}
     if ctx.quilt_rms_um:
         q = ctx.quilt_rms_um
         out.update({"fundamental_x_rms_um": q["fundamental_x"],
                     "fundamental_y_rms_um": q["fundamental_y"] * p.get("quilt_fund_xy_ratio", 1.0),
                     "harmonics_rms_um": q["harmonics"] * abs(p["quilt_harmonics_ratio"]),
+                    "cross_rms_um": q["cross"] * abs(p.get("quilt_cross_ratio", 1.0)),
                     "quilt_note": f"RMS over a period at the simulation's {ctx.cold_K:g} K, before amplitude_scale "
                                   "and temperature; fitted over the 82 x 72 mm centre"})
     return out

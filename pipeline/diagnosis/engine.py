@@ -27,13 +27,14 @@ Decision logic (thresholds in :class:`Criteria`, passed explicitly):
    residual are listed in each other's ``degenerate_with`` — the data cannot tell them apart.
    Signed parameters whose sign the data cannot tell (negated, the score changes by
    less than ``degenerate_bic``) are listed in ``sign_degenerate``.
-   **Companions** (``Effect.companion``: ``plating_gradient``, ``blank_bow``): after the
-   first ranking the ``companion_top`` best findings that are not companions themselves
-   (and every significant single where a companion alone is significant) are refitted
-   jointly with each companion (and with all of them where more than one helps; warm
-   start); the best joint fit replaces the finding (same name, the
-   companions listed in ``Finding.companions``) iff its BIC is lower by at least
-   ``companion_bic``. Such a finding is ``significant`` only if it also beats the
+   **Companions** (``Effect.companion``: ``plating_gradient``, ``blank_bow``,
+   ``quilt_shape``): after the first ranking the ``companion_top`` best findings that are
+   not companions themselves (and every significant single where a companion alone is
+   significant) are refitted jointly with each companion (and with every set of the
+   companions that each helped alone; warm start); the best single joint fit replaces the
+   finding (same name, the companions listed in ``Finding.companions``) iff its BIC is
+   lower by at least ``companion_bic``, and a larger set replaces it only if lower again by
+   ``companion_bic``. A ``background`` effect (``quilt_shape``) is never half of a pair. Such a finding is ``significant`` only if it also beats the
    companions alone by ``min_delta_bic``, and its ``excess_explained`` is measured from
    the companion-alone fit (what the finding adds beyond the gradient or bow), so a
    discrepancy present in the data cannot lend its evidence to another effect.
@@ -93,7 +94,7 @@ from .forward import ProfileForward, SurfaceForward
 from .psf_image import PsfImageForward
 from .manifest import Manifest, load_data, load_manifest
 from .nominal import nominal_sag_map
-from .plausibility import check_measurements
+from .plausibility import at_prior_bound, check_measurements
 from .where import measurement_parts, profile_parts, psf_image_parts, satellite_spacing_um, surface_parts
 
 __all__ = ["Criteria", "N_EFF_SOURCES", "post_fit_n_eff", "recounted", "Finding", "Diagnosis", "diagnose", "build_problem", "fit_effects", "all_effects", "parameters_of", "summary_context", "unconstrained", "acting_on", "gap_statistics", "gaps"]
@@ -178,6 +179,11 @@ class Finding:
     #: ``rms_um`` of Zernike-type effects with the ``aperture`` it refers to, the quilt's
     #: component amplitudes.
     summary: dict = field(default_factory=dict)
+    #: Fitted parameters of the finding's own effects that ended at a bound of their prior
+    #: range (:func:`.plausibility.at_prior_bound`): stopped by the prior, not the data.
+    at_bound: tuple = ()
+    #: Measurements still beyond their noise after this finding (:func:`gaps`).
+    remaining_gap: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -301,7 +307,8 @@ def _rank(prob: Problem, nom: FitOutcome, cands, criteria: Criteria, memo: dict)
         f, fo = fit_effects(prob, nom, (e.name,), criteria, memo=memo)
         findings.append(f)
         fits[f.effect] = fo
-    singles = sorted([f for f in findings if f.significant], key=lambda f: f.score)[:criteria.pair_from]
+    singles = sorted([f for f in findings if f.significant and not _background_only(f)],
+                     key=lambda f: f.score)[:criteria.pair_from]
     for a, b in itertools.combinations(singles, 2):
         names = tuple(sorted(a.effects + b.effects, key=list(LIBRARY).index))
         if _same_rescaling(names, prob):
@@ -516,13 +523,16 @@ def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict,
             start = {**f.parameters, **(fits[sub[0]].parameters if sub[0] in fits else {})}
             tried.append((*fit_effects(prob, nom, tuple(f.effects) + sub, c, start=start, memo=memo), sub))
         better = [t for t in tried if t[0].score < f.score]
-        if len(comp) > 1 and len(better) > 1:
-            start = {k: v for t in better for k, v in t[0].parameters.items()}
-            tried.append((*fit_effects(prob, nom, tuple(f.effects) + comp, c, start=start, memo=memo), comp))
+        helping = tuple(n for n in comp if any(t[2] == (n,) for t in better))
+        for size in range(2, len(helping) + 1):
+            for sub in itertools.combinations(helping, size):
+                start = {k: v for t in better if set(t[2]) <= set(sub) for k, v in t[0].parameters.items()}
+                tried.append((*fit_effects(prob, nom, tuple(f.effects) + sub, c, start=start, memo=memo), sub))
         joint_fits.setdefault(f.effect, []).extend((tuple(f.effects) + sub, fo) for _, fo, sub in tried)
-        joint, fo, sub = min(tried, key=lambda t: t[0].score)
+        joint, fo, sub = _supported_companions(tried, c)
         if not joint.score <= f.score - c.companion_bic:
-            out[i] = _replace(f, uncertainties=_mismatch_errors(f, [j for j, _, _ in tried], f.parameters))
+            out[i] = _replace(f, uncertainties=_mismatch_errors(f, [j for j, _, s in tried if len(s) == 1],
+                                                                f.parameters))
             continue
         joint = _replace(joint, uncertainties=_mismatch_errors(joint, [j for j, _, _ in tried if j is not joint],
                                                                  f.parameters))
@@ -539,6 +549,24 @@ def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict,
                           **_excesses(prob, base, fo, f.effects))
         fits[f.effect] = fo
     return out
+
+
+def _supported_companions(tried: list, c: Criteria) -> tuple:
+    """The joint fit ``(finding, fit, companion set)`` to adopt among ``tried``: the best
+    single companion, replaced by a larger set only where that set beats the best smaller
+    one by ``c.companion_bic`` (each companion adopted must be supported by the data, as
+    the first one must beat the finding alone)."""
+    best = None
+    for size in sorted({len(t[2]) for t in tried}):
+        top = min((t for t in tried if len(t[2]) == size), key=lambda t: t[0].score)
+        if best is None or top[0].score <= best[0].score - c.companion_bic:
+            best = top
+    return best
+
+
+def _background_only(f: Finding) -> bool:
+    """Whether every effect of ``f`` is a ``background`` effect (:mod:`.effects`)."""
+    return all(LIBRARY[e].background for e in f.effects)
 
 
 def _mismatch_errors(chosen: Finding, alternatives: list, own) -> dict:
@@ -721,8 +749,18 @@ def _with_heldout(prob: Problem, f: Finding, c: Criteria) -> Finding:
 
 
 def _explains(f: Finding, c: Criteria) -> bool:
-    """The verdict's test of a finding (module docstring, step 6)."""
-    return f.significant and f.excess_explained >= c.min_variance_explained and not f.overfit
+    """The verdict's test of a finding (module docstring, step 6). Also: not every one of
+    its own parameters at a prior bound (then the prior, not the data, stopped the fit: a
+    map of zeros "explained" by an amplitude scale of 0.3)."""
+    own = set(f.parameters) - _companion_parameters(f)
+    pinned = bool(own) and own <= set(f.at_bound)
+    return f.significant and f.excess_explained >= c.min_variance_explained and not f.overfit and not pinned
+
+
+def _companion_parameters(f: Finding) -> set:
+    """Names of ``f``'s parameters that belong to its companions, not to its own effects."""
+    own = {q.name for e in f.effects for q in LIBRARY[e].parameters}
+    return {q for q in f.parameters if q not in own and not any(q.startswith(o + "_") for o in own)}
 
 
 def _member_explains(prob: Problem, findings: list, c: Criteria, heldout: bool) -> tuple[list, str]:
@@ -740,8 +778,7 @@ def _member_explains(prob: Problem, findings: list, c: Criteria, heldout: bool) 
     so 6 of 22 slit-width cases ended ``unexplained``."""
     pair = findings[0]
     for i, f in enumerate(findings[1:], start=1):
-        if len(f.effects) != 1 or f.effects[0] not in pair.effects or not f.significant \
-                or f.excess_explained < c.min_variance_explained:
+        if len(f.effects) != 1 or f.effects[0] not in pair.effects or not _explains(f, c):
             continue
         if heldout and f.heldout_shrink_fraction is None and not f.heldout_note:
             f = findings[i] = _with_heldout(prob, f, c)
@@ -839,7 +876,12 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
             findings, fits, joint_fits = _rank(prob, nom, cands, criteria, memo)
     t["fit_s"] = time.perf_counter() - t["start"] - t["load_s"]
     half = {q.name: 0.5 * q.width for q in parameters_of(tuple(e.name for e in cands), prob.forwards)}
-    findings = [_replace(f, unconstrained=unconstrained(f, half)) for f in findings]
+    bounds = {q.name: (q.lo, q.hi) for q in parameters_of(tuple(e.name for e in cands), prob.forwards)}
+    findings = [_replace(f, unconstrained=unconstrained(f, half),
+                         at_bound=at_prior_bound({q: v for q, v in f.parameters.items()
+                                                  if q not in _companion_parameters(f)}, bounds),
+                         remaining_gap=tuple(g["measurement"] for g in gaps(prob, fits[f.effect], criteria)))
+                for f in findings]
     findings = _degeneracies(findings, fits, prob, criteria)
     findings = [_replace(f, sign_degenerate=_sign_degeneracies(prob, f, fits[f.effect], criteria,
                                                                joint_fits.get(f.effect)))

@@ -61,25 +61,29 @@ def bow_um(x_mm: np.ndarray, y_mm: np.ndarray, defocus_um: float, spherical_um: 
 
 
 def quilt_parts(quilt: QuiltComponents | None, x_mm: np.ndarray, y_mm: np.ndarray) -> tuple | None:
-    """``(F_y, H)`` of the nominal's quilt (µm) at blank coordinates (:mod:`.quilt`): the
-    parts ``quilt_shape`` changes (``F_x`` is held); None without a quilt fit."""
+    """``(F_x, F_y, H, C)`` of the nominal's quilt (µm) at blank coordinates (:mod:`.quilt`):
+    the parts ``quilt_shape`` holds (``F_x``) or changes; None without a quilt fit."""
     if quilt is None:
         return None
-    return quilt.fundamental_y_um(x_mm, y_mm), quilt.harmonics_um(x_mm, y_mm)
+    return (quilt.fundamental_x_um(x_mm, y_mm), quilt.fundamental_y_um(x_mm, y_mm), quilt.harmonics_um(x_mm, y_mm),
+            quilt.cross_um(x_mm, y_mm))
 
 
 def blank_shape_um(base_um: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, p: dict,
                    quilt: tuple | None = None) -> np.ndarray:
     """Deformation ``base_um`` (µm, at blank coordinates ``x_mm``, ``y_mm``) changed by the
     blank effects in ``p``: the quilt's shape (``quilt`` = :func:`quilt_parts` at the same
-    points: ``+ (rho - 1) F_y + (h - 1) H``), then times
+    points: ``+ (rho - 1) F_y + (h - 1) H + (c - 1) C + (g - 1) R`` with ``R`` the smooth
+    figure, ``base_um`` minus its quilt), then times
     ``1 + (plating_grad_x x + plating_grad_y y) / 70 mm`` (plating gradient: it scales the
     local deformation, quilt included), plus the blank bow (:func:`bow_um`). Shared by the
     map and the spectrograph-image models."""
     rho, h = p.get("quilt_fund_xy_ratio", 1.0), p.get("quilt_harmonics_ratio", 1.0)
-    if quilt is not None and (rho != 1.0 or h != 1.0):
-        fy, hh = quilt
-        base_um = base_um + (rho - 1.0) * fy + (h - 1.0) * hh
+    c, g = p.get("quilt_cross_ratio", 1.0), p.get("quilt_figure_ratio", 1.0)
+    if quilt is not None and (rho != 1.0 or h != 1.0 or c != 1.0 or g != 1.0):
+        fx, fy, hh, cc = quilt
+        figure = base_um - (fx + fy + hh + cc)
+        base_um = base_um + (rho - 1.0) * fy + (h - 1.0) * hh + (c - 1.0) * cc + (g - 1.0) * figure
     gx, gy = p.get("plating_grad_x", 0.0), p.get("plating_grad_y", 0.0)
     if gx or gy:
         base_um = base_um * (1.0 + (gx * x_mm + gy * y_mm) / PLATING_GRADIENT_REF_MM)
@@ -188,7 +192,7 @@ class SurfaceForward:
 #: deformation's overall factor: the memo key of the image models.
 PROFILE_KEYS = ("pupil_x_mm", "pupil_y_mm", "coll_coma_um", "coll_defocus_um", "coll_astig45_um", "slit_image_width_um",
                 "plating_grad_x", "plating_grad_y", "bow_defocus_um", "bow_spherical_um", "quilt_fund_xy_ratio",
-                "quilt_harmonics_ratio")
+                "quilt_harmonics_ratio", "quilt_cross_ratio", "quilt_figure_ratio")
 
 
 def collimator_terms(p: dict) -> dict:

@@ -16,13 +16,23 @@ up to the third harmonic with cross terms, phases referred to the blank's origin
 
 * ``F_x``: component (1, 0), ``A cos(2 pi x / 21 mm - phi)``;
 * ``F_y``: component (0, 1);
-* ``H``: every other fitted component (the (1, ±1) cross terms, (2, 0), (0, 2), ...).
+* ``C``: the egg-crate cross terms (1, 1) and (1, -1), the product of the two
+  fundamentals: a sum-form quilt has none, a product-form quilt is made of them;
+* ``H``: every other fitted component ((2, 0), (0, 2), (2, ±1), ...).
+
+``C`` is split from ``H`` because the two change the line shape differently: the cross
+terms scatter light into the satellites of the fundamental along the slit, the higher
+harmonics into the second and third satellites (``benchmarks/results_j_gap.md``: the J
+double peak depends mostly on the cross terms).
 
 The components are periodic and evaluated wherever the nominal map is valid: the
 pockets' pitch is the same over the whole blank, and the model change is a statement
-about the quilt's shape, not about where it is. What the fit leaves (the blank's smooth
-figure: edge roll-off, bow; ~8 % of the FEA map's variance over the centre) is not
-changed by the effect.
+about the quilt's shape, not about where it is. What the fit leaves, ``R`` (the blank's
+smooth figure: edge roll-off, bow; ~8 % of the FEA map's variance over the centre), is
+the fourth part: the quilt is the pockets printing through the plating, the smooth figure
+the plate bending as a whole under the plating's mismatch strain and at its free edges,
+and the two need not scale alike on a real blank (pocket depth and rib width against
+plating thickness and symmetry).
 """
 
 from __future__ import annotations
@@ -34,8 +44,8 @@ import numpy as np
 from optics.fitting import FourierFit, fit_fourier
 from optics.sagmap import SagMap
 
-__all__ = ["QUILT_PERIOD_X_MM", "QUILT_PERIOD_Y_MM", "QUILT_HARMONICS", "QUILT_APERTURE", "QuiltComponents",
-           "quilt_components", "quilt_change_um"]
+__all__ = ["QUILT_PERIOD_X_MM", "QUILT_PERIOD_Y_MM", "QUILT_HARMONICS", "QUILT_APERTURE", "CROSS_TERMS", "QuiltComponents",
+           "quilt_components"]
 
 #: The blank's pocket pitch (mm) along x (dispersion) and y (rulings).
 QUILT_PERIOD_X_MM = 21.0
@@ -46,6 +56,8 @@ QUILT_PERIOD_Y_MM = 18.0
 QUILT_HARMONICS = 3
 #: Aperture of the decomposition fit (optics.sagmap.REGIONS).
 QUILT_APERTURE = "center"
+#: The egg-crate cross terms ``C`` (module docstring).
+CROSS_TERMS = ((1, 1), (1, -1))
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,8 +78,12 @@ class QuiltComponents:
         return out
 
     @property
+    def cross_terms(self) -> tuple:
+        return tuple(c for c in self.fourier.components if c in CROSS_TERMS)
+
+    @property
     def harmonic_terms(self) -> tuple:
-        return tuple(c for c in self.fourier.components if c not in ((1, 0), (0, 1)))
+        return tuple(c for c in self.fourier.components if c not in ((1, 0), (0, 1)) + CROSS_TERMS)
 
     def fundamental_x_um(self, x_mm, y_mm) -> np.ndarray:
         return self._sum(x_mm, y_mm, ((1, 0),))
@@ -75,13 +91,17 @@ class QuiltComponents:
     def fundamental_y_um(self, x_mm, y_mm) -> np.ndarray:
         return self._sum(x_mm, y_mm, ((0, 1),))
 
+    def cross_um(self, x_mm, y_mm) -> np.ndarray:
+        return self._sum(x_mm, y_mm, self.cross_terms)
+
     def harmonics_um(self, x_mm, y_mm) -> np.ndarray:
         return self._sum(x_mm, y_mm, self.harmonic_terms)
 
     def amplitudes_um(self) -> dict:
-        """RMS over a period (µm) of ``F_x``, ``F_y`` and ``H``: what the effect scales."""
+        """RMS over a period (µm) of ``F_x``, ``F_y``, ``C`` and ``H``: what the effect scales."""
         a = self.fourier.amplitude_um
         return {"fundamental_x": float(a[(1, 0)] / np.sqrt(2)), "fundamental_y": float(a[(0, 1)] / np.sqrt(2)),
+                "cross": float(np.sqrt(sum(a[c] ** 2 for c in self.cross_terms) / 2)),
                 "harmonics": float(np.sqrt(sum(a[c] ** 2 for c in self.harmonic_terms) / 2))}
 
 
@@ -94,19 +114,3 @@ def quilt_components(nominal: SagMap) -> QuiltComponents | None:
     except ValueError:
         return None
     return QuiltComponents(f)
-
-
-def quilt_change_um(quilt: QuiltComponents | None, x_mm, y_mm, fund_x: float = 1.0, fund_y: float = 1.0,
-                    harmonics: float = 1.0) -> np.ndarray | float:
-    """Change of the sag (µm) when ``F_x``, ``F_y`` and ``H`` are multiplied by ``fund_x``,
-    ``fund_y`` and ``harmonics``: ``(fund_x - 1) F_x + (fund_y - 1) F_y + (harmonics - 1) H``."""
-    if quilt is None or (fund_x == 1.0 and fund_y == 1.0 and harmonics == 1.0):
-        return 0.0
-    out = 0.0
-    if fund_x != 1.0:
-        out = out + (fund_x - 1.0) * quilt.fundamental_x_um(x_mm, y_mm)
-    if fund_y != 1.0:
-        out = out + (fund_y - 1.0) * quilt.fundamental_y_um(x_mm, y_mm)
-    if harmonics != 1.0:
-        out = out + (harmonics - 1.0) * quilt.harmonics_um(x_mm, y_mm)
-    return out

@@ -26,19 +26,21 @@ from .quilt import quilt_components
 __all__ = ["quilt_shape_map", "shape_discrepancy", "unmodelled_shape", "FOIL_TERMS", "synthetic_surface", "synthetic_profile", "synthetic_psf_image", "write_profile_csv"]
 
 
-def quilt_shape_map(sag: SagMap, fund_xy_ratio: float = 1.0, harmonics_ratio: float = 1.0) -> SagMap:
+def quilt_shape_map(sag: SagMap, fund_xy_ratio: float = 1.0, harmonics_ratio: float = 1.0,
+                    cross_ratio: float = 1.0) -> SagMap:
     """``sag`` with its own quilt reshaped (the ``quilt_shape`` effect, :mod:`.quilt`): the y
-    fundamental times ``fund_xy_ratio`` (x held) and the higher harmonics times
-    ``harmonics_ratio``, decomposed from ``sag`` itself (a truth map from another mesh has
+    fundamental times ``fund_xy_ratio`` (x held), the (1, ±1) cross terms times
+    ``cross_ratio`` and the other harmonics times ``harmonics_ratio``, decomposed from ``sag`` itself (a truth map from another mesh has
     its own harmonic content)."""
-    for name, v in (("fund_xy_ratio", fund_xy_ratio), ("harmonics_ratio", harmonics_ratio)):
+    for name, v in (("fund_xy_ratio", fund_xy_ratio), ("harmonics_ratio", harmonics_ratio),
+                    ("cross_ratio", cross_ratio)):
         if not math.isfinite(v):
             raise ValueError(f"quilt_shape_map: {name}={v} must be finite")
     q = quilt_components(sag)
     if q is None:
         raise ValueError(f"quilt_shape_map: map {sag.label!r} does not cover the 82 x 72 mm centre the quilt is fitted on")
     X, Y = sag.grid()
-    p = {"quilt_fund_xy_ratio": fund_xy_ratio, "quilt_harmonics_ratio": harmonics_ratio}
+    p = {"quilt_fund_xy_ratio": fund_xy_ratio, "quilt_harmonics_ratio": harmonics_ratio, "quilt_cross_ratio": cross_ratio}
     return sag.with_sag(blank_shape_um(sag.sag_um, X, Y, p, quilt_parts(q, X, Y)), label=f"{sag.label} + quilt shape")
 
 
