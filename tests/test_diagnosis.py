@@ -333,3 +333,23 @@ def test_n_eff_source_checked(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["diagnose", str(_map(tmp_path)), "--out", str(tmp_path / "o"), "--n-eff-from", "post"])
     assert "--n-eff-from: invalid choice: 'post'" in capsys.readouterr().err
+
+
+def test_a_finding_pinned_at_its_prior_bounds_is_no_explanation(tmp_path):
+    """A blank deformed 4x the simulation's (amplitude_scale's prior ends at 3): the fit of
+    the scale stops at the bound, so the finding is reported ``at_bound`` and the verdict is
+    not ``explained`` by it; a companion's parameter at its bound does not pin the finding."""
+    from pipeline.diagnosis.engine import Criteria, Finding, _explains
+
+    d = diagnose(_map(tmp_path, scale=4.0), heldout=False)
+    a = d.finding("amplitude_scale")
+    assert a.at_bound == tuple(q for q in a.parameters if q.startswith("scale_")) and a.at_bound
+    assert a.parameters[a.at_bound[0]] == pytest.approx(3.0, abs=0.01)
+    assert not (d.verdict == "explained" and d.best.effect == "amplitude_scale")
+    c = Criteria()
+    f = Finding("amplitude_scale", ("amplitude_scale",), {"scale_A": 1.2, "bow_defocus_um": 0.2}, {}, -50.0, -50.0,
+                1.0, 0.3, 0.7, 0.9, 0.9, significant=True, companions=("blank_bow",), at_bound=())
+    assert _explains(f, c)
+    from dataclasses import replace
+
+    assert not _explains(replace(f, at_bound=("scale_A",)), c)
