@@ -169,9 +169,9 @@ class FEACaseRunner:
     block_size = 16
 
     def plan(self, params_list) -> None:
-        """Announce the cases about to be run (inline sweeps): those that share a mesh,
-        materials and load are then solved in blocks (:meth:`PreparedBlank.solve_many`),
-        one block when its first case is asked for."""
+        """Announce the cases about to be run (the ``planner`` of an inline sweep): those
+        that share a mesh, materials and load are then solved in blocks
+        (:meth:`PreparedBlank.solve_many`), one block when its first case is asked for."""
         self._planned = [dict(p) for p in params_list]
         self._solved: dict = {}
 
@@ -317,8 +317,9 @@ def run_fea_sweep(axes: dict, out_dir, *, scheduler: str | None = None, workers:
     core = {k: [FEA_PARAMETERS[k][0]] for k in ("coverage", "t0_um", "polish")}
     axes = {**core, **axes}
     cases = fea_grid(**axes)
-    res = run_sweep(FEACaseRunner(with_maps), cases, out_dir, namespace=case_namespace(),
-                    workers=workers, scheduler=scheduler, progress=progress, description="FEA sweep")
+    runner = FEACaseRunner(with_maps)
+    res = run_sweep(runner, cases, out_dir, namespace=case_namespace(), workers=workers, scheduler=scheduler,
+                    progress=progress, description="FEA sweep", planner=runner.plan)
     out = Path(out_dir)
     res.write_csv(out / "sweep.csv")
     res.write_netcdf(out / "sweep.nc")
@@ -367,8 +368,9 @@ def run_tables(out_dir, *, progress: bool = True, mesh_size_mm: float | None = N
                                ("stress_scale", stress_scale)) if v is not None}
     paper = paper_cases()
     cases = [Case({"coverage": c.coverage, "t0_um": c.t0_um, "polish": c.polish, **extra}) for c in paper]
-    res = run_sweep(FEACaseRunner(), cases, out_dir, namespace=case_namespace(), workers=1,
-                    progress=progress, description="paper tables")
+    runner = FEACaseRunner()
+    res = run_sweep(runner, cases, out_dir, namespace=case_namespace(), workers=1,
+                    progress=progress, description="paper tables", planner=runner.plan)
     rows = [TableRow(c.table, c.coverage, c.t0_um, c.polish, c.pv_center_um, float(out["pv_center_um"]),
                      c.direction, float(out["quilt_direction_um"]), c.calibrate, figure_of(out))
             for c, (_, out) in zip(paper, res)]
