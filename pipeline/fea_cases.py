@@ -92,40 +92,44 @@ def _quilt_direction_um(sag, blank: Blank) -> float:
     return sag.value_at(x0, y0) - sag.value_at(x0 + blank.pitch_x_mm / 2, y0 + blank.pitch_y_mm / 2)
 
 
-def field_path(fields_dir, params: dict) -> Path:
-    """Where the displacement field of the case ``params`` is kept (key: params + model version)."""
-    import hashlib
+def field_path(fields_dir, params: dict):
+    """The :mod:`pipeline.store` entry of the displacement field of the case ``params``
+    (key: params + model version; ``.payload`` is the ``.npz``)."""
+    from pipeline import store
+
+    norm = {k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v)) for k, v in params.items()}
+    return store.entry(fields_dir, f"field-{_namespace()}", norm)
+
+
+def save_field(entry, result) -> None:
+    """Displacement field (mm, float32) + node positions + case info, written atomically
+    with its checksummed sidecar (``entry`` from :func:`field_path`)."""
     import json
 
-    norm = {k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v))
-            for k, v in sorted(params.items())}
-    text = json.dumps({"namespace": _namespace(), "params": norm}, sort_keys=True)
-    return Path(fields_dir) / f"{hashlib.sha256(text.encode()).hexdigest()[:20]}.npz"
+    from pipeline import store
+
+    store.save_arrays(entry, {"coords_mm": result.coords_mm,
+                              "displacement_mm": result.displacement_mm.astype(np.float32),
+                              "uniform_strain": result.uniform_strain,
+                              "info": json.dumps(result.info, default=str)})
 
 
-def save_field(path: Path, result) -> None:
-    """Displacement field (mm, float32) + node positions + case info, written atomically."""
-    import json
-
-    from pipeline.io_common import atomic_path
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, coords_mm=result.coords_mm, displacement_mm=result.displacement_mm.astype(np.float32),
-                 uniform_strain=result.uniform_strain, info=json.dumps(result.info, default=str))
-
-
-def load_field(path: Path):
-    """The :class:`fea.model.FEAResult` (without sag) saved by :func:`save_field`, or None."""
+def load_field(entry):
+    """The :class:`fea.model.FEAResult` (without sag) saved by :func:`save_field`, or None
+    (absent; a damaged or mismatched file also warns)."""
     import json
 
     from fea.model import FEAResult
+    from pipeline import store
 
     try:
-        with np.load(path) as z:
-            return FEAResult(z["coords_mm"], z["displacement_mm"].astype(float), float(z["uniform_strain"]),
-                             None, json.loads(str(z["info"])))
-    except (OSError, KeyError, ValueError):
+        z, _ = store.load_arrays(entry)
+        return FEAResult(z["coords_mm"], z["displacement_mm"].astype(float), float(z["uniform_strain"]),
+                         None, json.loads(str(z["info"])))
+    except FileNotFoundError:
+        return None
+    except (store.CacheMiss, KeyError, ValueError) as exc:
+        store.warn_rebuild(entry, exc, "displacement field")
         return None
 
 

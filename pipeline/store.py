@@ -259,7 +259,8 @@ def read_bytes(e: Entry) -> tuple[bytes, dict]:
     except OSError as exc:
         raise CacheMiss(f"{e.payload.name} unreadable: {exc.strerror or exc}") from None
     if len(data) != side.get("size_bytes"):
-        raise CacheMiss(f"{e.payload.name} has {len(data)} bytes, its sidecar {side.get('size_bytes')} (truncated?)")
+        raise CacheMiss(f"{e.payload.name} has {len(data)} bytes, its sidecar records {side.get('size_bytes')} "
+                        "(truncated or replaced)")
     if _sha256(data) != side.get("sha256"):
         raise CacheMiss(f"{e.payload.name} checksum differs from its sidecar's (corrupt, or another key's file)")
     return data, side
