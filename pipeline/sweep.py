@@ -45,6 +45,8 @@ from pipeline.store import CacheWarning
 __all__ = ["Case", "grid", "parse_range", "run_sweep", "SweepResult", "SweepError", "CacheWarning"]
 
 _PARAM_TYPES = "float, int, str or bool"
+#: Cached cases that fail verification are each named in a warning up to this many.
+_MAX_CASE_WARNINGS = 10
 
 
 class SweepError(RuntimeError):
@@ -308,15 +310,21 @@ def run_sweep(func, cases, out_dir, *, namespace: str, workers: int | None = Non
 
     keys = [c.key(namespace) for c in cases]
     unique = dict(zip(keys, cases))
-    results, todo = {}, []
+    results, todo, misses = {}, [], []
     for key, case in unique.items():
         try:
             results[key], _ = load_case(cases_dir, key, namespace, case.as_dict())
         except FileNotFoundError:
             todo.append(key)
         except CacheMiss as exc:
-            warnings.warn(f"recomputing case {case}: {exc}", CacheWarning, stacklevel=2)
+            misses.append((case, exc))
             todo.append(key)
+    # one line per case, but bounded: a cache of an older format can hold thousands of cases
+    for case, exc in misses[:_MAX_CASE_WARNINGS]:
+        warnings.warn(f"recomputing case {case}: {exc}", CacheWarning, stacklevel=2)
+    if len(misses) > _MAX_CASE_WARNINGS:
+        warnings.warn(f"recomputing {len(misses) - _MAX_CASE_WARNINGS} more cases whose files in {cases_dir} "
+                      "do not verify", CacheWarning, stacklevel=2)
     n_reused, failures = len(results), []
 
     from tqdm.auto import tqdm

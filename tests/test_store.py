@@ -286,3 +286,16 @@ def test_swapped_field_files_are_not_used(tmp_path):
     with pytest.warns(CacheWarning, match="displacement field .*checksum"):
         assert load_field(ea) is None
     assert load_field(field_path(tmp_path, {"t0_um": 50.0})) is None  # absent: no warning
+
+
+def test_many_stale_case_files_give_a_bounded_number_of_warnings(tmp_path):
+    cases = grid(x=[float(i) for i in range(14)])
+    run_sweep(square, cases, tmp_path, namespace="t", workers=1, progress=False)
+    for e in tmp_path.glob("cases/*.json"):
+        side = json.loads(e.read_text())
+        side["format"] = 1  # written by the format before checksums
+        e.write_text(json.dumps(side))
+    with pytest.warns(CacheWarning) as record:
+        res = run_sweep(square, cases, tmp_path, namespace="t", workers=1, progress=False)
+    assert res.n_computed == 14 and [r["y"] for _, r in res] == [float(i * i) for i in range(14)]
+    assert len(record) == 11 and "4 more cases" in str(record[-1].message)
