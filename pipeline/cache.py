@@ -1,30 +1,37 @@
-"""On-disk cache of sweep cases: canonical keys, result validation, atomic files.
+"""Sweep cases in the keyed result store: result validation and the case files.
 
-One case is two files in ``<out_dir>/cases/``:
+One case is one :mod:`pipeline.store` entry in ``<out_dir>/cases/``:
 
 ``<key>.npz``
-    every output as an array (scalars as 0-d arrays), written with
-    ``allow_pickle=False`` semantics so loading never executes code;
+    every output as an array (scalars as 0-d arrays), loaded with
+    ``allow_pickle=False`` so loading never executes code;
 ``<key>.json``
-    the params, namespace, key, elapsed seconds, library version and a manifest of
-    the outputs (kind and, for labelled arrays, dimension names).
+    the store's sidecar (namespace, params, key, sha256 of the ``.npz``, format and
+    library version) plus the elapsed seconds and a manifest of the outputs (kind
+    and, for labelled arrays, dimension names).
 
-The ``.npz`` is written first and the ``.json`` last, each through a temporary file
-in the same directory and :func:`os.replace` (:func:`pipeline.io_common.atomic_write`), so the ``.json`` is the commit marker:
-a case counts as done only when both files exist, load cleanly and agree with the
-requested params.
+The ``.npz`` is written first and the ``.json`` last, both atomically, so the
+``.json`` is the commit marker: a case counts as done only when both files exist,
+the ``.json`` describes the requested params and the ``.npz`` bytes match its checksum.
 """
 
 from __future__ import annotations
 
-import json
-import math
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
-from pipeline.io_common import atomic_write
+from pipeline.store import (
+    CacheMiss,
+    canonical_json,
+    canonical_token,
+    entry,
+    entry_key,
+    library_version,
+    load_arrays,
+    save_arrays,
+)
 
 __all__ = [
     "canonical_token",
@@ -37,61 +44,13 @@ __all__ = [
     "library_version",
 ]
 
-# JSON manifest format of the per-case .json file; bump when the layout changes.
-FORMAT_VERSION = 1
+#: Payload format of a case entry; bump when the stored outputs change layout.
+#: 2: the sidecar carries the payload's sha256 (entries of format 1 are recomputed).
+FORMAT_VERSION = 2
 COORD_PREFIX = "coord:"
 
-
-class CacheMiss(Exception):
-    """A cached case cannot be used; ``str(exc)`` says why (shown in the warning)."""
-
-
-def library_version() -> str:
-    """Installed cryograting version, or ``"unknown"`` when not installed."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("cryograting")
-    except PackageNotFoundError:
-        return "unknown"
-
-
-def canonical_token(value: object) -> str:
-    """JSON text of one parameter value, identical for numerically equal numbers.
-
-    Integral numbers are written as integers (so ``200 == 200.0``) and other floats
-    with 12 significant digits, so values that differ only by floating-point noise
-    (``0.1 + 0.2`` vs ``0.3``, a range built by repeated addition) share a cache
-    entry. Booleans and strings stay distinct from numbers (``True != 1``,
-    ``"200" != 200``) because JSON types them differently.
-    """
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            raise ValueError(f"non-finite value {value!r} has no canonical form")
-        if value.is_integer():
-            return str(int(value))
-        return format(value, ".12g")
-    if isinstance(value, str):
-        return json.dumps(value, ensure_ascii=False)
-    raise TypeError(f"unsupported parameter type {type(value).__name__}")
-
-
-def canonical_json(params: Mapping[str, object]) -> str:
-    """Canonical JSON of ``params``: sorted keys, no spaces, canonical numbers."""
-    items = (f"{json.dumps(k, ensure_ascii=False)}:{canonical_token(params[k])}" for k in sorted(params))
-    return "{" + ",".join(items) + "}"
-
-
-def case_key(namespace: str, params: Mapping[str, object]) -> str:
-    """sha256 hex digest of ``namespace`` and the canonical JSON of ``params``."""
-    import hashlib
-
-    # The newline separates namespace from JSON so ("a", '{"b"...') can't alias.
-    return hashlib.sha256(f"{namespace}\n{canonical_json(params)}".encode()).hexdigest()
+#: Cache key of one case: sha256 of the namespace and the canonical JSON of the params.
+case_key = entry_key
 
 
 def normalise_result(result: object, param_names=()) -> dict:
@@ -147,13 +106,18 @@ def _check_array(name: str, arr: np.ndarray) -> np.ndarray:
     return arr
 
 
-def save_case(cases_dir: Path, key: str, namespace: str, params: dict, result: dict, elapsed_s: float,
-              version: str) -> None:
+def _entry(cases_dir: Path, namespace: str, params: Mapping):
+    return entry(cases_dir, namespace, params, suffix=".npz", format_version=FORMAT_VERSION)
+
+
+def save_case(cases_dir: Path, key: str, namespace: str, params: dict, result: dict, elapsed_s: float) -> None:
     """Store one normalised ``result`` as ``<key>.npz`` then ``<key>.json`` (the commit marker).
 
-    ``version`` is the library version recorded in the json (looked up once per sweep
-    by the caller: :func:`library_version` costs ~1 ms).
+    ``key`` must be :func:`case_key` of ``namespace`` and ``params`` (checked).
     """
+    e = _entry(cases_dir, namespace, params)
+    if e.key != key:
+        raise ValueError(f"key {key[:12]}... is not the key of namespace {namespace!r} and params {params}")
     arrays, manifest = {}, {}
     for name, value in result.items():
         if isinstance(value, tuple):
@@ -162,62 +126,32 @@ def save_case(cases_dir: Path, key: str, namespace: str, params: dict, result: d
         else:
             arrays[name] = np.asarray(value)
             manifest[name] = {"kind": "array" if isinstance(value, np.ndarray) else "scalar"}
-    with atomic_write(cases_dir / f"{key}.npz", "wb") as fh:
-        np.savez(fh, **arrays)
-    meta = {
-        "format": FORMAT_VERSION,
-        "key": key,
-        "namespace": namespace,
-        "params": params,
-        "elapsed_s": elapsed_s,
-        "version": version,
-        "outputs": manifest,
-    }
-    text = json.dumps(meta, indent=1, ensure_ascii=False).encode()
-    with atomic_write(cases_dir / f"{key}.json", "wb") as fh:
-        fh.write(text)
+    save_arrays(e, arrays, {"elapsed_s": elapsed_s, "outputs": manifest})
 
 
 def load_case(cases_dir: Path, key: str, namespace: str, params: dict) -> tuple[dict, dict]:
-    """Load a cached case as ``(result, meta)``.
+    """Load a cached case as ``(result, sidecar)``, verified against its key and checksum.
 
     Raises
     ------
     FileNotFoundError
         neither file exists (a plain miss, not worth a warning).
     CacheMiss
-        the files exist but are incomplete, corrupt or describe other params.
+        the files exist but are incomplete, corrupt, of another format, another key's
+        or describe other params.
     """
-    npz, js = cases_dir / f"{key}.npz", cases_dir / f"{key}.json"
-    if not npz.exists() and not js.exists():
-        raise FileNotFoundError(npz)
-    try:
-        meta = json.loads(js.read_text())
-    except FileNotFoundError:
-        raise CacheMiss(f"{npz.name} has no {js.name} (run killed between the two writes?)") from None
-    except (OSError, ValueError) as exc:
-        raise CacheMiss(f"{js.name} unreadable: {exc}") from None
-    try:
-        same = (meta["key"] == key and meta["namespace"] == namespace
-                and canonical_json(meta["params"]) == canonical_json(params))
-        manifest = meta["outputs"]
-    except (KeyError, TypeError, ValueError) as exc:
-        raise CacheMiss(f"{js.name} malformed: {exc!r}") from None
-    if not same:
-        raise CacheMiss(f"{js.name} describes namespace {meta.get('namespace')!r}, params {meta.get('params')}")
-    try:
-        # Reading every member checks each zip CRC, so a truncated file is caught here.
-        # Our own file handle: np.load leaks its handle when the zip directory is bad.
-        with open(npz, "rb") as f, np.load(f, allow_pickle=False) as data:
-            arrays = {name: data[name] for name in data.files}
-    except Exception as exc:  # zipfile.BadZipFile, OSError, ValueError, EOFError, ...
-        raise CacheMiss(f"{npz.name} unreadable: {type(exc).__name__}: {exc}") from None
-    if set(arrays) != set(manifest):
-        raise CacheMiss(f"{npz.name} holds {sorted(arrays)}, {js.name} lists {sorted(manifest)}")
+    e = _entry(cases_dir, namespace, params)
+    if e.key != key:
+        raise CacheMiss(f"key {key[:12]}... is not the key of namespace {namespace!r} and params {params}")
+    arrays, meta = load_arrays(e)
+    manifest = meta.get("outputs")
+    if not isinstance(manifest, dict) or set(arrays) != set(manifest):
+        raise CacheMiss(f"{e.payload.name} holds {sorted(arrays)}, {e.sidecar.name} lists "
+                        f"{sorted(manifest) if isinstance(manifest, dict) else manifest!r}")
     result = {}
     for name, info in manifest.items():
         arr = arrays[name]
-        kind = info.get("kind")
+        kind = info.get("kind") if isinstance(info, dict) else None
         if kind == "scalar":
             result[name] = arr.item()
         elif kind == "labelled":

@@ -92,40 +92,44 @@ def _quilt_direction_um(sag, blank: Blank) -> float:
     return sag.value_at(x0, y0) - sag.value_at(x0 + blank.pitch_x_mm / 2, y0 + blank.pitch_y_mm / 2)
 
 
-def field_path(fields_dir, params: dict) -> Path:
-    """Where the displacement field of the case ``params`` is kept (key: params + model version)."""
-    import hashlib
+def field_path(fields_dir, params: dict):
+    """The :mod:`pipeline.store` entry of the displacement field of the case ``params``
+    (key: params + model version; ``.payload`` is the ``.npz``)."""
+    from pipeline import store
+
+    norm = {k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v)) for k, v in params.items()}
+    return store.entry(fields_dir, f"field-{_namespace()}", norm)
+
+
+def save_field(entry, result) -> None:
+    """Displacement field (mm, float32) + node positions + case info, written atomically
+    with its checksummed sidecar (``entry`` from :func:`field_path`)."""
     import json
 
-    norm = {k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v))
-            for k, v in sorted(params.items())}
-    text = json.dumps({"namespace": _namespace(), "params": norm}, sort_keys=True)
-    return Path(fields_dir) / f"{hashlib.sha256(text.encode()).hexdigest()[:20]}.npz"
+    from pipeline import store
+
+    store.save_arrays(entry, {"coords_mm": result.coords_mm,
+                              "displacement_mm": result.displacement_mm.astype(np.float32),
+                              "uniform_strain": result.uniform_strain,
+                              "info": json.dumps(result.info, default=str)})
 
 
-def save_field(path: Path, result) -> None:
-    """Displacement field (mm, float32) + node positions + case info, written atomically."""
-    import json
-
-    from pipeline.io_common import atomic_path
-
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, coords_mm=result.coords_mm, displacement_mm=result.displacement_mm.astype(np.float32),
-                 uniform_strain=result.uniform_strain, info=json.dumps(result.info, default=str))
-
-
-def load_field(path: Path):
-    """The :class:`fea.model.FEAResult` (without sag) saved by :func:`save_field`, or None."""
+def load_field(entry):
+    """The :class:`fea.model.FEAResult` (without sag) saved by :func:`save_field`, or None
+    (absent; a damaged or mismatched file also warns)."""
     import json
 
     from fea.model import FEAResult
+    from pipeline import store
 
     try:
-        with np.load(path) as z:
-            return FEAResult(z["coords_mm"], z["displacement_mm"].astype(float), float(z["uniform_strain"]),
-                             None, json.loads(str(z["info"])))
-    except (OSError, KeyError, ValueError):
+        z, _ = store.load_arrays(entry)
+        return FEAResult(z["coords_mm"], z["displacement_mm"].astype(float), float(z["uniform_strain"]),
+                         None, json.loads(str(z["info"])))
+    except FileNotFoundError:
+        return None
+    except (store.CacheMiss, KeyError, ValueError) as exc:
+        store.warn_rebuild(entry, exc, "displacement field")
         return None
 
 
@@ -169,9 +173,9 @@ class FEACaseRunner:
     block_size = 16
 
     def plan(self, params_list) -> None:
-        """Announce the cases about to be run (inline sweeps): those that share a mesh,
-        materials and load are then solved in blocks (:meth:`PreparedBlank.solve_many`),
-        one block when its first case is asked for."""
+        """Announce the cases about to be run (the ``planner`` of an inline sweep): those
+        that share a mesh, materials and load are then solved in blocks
+        (:meth:`PreparedBlank.solve_many`), one block when its first case is asked for."""
         self._planned = [dict(p) for p in params_list]
         self._solved: dict = {}
 
@@ -317,8 +321,9 @@ def run_fea_sweep(axes: dict, out_dir, *, scheduler: str | None = None, workers:
     core = {k: [FEA_PARAMETERS[k][0]] for k in ("coverage", "t0_um", "polish")}
     axes = {**core, **axes}
     cases = fea_grid(**axes)
-    res = run_sweep(FEACaseRunner(with_maps), cases, out_dir, namespace=case_namespace(),
-                    workers=workers, scheduler=scheduler, progress=progress, description="FEA sweep")
+    runner = FEACaseRunner(with_maps)
+    res = run_sweep(runner, cases, out_dir, namespace=case_namespace(), workers=workers, scheduler=scheduler,
+                    progress=progress, description="FEA sweep", planner=runner.plan)
     out = Path(out_dir)
     res.write_csv(out / "sweep.csv")
     res.write_netcdf(out / "sweep.nc")
@@ -367,8 +372,9 @@ def run_tables(out_dir, *, progress: bool = True, mesh_size_mm: float | None = N
                                ("stress_scale", stress_scale)) if v is not None}
     paper = paper_cases()
     cases = [Case({"coverage": c.coverage, "t0_um": c.t0_um, "polish": c.polish, **extra}) for c in paper]
-    res = run_sweep(FEACaseRunner(), cases, out_dir, namespace=case_namespace(), workers=1,
-                    progress=progress, description="paper tables")
+    runner = FEACaseRunner()
+    res = run_sweep(runner, cases, out_dir, namespace=case_namespace(), workers=1,
+                    progress=progress, description="paper tables", planner=runner.plan)
     rows = [TableRow(c.table, c.coverage, c.t0_um, c.polish, c.pv_center_um, float(out["pv_center_um"]),
                      c.direction, float(out["quilt_direction_um"]), c.calibrate, figure_of(out))
             for c, (_, out) in zip(paper, res)]

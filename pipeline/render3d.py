@@ -498,7 +498,10 @@ STUDY_RENDERS = {
         [("holes", 200.0, 1.0), ("surfaces", 200.0, 1.0)],
         ["NiP 200 µm only in the holes", "NiP 200 µm only on the outer surfaces"]),
 }
+#: payload format of a render entry (:mod:`pipeline.store`); bump when a render changes look
 _RENDER_VERSION = 1
+#: key of the child's answer that lists renders redone because their files did not verify
+_REBUILT = "rebuilt"
 _HEADING = "3-D render of the deformed blank"
 
 
@@ -521,23 +524,29 @@ def study_renders(cases) -> dict:
             if all(k in found for k in keys)}
 
 
-def _key(file: str, params: list) -> dict:
+def _entry(out: Path, file: str, params: list):
+    """The render's store entry: the PNG in ``out``, its sidecar in ``out/fea/render3d``."""
+    from pipeline import store
     from pipeline.fea_cases import _namespace
 
-    return {"render_version": _RENDER_VERSION, "namespace": _namespace(), "file": file,
-            "cases": [{k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v))
-                       for k, v in sorted(p.items())} for p in params]}
+    cases = [{k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v)) for k, v in p.items()}
+             for p in params]
+    return store.Entry(f"render3d-{_namespace()}", {"file": file, "cases": cases}, out / file,
+                       out / "fea" / "render3d" / (Path(file).stem + ".json"), format_version=_RENDER_VERSION)
 
 
-def _meta_path(out: Path, file: str) -> Path:
-    return out / "fea" / "render3d" / (Path(file).stem + ".json")
+def _is_current(entry, rebuilt: dict) -> bool:
+    """True when the PNG of ``entry`` is the verified render of its cases; a PNG that is
+    not (edited, truncated, another case's, a failure notice) is noted in ``rebuilt``."""
+    from pipeline import store
 
-
-def _is_current(out: Path, file: str, params: list) -> bool:
-    png, meta = out / file, _meta_path(out, file)
     try:
-        return png.exists() and json.loads(meta.read_text()).get("key") == _key(file, params)
-    except (OSError, ValueError):
+        store.verify(entry)
+        return True
+    except FileNotFoundError:
+        return False
+    except store.CacheMiss as exc:
+        rebuilt[entry.payload.name] = str(exc)
         return False
 
 
@@ -549,10 +558,12 @@ def _render_child(out: Path, renders: dict) -> dict:
 
     from pipeline.fea_cases import _split, field_path, load_field
 
-    done, models = {}, {}
+    from pipeline import store
+
+    done, models, rebuilt = {}, {}, {}
     for file, (_, params, labels) in renders.items():
-        png = out / file
-        if _is_current(out, file, params):
+        png, entry = out / file, _entry(out, file, params)
+        if _is_current(entry, rebuilt):
             done[file] = str(png)
             continue
         t0 = time.perf_counter()
@@ -572,12 +583,11 @@ def _render_child(out: Path, renders: dict) -> dict:
             info = render_deformed_blank(results[0][0].mesh, results[0][1], png)
         else:
             info = render_comparison(results[0][0].mesh, [r for _, r in results], labels, png)
-        meta = _meta_path(out, file)
-        meta.parent.mkdir(parents=True, exist_ok=True)
-        meta.write_text(json.dumps({"key": _key(file, params), "exaggeration": info["exaggeration"],
-                                    "clim_um": list(info["clim_um"]), "solve_s": round(t_solve, 1),
-                                    "render_s": round(info["seconds"], 1)}, indent=1))
+        store.commit(entry, {"exaggeration": info["exaggeration"], "clim_um": list(info["clim_um"]),
+                             "solve_s": round(t_solve, 1), "render_s": round(info["seconds"], 1)})
         done[file] = str(png)
+    if rebuilt:
+        done[_REBUILT] = rebuilt
     return done
 
 
@@ -689,6 +699,10 @@ class StudyRender:
             done = json.loads(stdout.decode().strip().splitlines()[-1])
         except (ValueError, IndexError):
             return self._fail(f"the render process gave no result: {err[-300:]}")
+        from pipeline.store import warn_rebuild
+
+        for file, why in done.get(_REBUILT, {}).items():  # the child's stderr is not shown: warn here
+            warn_rebuild(self.out / file, why, "3-D render", stacklevel=2)
         res = {f: (Path(done[f]) if f in done else None) for f in self.renders}
         res["error"] = None
         return res

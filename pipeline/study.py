@@ -114,7 +114,7 @@ def _run_fea(config: StudyConfig, out: Path, progress: bool):
     keep = [p for _, ps, _ in study_renders(cases).values() for p in ps] if config.output.figures else []
     runner = FEACaseRunner(fields_dir=out / "fields", fields_for=keep)
     res = run_sweep(runner, [Case(c.params) for c in cases], out, namespace=case_namespace(), workers=1,
-                    progress=progress, description="FEA cases")
+                    progress=progress, description="FEA cases", planner=runner.plan)
     res.write_netcdf(out / "sweep.nc")
     outputs = {c.label: o for c, (_, o) in zip(cases, res)}
     _write_cases(cases, outputs, out / "cases.csv")

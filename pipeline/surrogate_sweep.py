@@ -85,9 +85,9 @@ class SurrogateCaseRunner:
         return self.surrogate
 
     def plan(self, cases) -> None:
-        """Announce the cases about to run (:func:`pipeline.sweep.run_sweep` does, inline,
-        for the uncached ones): the first call that needs the surrogate then evaluates them
-        all in one batch (a fully cached re-run builds nothing)."""
+        """Announce the cases about to run (the ``planner`` of :func:`pipeline.sweep.run_sweep`:
+        the uncached ones): the first call that needs the surrogate then evaluates them all
+        in one batch (a fully cached re-run builds nothing)."""
         self._planned = list(cases)
 
     def precompute(self, cases) -> None:
@@ -192,7 +192,7 @@ def run_surrogate_sweep(axes: dict, out_dir, *, validate: int = 3, tol: float = 
 
     runner = SurrogateCaseRunner(cases[0].as_dict(), domain, tol, with_maps, seed, log)
     res = run_sweep(runner, cases, out_dir, namespace=namespace, workers=1, progress=progress,
-                    description="surrogate sweep")
+                    description="surrogate sweep", planner=runner.plan)
     out = Path(out_dir)
     res.write_csv(out / "sweep.csv")
     res.write_netcdf(out / "sweep.nc")

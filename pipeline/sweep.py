@@ -8,7 +8,9 @@
 of the case. Each case's outputs are cached under ``out_dir/cases/<key>.npz`` (+ a
 ``.json``), keyed by ``namespace`` and the canonical params (see
 :meth:`Case.key`). Change ``namespace`` when the case function changes meaning: the
-cache never compares code or library versions, only namespace and params.
+cache never compares code or library versions, only namespace and params; each
+case file is verified against its key and checksum on load (:mod:`pipeline.store`),
+and one that is not what it claims to be is recomputed with a :class:`CacheWarning`.
 """
 
 from __future__ import annotations
@@ -38,14 +40,13 @@ from pipeline.cache import (
 )
 from pipeline.executors import check_scheduler, iter_dask, iter_inline, iter_processes
 from pipeline.io_common import atomic_path, atomic_write
+from pipeline.store import CacheWarning
 
 __all__ = ["Case", "grid", "parse_range", "run_sweep", "SweepResult", "SweepError", "CacheWarning"]
 
 _PARAM_TYPES = "float, int, str or bool"
-
-
-class CacheWarning(UserWarning):
-    """A cached case was incomplete or corrupt and is being recomputed."""
+#: Cached cases that fail verification are each named in a warning up to this many.
+_MAX_CASE_WARNINGS = 10
 
 
 class SweepError(RuntimeError):
@@ -238,7 +239,7 @@ def _prepare_out_dir(out_dir) -> Path:
 
 def run_sweep(func, cases, out_dir, *, namespace: str, workers: int | None = None,
               scheduler: str | None = None, progress: bool = True, description: str = "sweep",
-              connect_timeout_s: float = 5.0) -> "SweepResult":
+              connect_timeout_s: float = 5.0, planner=None) -> "SweepResult":
     """Run ``func`` over ``cases``, reusing cached results and caching new ones.
 
     Parameters
@@ -266,6 +267,11 @@ def run_sweep(func, cases, out_dir, *, namespace: str, workers: int | None = Non
         label of the progress bar.
     connect_timeout_s : float
         how long to wait for the Dask scheduler before raising ``ConnectionError``.
+    planner : callable, optional
+        ``planner(list_of_params)`` is told the uncached cases before an inline run
+        (``workers=1``), so that ``func`` can compute them in batches (e.g.
+        ``FEACaseRunner.plan``: cases sharing a mesh solved in lockstep blocks). Not
+        called when cases run in worker processes, where each case is computed alone.
 
     Returns
     -------
@@ -282,6 +288,8 @@ def run_sweep(func, cases, out_dir, *, namespace: str, workers: int | None = Non
     """
     if not callable(func):
         raise TypeError(f"func must be callable, got {type(func).__name__}")
+    if planner is not None and not callable(planner):
+        raise TypeError(f"planner must be callable or None, got {type(planner).__name__}")
     if not isinstance(namespace, str) or not namespace:
         raise ValueError(f"namespace={namespace!r} must be a non-empty str, e.g. 'fea-v1'")
     cases = [c if isinstance(c, Case) else Case(c) for c in cases]
@@ -302,16 +310,22 @@ def run_sweep(func, cases, out_dir, *, namespace: str, workers: int | None = Non
 
     keys = [c.key(namespace) for c in cases]
     unique = dict(zip(keys, cases))
-    results, todo = {}, []
+    results, todo, misses = {}, [], []
     for key, case in unique.items():
         try:
             results[key], _ = load_case(cases_dir, key, namespace, case.as_dict())
         except FileNotFoundError:
             todo.append(key)
         except CacheMiss as exc:
-            warnings.warn(f"recomputing case {case}: {exc}", CacheWarning, stacklevel=2)
+            misses.append((case, exc))
             todo.append(key)
-    n_reused, failures, version = len(results), [], library_version()
+    # one line per case, but bounded: a cache of an older format can hold thousands of cases
+    for case, exc in misses[:_MAX_CASE_WARNINGS]:
+        warnings.warn(f"recomputing case {case}: {exc}", CacheWarning, stacklevel=2)
+    if len(misses) > _MAX_CASE_WARNINGS:
+        warnings.warn(f"recomputing {len(misses) - _MAX_CASE_WARNINGS} more cases whose files in {cases_dir} "
+                      "do not verify", CacheWarning, stacklevel=2)
+    n_reused, failures = len(results), []
 
     from tqdm.auto import tqdm
 
@@ -324,14 +338,14 @@ def run_sweep(func, cases, out_dir, *, namespace: str, workers: int | None = Non
             if scheduler is not None:
                 outcomes = iter_dask(func, jobs, scheduler, workers, connect_timeout_s)
             elif workers == 1:
-                if hasattr(func, "plan"):  # e.g. FEACaseRunner: solves the planned cases in blocks
-                    func.plan([params for _, params in jobs])
+                if planner is not None:
+                    planner([params for _, params in jobs])
                 outcomes = iter_inline(func, jobs)
             else:
                 outcomes = iter_processes(func, jobs, workers)
             for key, (status, payload, extra) in outcomes:
                 if status == "ok":
-                    save_case(cases_dir, key, namespace, unique[key].as_dict(), payload, extra, version)
+                    save_case(cases_dir, key, namespace, unique[key].as_dict(), payload, extra)
                     results[key] = payload
                 else:
                     failures.append((unique[key], payload, extra))

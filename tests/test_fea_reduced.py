@@ -172,7 +172,8 @@ def test_sweep_runner_solves_planned_cases_in_blocks(tmp_path):
     blank, spec, substrate, *_ = _split(cases[0].as_dict())
     model = runner.model(blank, spec, substrate)
     model.explicit_offset_max_dof = 0  # the block path is for large meshes; force it here
-    res = run_sweep(runner, cases, tmp_path, namespace="test-blocks", workers=1, progress=False)
+    res = run_sweep(runner, cases, tmp_path, namespace="test-blocks", workers=1, progress=False,
+                    planner=runner.plan)
     direct = prepare(mesh=COARSE)
     for case, out in res:
         _, _, _, coating, *_ = _split(case.as_dict())

@@ -9,13 +9,10 @@ indistinguishable on a single surface map.
 
 from __future__ import annotations
 
-import hashlib
-import json
 from pathlib import Path
 
-import numpy as np
-
 from optics.sagmap import SagMap
+from pipeline import store
 
 from .manifest import Simulation
 
@@ -26,6 +23,8 @@ __all__ = ["mismatch_strain", "thermal_factor", "nominal_sag_map", "fea_sag_map"
 #: of "refined" 0.4-1.0 % below the Richardson-extrapolated value.
 MESH_SPECS = {"coarse": dict(size_mm=5.0, size_bulk_mm=10.0), "default": dict(size_mm=1.4, size_bulk_mm=2.8),
               "refined": dict(size_mm=1.0, size_bulk_mm=2.0)}
+#: Store namespace of the nominal maps (the FEA model version is among the parameters).
+_NAMESPACE = "diagnosis-fea-sag-map"
 
 
 def mismatch_strain(temperature_K: float, warm_K: float = 293.0) -> float:
@@ -54,7 +53,8 @@ def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh:
         used for the *truths* of synthetic data so that they come from a different
         discretisation than the default-mesh nominal they are diagnosed against).
     cache_dir : path, optional
-        Directory for ``fea-<hash>.npz``; None disables the disk cache.
+        Directory for ``fea-<key>.npz`` and its sidecar (:mod:`pipeline.store`); None
+        disables the disk cache. A damaged or mismatched file is rebuilt with a warning.
     """
     from fea import MODEL_VERSION
     from fea.calibration import STRESS_SCALE
@@ -62,12 +62,17 @@ def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh:
     key = dict(t0_um=float(t0_um), polish=float(polish), coverage=coverage, cold_K=float(cold_K),
                warm_K=float(warm_K), mesh=mesh, spacing_mm=float(spacing_mm), stress_scale=float(STRESS_SCALE),
                fea_model_version=MODEL_VERSION)
-    digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
     label = f"FEA {coverage} t0={t0_um:g} polish={polish:g} {cold_K:g} K ({mesh} mesh)"
-    path = Path(cache_dir) / f"fea-{digest}.npz" if cache_dir is not None else None
-    if path is not None and path.is_file():
-        with np.load(path) as d:
+    entry = None
+    if cache_dir is not None:
+        entry = store.entry(cache_dir, _NAMESPACE, key, prefix="fea-")
+        try:
+            d, _ = store.load_arrays(entry)
             return SagMap(d["x_mm"], d["y_mm"], d["sag_um"], label, dict(key))
+        except FileNotFoundError:
+            pass
+        except (store.CacheMiss, KeyError, ValueError) as exc:  # KeyError/ValueError: arrays not a map
+            store.warn_rebuild(entry, exc, "nominal FEA map")
     from fea.api import prepare, solve
     from fea.mesh import MeshSpec
 
@@ -81,13 +86,9 @@ def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh:
     r = solve(t0_um, polish, coverage, cold_K, warm_K, prepared=prepare(mesh=spec))
     sm = r.sag.sag_map(spacing_mm)
     out = SagMap(sm.x_mm, sm.y_mm, sm.sag_um, label, dict(key))
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        from pipeline.io_common import atomic_write
-
-        # a unique temporary name per writer: parallel campaign workers may race on one key
-        with atomic_write(path, "wb") as fh:
-            np.savez(fh, x_mm=out.x_mm, y_mm=out.y_mm, sag_um=out.sag_um)
+    if entry is not None:
+        # atomic, with a unique temporary name per writer: parallel campaign workers may race on one key
+        store.save_arrays(entry, {"x_mm": out.x_mm, "y_mm": out.y_mm, "sag_um": out.sag_um})
     return out
 
 
