@@ -43,7 +43,8 @@ from .mesh import MeshSpec
 from .mesh_budget import check_mesh_budget
 from .model import ThermalLoad
 
-__all__ = ["Parameter", "PARAMETERS", "FEACase", "CaseObjects", "resolve_params", "model_namespace"]
+__all__ = ["Parameter", "PARAMETERS", "FEACase", "CaseObjects", "resolve_params", "model_namespace",
+           "mesh_spec_for"]
 
 
 @dataclass(frozen=True)
@@ -198,6 +199,17 @@ def resolve_params(params: Mapping) -> dict:
     return full
 
 
+def mesh_spec_for(coating: Coating, spec: MeshSpec | None = None, blank: Blank | None = None) -> MeshSpec:
+    """The mesh spec to use: eighth model when the film and the blank are symmetric about
+    the mid-plane, quarter model otherwise (front and back polish differ, or the holes are
+    off the mid-plane)."""
+    spec = spec or MeshSpec()
+    symmetric = coating.is_z_symmetric and (blank is None or blank.is_z_symmetric)
+    if not symmetric and spec.symmetry == "eighth":
+        spec = replace(spec, symmetry="quarter")
+    return spec
+
+
 def model_namespace() -> str:
     """Cache namespace of FEA results: the solver's physics version and the calibration
     (a cached result must not survive either changing)."""
@@ -324,8 +336,7 @@ class FEACase:
             sizes = {k: v for k, v in (("size_mm", self.mesh_size_mm), ("size_bulk_mm", self.mesh_bulk_mm))
                      if v is not None}
             mesh = replace(MeshSpec(), **sizes)  # one replace: the sizes are validated together
-        if not (coating.is_z_symmetric and blank.is_z_symmetric) and mesh.symmetry == "eighth":
-            mesh = replace(mesh, symmetry="quarter")
+        mesh = mesh_spec_for(coating, mesh, blank)
         load = ThermalLoad(warm_K=self.warm_K, cold_K=self.cold_K)
         scale = STRESS_SCALE if self.stress_scale is None else self.stress_scale
         return CaseObjects(blank, mesh, coating, load, MATERIALS[self.substrate], MATERIALS[self.film], scale)

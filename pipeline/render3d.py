@@ -522,9 +522,9 @@ def study_renders(cases) -> dict:
 
 
 def _key(file: str, params: list) -> dict:
-    from pipeline.fea_cases import _namespace
+    from fea.case import model_namespace
 
-    return {"render_version": _RENDER_VERSION, "namespace": _namespace(), "file": file,
+    return {"render_version": _RENDER_VERSION, "namespace": model_namespace(), "file": file,
             "cases": [{k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v))
                        for k, v in sorted(p.items())} for p in params]}
 
@@ -547,7 +547,8 @@ def _render_child(out: Path, renders: dict) -> dict:
     from fea.model import PreparedBlank
     from types import SimpleNamespace
 
-    from pipeline.fea_cases import _split, field_path, load_field
+    from fea.case import FEACase
+    from pipeline.fea_cases import field_path, load_field
 
     done, models = {}, {}
     for file, (_, params, labels) in renders.items():
@@ -558,7 +559,10 @@ def _render_child(out: Path, renders: dict) -> dict:
         t0 = time.perf_counter()
         results = []
         for c in params:
-            blank, spec, substrate, coating, film, load, scale = _split(c)
+            case = FEACase.from_params(c)
+            o = case.to_objects()
+            blank, spec, substrate, coating, film, load, scale = (o.blank, o.mesh, case.substrate, o.coating,
+                                                                  case.film, o.load, o.stress_scale)
             saved = load_field(field_path(out / "fea" / "fields", c))  # kept by the study's FEA run
             if saved is not None:
                 results.append((SimpleNamespace(mesh=blank_mesh(blank, spec)), saved))

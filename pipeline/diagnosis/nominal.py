@@ -1,7 +1,7 @@
 """The nominal simulation: one FEA sag map per manifest, cached, and exact thermal rescaling.
 
 Why one map is enough: the FEA sag is exactly linear in the film mismatch strain
-``eps_m(T) = NiP.strain_between(warm, T) - Al6061.strain_between(warm, T)``, so the
+``eps_m(T) = film.strain_between(warm, T) - substrate.strain_between(warm, T)``, so the
 map at any other cold temperature is ``eps_m(T) / eps_m(cold_K)`` times the map at
 ``cold_K``. The same linearity makes a temperature change and an amplitude scale
 indistinguishable on a single surface map.
@@ -17,32 +17,35 @@ import numpy as np
 
 from optics.sagmap import SagMap
 
-from .manifest import Simulation
+from .manifest import MESH_SPECS, Simulation
 
-__all__ = ["mismatch_strain", "thermal_factor", "nominal_sag_map", "fea_sag_map", "MESH_SPECS"]
+__all__ = ["mismatch_strain", "thermal_factor", "nominal_sag_map", "fea_sag_map", "case_sag_map", "MESH_SPECS"]
 
-#: Named FEA meshes (element size near surfaces / in the bulk, mm); see
-#: ``benchmarks/results_mesh_convergence.md``: P/V_center of "default" is 1.2-1.6 %,
-#: of "refined" 0.4-1.0 % below the Richardson-extrapolated value.
-MESH_SPECS = {"coarse": dict(size_mm=5.0, size_bulk_mm=10.0), "default": dict(size_mm=1.4, size_bulk_mm=2.8),
-              "refined": dict(size_mm=1.0, size_bulk_mm=2.0)}
+#: Parameters every nominal-map cache key names (its other parameters only when they differ
+#: from the default, so the keys of the default blank and materials stay what they were).
+_KEYED = ("t0_um", "polish", "coverage", "cold_K", "warm_K")
 
 
-def mismatch_strain(temperature_K: float, warm_K: float = 293.0) -> float:
+def mismatch_strain(temperature_K: float, warm_K: float = 293.0, substrate: str = "Al6061-T6",
+                    film: str = "NiP") -> float:
     """Film-minus-substrate thermal strain from ``warm_K`` to ``temperature_K`` (dimensionless)."""
-    from fea.materials import AL6061_T6, NIP_HIGH_P
+    from fea.materials import get_material
 
-    return float(NIP_HIGH_P.strain_between(warm_K, temperature_K) - AL6061_T6.strain_between(warm_K, temperature_K))
+    return float(get_material(film).strain_between(warm_K, temperature_K)
+                 - get_material(substrate).strain_between(warm_K, temperature_K))
 
 
-def thermal_factor(temperature_K: float, reference_K: float, warm_K: float = 293.0) -> float:
+def thermal_factor(temperature_K: float, reference_K: float, warm_K: float = 293.0,
+                   substrate: str = "Al6061-T6", film: str = "NiP") -> float:
     """Sag at ``temperature_K`` divided by the sag at ``reference_K`` (exact for the linear FEA)."""
-    return mismatch_strain(temperature_K, warm_K) / mismatch_strain(reference_K, warm_K)
+    return (mismatch_strain(temperature_K, warm_K, substrate, film)
+            / mismatch_strain(reference_K, warm_K, substrate, film))
 
 
 def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh: str = "coarse",
                 spacing_mm: float = 0.5, cache_dir: str | Path | None = None, warm_K: float = 293.0) -> SagMap:
-    """Front-face sag map (µm on a ``spacing_mm`` grid) of one FEA case, cached as npz.
+    """Front-face sag map (µm on a ``spacing_mm`` grid) of one FEA case of the default blank
+    and materials, cached as npz (see :func:`case_sag_map`).
 
     Parameters
     ----------
@@ -56,29 +59,36 @@ def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh:
     cache_dir : path, optional
         Directory for ``fea-<hash>.npz``; None disables the disk cache.
     """
-    from fea import MODEL_VERSION
-    from fea.calibration import STRESS_SCALE
+    sim = Simulation.from_params(dict(t0_um=t0_um, polish=polish, coverage=coverage, cold_K=cold_K,
+                                      warm_K=warm_K, mesh=mesh))
+    return case_sag_map(sim, spacing_mm, cache_dir)
 
-    key = dict(t0_um=float(t0_um), polish=float(polish), coverage=coverage, cold_K=float(cold_K),
-               warm_K=float(warm_K), mesh=mesh, spacing_mm=float(spacing_mm), stress_scale=float(STRESS_SCALE),
+
+def case_sag_map(sim: Simulation, spacing_mm: float = 0.5, cache_dir: str | Path | None = None) -> SagMap:
+    """Front-face sag map (µm on a ``spacing_mm`` grid) of the simulation's FEA case on its
+    named mesh, cached as ``cache_dir/fea-<hash>.npz`` (None: no disk cache)."""
+    from fea import MODEL_VERSION
+    from fea.case import PARAMETERS
+
+    case, mesh = sim.case, sim.mesh
+    resolved = case.resolved()
+    key = {k: getattr(case, k) for k in _KEYED}
+    key.update(mesh=mesh, spacing_mm=float(spacing_mm), stress_scale=float(resolved.stress_scale),
                fea_model_version=MODEL_VERSION)
+    key.update({k: v for k, v in case.as_params().items() if k not in key and k not in
+                ("mesh_size_mm", "mesh_bulk_mm") and v != PARAMETERS[k].default})
     digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
-    label = f"FEA {coverage} t0={t0_um:g} polish={polish:g} {cold_K:g} K ({mesh} mesh)"
+    other = "".join(f" {case.as_params()[k]}" for k in ("substrate", "film") if k in key)
+    label = (f"FEA {case.coverage} t0={case.t0_um:g} polish={case.polish:g} {case.cold_K:g} K"
+             f"{other} ({mesh} mesh)")
     path = Path(cache_dir) / f"fea-{digest}.npz" if cache_dir is not None else None
     if path is not None and path.is_file():
         with np.load(path) as d:
             return SagMap(d["x_mm"], d["y_mm"], d["sag_um"], label, dict(key))
-    from fea.api import prepare, solve
-    from fea.mesh import MeshSpec
+    from fea.api import prepare
 
-    if mesh not in MESH_SPECS:
-        raise ValueError(f"mesh={mesh!r} is unknown; valid: {list(MESH_SPECS)}")
-    spec = MeshSpec(**MESH_SPECS[mesh])
-    from fea.api import mesh_spec_for
-    from fea.coating import Coating
-
-    spec = mesh_spec_for(Coating(t0_um=t0_um, polish_front=polish, polish_back=polish, coverage=coverage), spec)
-    r = solve(t0_um, polish, coverage, cold_K, warm_K, prepared=prepare(mesh=spec))
+    o = case.to_objects()
+    r = prepare(o.blank, o.mesh, o.substrate).solve(o.coating, o.film, o.load, stress_scale=o.stress_scale)
     sm = r.sag.sag_map(spacing_mm)
     out = SagMap(sm.x_mm, sm.y_mm, sm.sag_um, label, dict(key))
     if path is not None:
@@ -100,5 +110,4 @@ def nominal_sag_map(sim: Simulation, cache_dir: str | Path | None = None) -> Sag
             return read_sag_map(sim.sag_file)
         except ValueError as exc:
             raise ValueError(f"[simulation] sag_file={str(sim.sag_file)!r}: {exc}") from None
-    return fea_sag_map(sim.t0_um, sim.polish, sim.coverage, sim.cold_K, sim.mesh, cache_dir=cache_dir,
-                       warm_K=sim.warm_K)
+    return case_sag_map(sim, cache_dir=cache_dir)
