@@ -144,3 +144,58 @@ def test_dof_estimate_follows_the_mesh_convergence_ladder():
     at four element sizes): the estimate stays within a factor of two at every level."""
     for size, bulk, dofs in ((2.0, 4.0, 91038), (1.4, 2.8, 216096), (1.0, 2.0, 480015), (0.8, 1.6, 858429)):
         assert 0.5 <= estimate_dofs(Blank(), MeshSpec(size, bulk)) / dofs <= 2.0
+
+
+def test_a_manifest_substrate_reaches_the_diagnosis_nominal_model(monkeypatch):
+    """[simulation] substrate = "AlSi40": the nominal FEA map is meshed with it, and the
+    thermal rescaling of the nominal uses the film-minus-AlSi40 mismatch."""
+    import fea.api
+    from fea.materials import ALSI40, NIP_HIGH_P
+    from pipeline.diagnosis.manifest import Simulation
+    from pipeline.diagnosis.nominal import nominal_sag_map, thermal_factor
+
+    sim = Simulation.from_params({"substrate": "AlSi40", "cold_K": 80, "mesh": "coarse"})
+    assert sim.materials == ("AlSi40", "NiP") and sim.case.mesh_size_mm == 5.0
+
+    seen = {}
+
+    def fake_prepare(blank, mesh, substrate):
+        seen.update(blank=blank, mesh=mesh, substrate=substrate)
+        raise RuntimeError("stop before meshing")
+
+    monkeypatch.setattr(fea.api, "prepare", fake_prepare)
+    with pytest.raises(RuntimeError, match="stop before meshing"):
+        nominal_sag_map(sim)
+    assert seen["substrate"] is ALSI40 and seen["mesh"] == MeshSpec.coarse()
+
+    # the mismatch ratio written out from the material data (AlSi40 follows the 6061 curve
+    # scaled by its room-temperature CTE)
+    def eps(T):
+        return NIP_HIGH_P.strain_between(293, T) - ALSI40.strain_between(293, T)
+
+    assert thermal_factor(128, 80, 293, *sim.materials) == pytest.approx(eps(128) / eps(80), rel=1e-12)
+    # (the library's materials share the 6061 curve's shape, so this factor equals the Al 6061
+    # one; a material with another shape would change it)
+
+
+@pytest.mark.slow
+def test_alsi40_nominal_map_bends_by_its_smaller_mismatch():
+    """Two coarse-mesh solves (~5 s idle). The sag is linear in the film mismatch strain and,
+    for a thin film, inversely proportional to the substrate's modulus (Stoney), so the AlSi40
+    map's P/V over the Al 6061 one lies between (E_Al / E_AlSi40) x and 1 x the ratio of
+    their mismatch strains (0.75 ... 1, with margin for the plate not being a thin film)."""
+    import numpy as np
+
+    from fea.materials import ALSI40, AL6061_T6
+    from pipeline.diagnosis.manifest import Simulation
+    from pipeline.diagnosis.nominal import mismatch_strain, nominal_sag_map
+
+    def pv(sim):
+        s = nominal_sag_map(sim).sag_um
+        return float(np.nanmax(s) - np.nanmin(s))
+
+    ratio = pv(Simulation.from_params({"substrate": "AlSi40", "mesh": "coarse"})) / pv(
+        Simulation.from_params({"mesh": "coarse"}))
+    mismatch = mismatch_strain(80, 293, "AlSi40") / mismatch_strain(80, 293)
+    stiffer = AL6061_T6.youngs_modulus_Pa / ALSI40.youngs_modulus_Pa
+    assert 0.8 * stiffer * mismatch <= ratio <= mismatch

@@ -135,6 +135,11 @@ class Simulation:
         """Stress-free temperature of the nominal model (K)."""
         return self.case.warm_K
 
+    @property
+    def materials(self) -> tuple[str, str]:
+        """(substrate, film) names: their mismatch strain rescales the nominal in temperature."""
+        return self.case.substrate, self.case.film
+
 
 @dataclass(frozen=True)
 class Measurement:

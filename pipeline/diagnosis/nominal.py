@@ -19,15 +19,19 @@ from optics.sagmap import SagMap
 
 from .manifest import MESH_SPECS, Simulation
 
-__all__ = ["mismatch_strain", "thermal_factor", "nominal_sag_map", "fea_sag_map", "case_sag_map", "MESH_SPECS"]
+__all__ = ["mismatch_strain", "thermal_factor", "nominal_sag_map", "fea_sag_map", "case_sag_map", "MESH_SPECS",
+           "DEFAULT_MATERIALS"]
+
+#: (substrate, film) of the FEA case's defaults: Al 6061-T6 plated with NiP.
+DEFAULT_MATERIALS = ("Al6061-T6", "NiP")
 
 #: Parameters every nominal-map cache key names (its other parameters only when they differ
 #: from the default, so the keys of the default blank and materials stay what they were).
 _KEYED = ("t0_um", "polish", "coverage", "cold_K", "warm_K")
 
 
-def mismatch_strain(temperature_K: float, warm_K: float = 293.0, substrate: str = "Al6061-T6",
-                    film: str = "NiP") -> float:
+def mismatch_strain(temperature_K: float, warm_K: float = 293.0, substrate: str = DEFAULT_MATERIALS[0],
+                    film: str = DEFAULT_MATERIALS[1]) -> float:
     """Film-minus-substrate thermal strain from ``warm_K`` to ``temperature_K`` (dimensionless)."""
     from fea.materials import get_material
 
@@ -36,7 +40,7 @@ def mismatch_strain(temperature_K: float, warm_K: float = 293.0, substrate: str 
 
 
 def thermal_factor(temperature_K: float, reference_K: float, warm_K: float = 293.0,
-                   substrate: str = "Al6061-T6", film: str = "NiP") -> float:
+                   substrate: str = DEFAULT_MATERIALS[0], film: str = DEFAULT_MATERIALS[1]) -> float:
     """Sag at ``temperature_K`` divided by the sag at ``reference_K`` (exact for the linear FEA)."""
     return (mismatch_strain(temperature_K, warm_K, substrate, film)
             / mismatch_strain(reference_K, warm_K, substrate, film))
