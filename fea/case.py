@@ -32,7 +32,7 @@ import hashlib
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 
 from .calibration import STRESS_SCALE
 from .coating import COVERAGES, Coating
@@ -102,6 +102,8 @@ class Parameter:
 
 
 _MATERIAL_NAMES = tuple(sorted(MATERIALS))
+#: the model objects' own defaults (the paper's blank, coating and cool-down)
+_DEFAULT = {f.name: f.default for cls in (Blank, Coating, ThermalLoad) for f in fields(cls)}
 _GEOMETRY = "a physically sane grating blank"
 #: Every FEA parameter, in the order of cache keys and tables. Ranges of the blank are the
 #: caps of a grating blank (a 1 km blank or a 0.01 mm hole is a unit mistake, and would
@@ -109,12 +111,12 @@ _GEOMETRY = "a physically sane grating blank"
 PARAMETERS: dict[str, Parameter] = {p.name: p for p in (
     Parameter("coverage", "str", "", "all", "which surfaces carry NiP (Table 1: all; Table 2: holes, surfaces)",
               f"one of {', '.join(COVERAGES)}", choices=COVERAGES),
-    Parameter("t0_um", "float", "µm", 200.0, "as-plated NiP thickness", "(0, 2000]"),
-    Parameter("polish", "float", "", 0.75, "fraction of t0 left on both faces after polishing", "(0, 1]"),
+    Parameter("t0_um", "float", "µm", _DEFAULT["t0_um"], "as-plated NiP thickness", "(0, 2000]"),
+    Parameter("polish", "float", "", _DEFAULT["polish_front"], "fraction of t0 left on both faces after polishing", "(0, 1]"),
     Parameter("polish_back", "float", "", None, "fraction of t0 left on the back face (default: as the front)",
               "(0, 1]"),
-    Parameter("cold_K", "float", "K", 80.0, "operating temperature", "4..300 (material data range)"),
-    Parameter("warm_K", "float", "K", 293.0, "temperature at which the blank is stress-free",
+    Parameter("cold_K", "float", "K", _DEFAULT["cold_K"], "operating temperature", "4..300 (material data range)"),
+    Parameter("warm_K", "float", "K", _DEFAULT["warm_K"], "temperature at which the blank is stress-free",
               "4..300 (material data range)"),
     Parameter("substrate", "str", "", "Al6061-T6", "blank material", f"one of {', '.join(_MATERIAL_NAMES)}",
               choices=_MATERIAL_NAMES),
@@ -122,23 +124,23 @@ PARAMETERS: dict[str, Parameter] = {p.name: p for p in (
               choices=_MATERIAL_NAMES),
     Parameter("stress_scale", "float", "", None, f"film mismatch-stress multiplier (default: calibrated "
               f"{STRESS_SCALE:g}; 1 = nominal material data)", "> 0", low=0.0, low_open=True),
-    Parameter("size_x_mm", "float", "mm", 160.0, "blank extent along x (dispersion)",
+    Parameter("size_x_mm", "float", "mm", _DEFAULT["size_x_mm"], "blank extent along x (dispersion)",
               f"10..1000 ({_GEOMETRY}); holes must not overlap nor break through a face", 10.0, 1000.0),
-    Parameter("size_y_mm", "float", "mm", 140.0, "blank extent along y (grooves)",
+    Parameter("size_y_mm", "float", "mm", _DEFAULT["size_y_mm"], "blank extent along y (grooves)",
               f"10..1000 ({_GEOMETRY}); holes must not overlap nor break through a face", 10.0, 1000.0),
-    Parameter("thickness_mm", "float", "mm", 20.0, "blank thickness along z",
+    Parameter("thickness_mm", "float", "mm", _DEFAULT["thickness_mm"], "blank thickness along z",
               f"2..300 ({_GEOMETRY}); holes must not overlap nor break through a face", 2.0, 300.0),
-    Parameter("hole_diameter_mm", "float", "mm", 15.0, "diameter of every lightweighting hole",
+    Parameter("hole_diameter_mm", "float", "mm", _DEFAULT["hole_diameter_mm"], "diameter of every lightweighting hole",
               "1..300; holes must not overlap nor break through a face", 1.0, 300.0),
-    Parameter("pitch_x_mm", "float", "mm", 21.0, "spacing in x of the holes drilled along y",
+    Parameter("pitch_x_mm", "float", "mm", _DEFAULT["pitch_x_mm"], "spacing in x of the holes drilled along y",
               "> 0 and <= 1000; holes must not overlap nor break through a face", 0.0, 1000.0, True),
-    Parameter("n_holes_x", "int", "", 7, "number of holes drilled along y (0 = none)",
+    Parameter("n_holes_x", "int", "", _DEFAULT["n_holes_x"], "number of holes drilled along y (0 = none)",
               "integer 0..100; holes must stay inside the blank", 0, 100),
-    Parameter("pitch_y_mm", "float", "mm", 18.0, "spacing in y of the holes drilled along x",
+    Parameter("pitch_y_mm", "float", "mm", _DEFAULT["pitch_y_mm"], "spacing in y of the holes drilled along x",
               "> 0 and <= 1000; holes must not overlap nor break through a face", 0.0, 1000.0, True),
-    Parameter("n_holes_y", "int", "", 7, "number of holes drilled along x (0 = none)",
+    Parameter("n_holes_y", "int", "", _DEFAULT["n_holes_y"], "number of holes drilled along x (0 = none)",
               "integer 0..100; holes must stay inside the blank", 0, 100),
-    Parameter("hole_axis_z_mm", "float", "mm", 0.0, "z of the hole axes (0 = mid-plane)",
+    Parameter("hole_axis_z_mm", "float", "mm", _DEFAULT["hole_axis_z_mm"], "z of the hole axes (0 = mid-plane)",
               "any; the holes must keep 0.5 mm walls to both faces"),
     Parameter("mesh_size_mm", "float", "mm", None, "element size near the faces and hole walls (default 1.4)",
               "> 0 and <= thickness_mm; the mesh must fit the memory budget"),
@@ -231,35 +233,41 @@ class CaseObjects:
     stress_scale: float
 
 
+def _field(name: str):
+    """A case field: default and metadata (``metadata["parameter"]``) from :data:`PARAMETERS`."""
+    return field(default=PARAMETERS[name].default, metadata={"parameter": PARAMETERS[name]})
+
+
 @dataclass(frozen=True)
 class FEACase:
-    """One FEA case; the fields and their units, defaults and ranges are :data:`PARAMETERS`.
+    """One FEA case; each field's unit, default and range are its :data:`PARAMETERS` entry
+    (also ``dataclasses.fields(FEACase)[i].metadata["parameter"]``).
 
     Build it with :meth:`from_params` (which checks everything); the constructor stores
     what it is given. ``None`` in ``polish_back``, ``stress_scale``, ``mesh_size_mm``,
     ``mesh_bulk_mm`` means the model's default (:func:`resolve_params`).
     """
 
-    coverage: str = "all"
-    t0_um: float = 200.0
-    polish: float = 0.75
-    polish_back: float | None = None
-    cold_K: float = 80.0
-    warm_K: float = 293.0
-    substrate: str = "Al6061-T6"
-    film: str = "NiP"
-    stress_scale: float | None = None
-    size_x_mm: float = 160.0
-    size_y_mm: float = 140.0
-    thickness_mm: float = 20.0
-    hole_diameter_mm: float = 15.0
-    pitch_x_mm: float = 21.0
-    n_holes_x: int = 7
-    pitch_y_mm: float = 18.0
-    n_holes_y: int = 7
-    hole_axis_z_mm: float = 0.0
-    mesh_size_mm: float | None = None
-    mesh_bulk_mm: float | None = None
+    coverage: str = _field("coverage")
+    t0_um: float = _field("t0_um")
+    polish: float = _field("polish")
+    polish_back: float | None = _field("polish_back")
+    cold_K: float = _field("cold_K")
+    warm_K: float = _field("warm_K")
+    substrate: str = _field("substrate")
+    film: str = _field("film")
+    stress_scale: float | None = _field("stress_scale")
+    size_x_mm: float = _field("size_x_mm")
+    size_y_mm: float = _field("size_y_mm")
+    thickness_mm: float = _field("thickness_mm")
+    hole_diameter_mm: float = _field("hole_diameter_mm")
+    pitch_x_mm: float = _field("pitch_x_mm")
+    n_holes_x: int = _field("n_holes_x")
+    pitch_y_mm: float = _field("pitch_y_mm")
+    n_holes_y: int = _field("n_holes_y")
+    hole_axis_z_mm: float = _field("hole_axis_z_mm")
+    mesh_size_mm: float | None = _field("mesh_size_mm")
+    mesh_bulk_mm: float | None = _field("mesh_bulk_mm")
 
     @classmethod
     def from_params(cls, params: Mapping, *, memory_budget_bytes: float | None = None,

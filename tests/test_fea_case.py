@@ -199,3 +199,31 @@ def test_alsi40_nominal_map_bends_by_its_smaller_mismatch():
     mismatch = mismatch_strain(80, 293, "AlSi40") / mismatch_strain(80, 293)
     stiffer = AL6061_T6.youngs_modulus_Pa / ALSI40.youngs_modulus_Pa
     assert 0.8 * stiffer * mismatch <= ratio <= mismatch
+
+
+def test_nominal_map_cache_key_of_the_paper_case_is_unchanged(tmp_path):
+    """The diagnosis cache of the default blank and materials keeps its key: a map stored
+    under the key written out by hand (as the nominal cache has always named it) is found
+    without solving anything."""
+    import hashlib
+    import json
+
+    import numpy as np
+
+    from fea import MODEL_VERSION
+    from fea.calibration import STRESS_SCALE
+    from pipeline.diagnosis.manifest import parse_manifest
+    from pipeline.diagnosis.nominal import nominal_sag_map
+
+    key = dict(t0_um=200.0, polish=0.75, coverage="all", cold_K=80.0, warm_K=293.0, mesh="default",
+               spacing_mm=0.5, stress_scale=float(STRESS_SCALE), fea_model_version=MODEL_VERSION)
+    digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+    x, y = np.linspace(-1, 1, 3), np.linspace(-2, 2, 5)
+    np.savez(tmp_path / f"fea-{digest}.npz", x_mm=x, y_mm=y, sag_um=np.full((5, 3), 0.123))
+    (tmp_path / "m.csv").write_text("offset_um,intensity\n0,1\n")
+    man = parse_manifest({"simulation": {"coverage": "all", "t0_um": 200, "polish": 0.75, "cold_K": 80,
+                                         "mesh": "default"},
+                          "measurement": [{"kind": "line_profile", "file": "m.csv", "grating": "J", "order": -2,
+                                           "wavelength_um": 1.25, "pixel_scale_mas": 250}]}, tmp_path)
+    m = nominal_sag_map(man.simulation, cache_dir=tmp_path)
+    assert np.all(m.sag_um == 0.123)
