@@ -18,6 +18,7 @@ from .case import PARAMETERS, FEACase, mesh_spec_for
 from .geometry import Blank
 from .materials import Material, get_material
 from .mesh import MeshSpec, blank_mesh
+from .mesh_budget import check_mesh_budget
 from .model import FEAResult, PreparedBlank
 
 __all__ = ["prepare", "solve", "mesh_spec_for"]
@@ -83,9 +84,9 @@ def solve(t0_um: float = PARAMETERS["t0_um"].default, polish: float = PARAMETERS
             params[name] = mat
     if mesh is not None and prepared is None:
         params.update(mesh_size_mm=mesh.size_mm, mesh_bulk_mm=mesh.size_bulk_mm)
-    case = FEACase.from_params(params, check_memory=prepared is None)
-    objects = case.to_objects(mesh)
+    objects = FEACase.from_params(params, check_memory=False).to_objects(mesh)
     if prepared is None:
+        check_mesh_budget(objects.blank, objects.mesh)  # the mesh actually built (its symmetry too)
         prepared = prepare(objects.blank, objects.mesh, substrate)
     return prepared.solve(objects.coating, get_material(film), objects.load, stress_scale=objects.stress_scale,
                           backend=backend)
