@@ -14,27 +14,14 @@ Example
 
 from __future__ import annotations
 
-from .calibration import STRESS_SCALE
-from .coating import Coating
+from .case import PARAMETERS, FEACase, mesh_spec_for
 from .geometry import Blank
 from .materials import Material, get_material
 from .mesh import MeshSpec, blank_mesh
-from .model import FEAResult, PreparedBlank, ThermalLoad
+from .mesh_budget import check_mesh_budget
+from .model import FEAResult, PreparedBlank
 
 __all__ = ["prepare", "solve", "mesh_spec_for"]
-
-
-def mesh_spec_for(coating: Coating, spec: MeshSpec | None = None, blank: Blank | None = None) -> MeshSpec:
-    """The mesh spec to use: eighth model when the film and the blank are symmetric about
-    the mid-plane, quarter model otherwise (front and back polish differ, or the holes are
-    off the mid-plane)."""
-    spec = spec or MeshSpec()
-    symmetric = coating.is_z_symmetric and (blank is None or blank.is_z_symmetric)
-    if not symmetric and spec.symmetry == "eighth":
-        from dataclasses import replace
-
-        spec = replace(spec, symmetry="quarter")
-    return spec
 
 
 def prepare(blank: Blank | None = None, mesh: MeshSpec | None = None,
@@ -55,12 +42,17 @@ def prepare(blank: Blank | None = None, mesh: MeshSpec | None = None,
     return PreparedBlank(blank_mesh(blank, mesh, progress=progress), get_material(substrate))
 
 
-def solve(t0_um: float = 200.0, polish: float = 0.75, coverage: str = "all", cold_K: float = 80.0,
-          warm_K: float = 293.0, polish_back: float | None = None, *, blank: Blank | None = None,
-          mesh: MeshSpec | None = None, substrate: Material | str = "Al6061-T6",
-          film: Material | str = "NiP", stress_scale: float | None = None,
-          backend: str = "auto", prepared: PreparedBlank | None = None) -> FEAResult:
+def solve(t0_um: float = PARAMETERS["t0_um"].default, polish: float = PARAMETERS["polish"].default,
+          coverage: str = PARAMETERS["coverage"].default, cold_K: float = PARAMETERS["cold_K"].default,
+          warm_K: float = PARAMETERS["warm_K"].default, polish_back: float | None = None, *,
+          blank: Blank | None = None, mesh: MeshSpec | None = None,
+          substrate: Material | str = PARAMETERS["substrate"].default, film: Material | str = PARAMETERS["film"].default,
+          stress_scale: float | None = None, backend: str = "auto",
+          prepared: PreparedBlank | None = None) -> FEAResult:
     """Solve one cool-down case of the NiP-plated blank.
+
+    The case is checked as a :class:`fea.case.FEACase` (ranges, caps and, when a mesh is
+    to be built, its memory estimate) before any meshing.
 
     Parameters
     ----------
@@ -84,11 +76,17 @@ def solve(t0_um: float = 200.0, polish: float = 0.75, coverage: str = "all", col
     FEAResult
         ``.sag`` holds the front-face sag (``pv_um("center")``, ``sag_map()``).
     """
-    coating = Coating(t0_um=t0_um, polish_front=polish,
-                      polish_back=polish if polish_back is None else polish_back, coverage=coverage)
-    load = ThermalLoad(warm_K=warm_K, cold_K=cold_K)
-    film = get_material(film)
+    params = dict(t0_um=t0_um, polish=polish, coverage=coverage, cold_K=cold_K, warm_K=warm_K,
+                  polish_back=polish_back, stress_scale=stress_scale, **(blank.key() if blank else {}))
+    # a Material object (not one of the named ones) is checked by the model, not by name
+    for name, mat in (("substrate", substrate), ("film", film)):
+        if isinstance(mat, str):
+            params[name] = mat
+    if mesh is not None and prepared is None:
+        params.update(mesh_size_mm=mesh.size_mm, mesh_bulk_mm=mesh.size_bulk_mm)
+    objects = FEACase.from_params(params, check_memory=False).to_objects(mesh)
     if prepared is None:
-        prepared = prepare(blank, mesh_spec_for(coating, mesh, blank), substrate)
-    scale = STRESS_SCALE if stress_scale is None else stress_scale
-    return prepared.solve(coating, film, load, stress_scale=scale, backend=backend)
+        check_mesh_budget(objects.blank, objects.mesh)  # the mesh actually built (its symmetry too)
+        prepared = prepare(objects.blank, objects.mesh, substrate)
+    return prepared.solve(objects.coating, get_material(film), objects.load, stress_scale=objects.stress_scale,
+                          backend=backend)

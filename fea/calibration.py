@@ -10,7 +10,7 @@ result; 15 % for the holes-only idealisation), so three loosely expected rows do
 pull nine tightly expected ones. The surfaces-only column is excluded: see README,
 "Table 2, surfaces only". Refit with::
 
-    .venv/bin/python -m fea.calibration
+    cryograting calibrate --mesh-size-mm 1.4 --mesh-bulk-mm 2.8
 
 which prints the fit and its residuals; the values below were pasted from that run
 and a slow test checks that a refit reproduces them.
@@ -24,14 +24,15 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["STRESS_SCALE", "FIT_RECORD", "TABLE_SIGMA", "PaperCase", "paper_cases", "fit_stress_scale"]
+__all__ = ["STRESS_SCALE", "FIT_RECORD", "TABLE_SIGMA", "PaperCase", "paper_cases", "fit_stress_scale",
+           "Calibration", "calibrate"]
 
 #: Multiplier on the nominal film mismatch strain (dimensionless). See FIT_RECORD.
 STRESS_SCALE = 0.7913
 
 #: Provenance of STRESS_SCALE (mesh, rows used, residuals in % per row).
 FIT_RECORD: dict = {'date': '2026-11-22',
-    'command': 'python -m fea.calibration --mesh-size-mm 1.4 --mesh-bulk-mm 2.8',
+    'command': 'cryograting calibrate --mesh-size-mm 1.4 --mesh-bulk-mm 2.8',
     'mesh': 'default MeshSpec (1.4 / 2.8 mm, eighth model, 216096 DOFs)',
     'fea_model_version': 4, 'rows': 'Table 1 (sigma 5 %) + Table 2 holes-only (sigma 15 %)',
     'residual_percent': {'all t0=200 p=1': -4.5, 'all t0=200 p=0.75': 0.1, 'all t0=200 p=0.5': 0.7, 'all t0=150 p=1': -3.0, 'all t0=150 p=0.75': 0.5, 'all t0=150 p=0.5': 2.9, 'all t0=100 p=1': -3.7, 'all t0=100 p=0.75': 0.5, 'all t0=100 p=0.5': 2.9, 'holes t0=200 p=1': 7.4, 'holes t0=150 p=1': 7.4, 'holes t0=100 p=1': 9.4, 'surfaces t0=200 p=1': -33.9, 'surfaces t0=150 p=1': -34.7, 'surfaces t0=100 p=1': -35.5}}
@@ -81,49 +82,44 @@ def fit_stress_scale(model_pv_um: np.ndarray, paper_pv_um: np.ndarray,
     return s, s * r - 1.0
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Solve the 15 paper cases at stress scale 1 on the default mesh and fit the scale."""
-    import argparse
+@dataclass(frozen=True)
+class Calibration:
+    """A refit of the stress scale: the cases, their P/V at scale 1, the fitted scale.
 
-    from fea.api import prepare
-    from fea.coating import Coating
+    ``residuals`` are ``scale * model / paper - 1`` of every case (excluded ones too);
+    ``used`` marks the rows the fit used.
+    """
 
-    ap = argparse.ArgumentParser(prog="python -m fea.calibration", description=main.__doc__)
-    ap.add_argument("--out", default=None, help="directory for calibration.csv")
-    ap.add_argument("--mesh-size-mm", type=float, default=None, help="element size near walls (mm)")
-    ap.add_argument("--mesh-bulk-mm", type=float, default=None, help="element size in the bulk (mm)")
-    a = ap.parse_args(argv)
-    from dataclasses import replace
+    cases: tuple[PaperCase, ...]
+    model_pv_scale1_um: np.ndarray
+    scale: float
+    residuals: np.ndarray
+    used: np.ndarray
+    ndof: int
 
-    from fea.mesh import MeshSpec
 
-    sizes = {k: v for k, v in (("size_mm", a.mesh_size_mm), ("size_bulk_mm", a.mesh_bulk_mm)) if v is not None}
-    model = prepare(mesh=replace(MeshSpec(), **sizes))
-    cases = paper_cases()
+def calibrate(model, progress=None) -> Calibration:
+    """Solve the paper's 15 cases at stress scale 1 on ``model`` and fit the scale.
+
+    Parameters
+    ----------
+    model : fea.model.PreparedBlank
+        The meshed blank (``fea.api.prepare``), the paper's by default mesh.
+    progress : callable, optional
+        Called with ``(case, model_pv_um)`` after each solve.
+    """
+    from .coating import Coating
+
+    cases = tuple(paper_cases())
     pv = []
     for c in cases:
         r = model.solve(Coating.symmetric(c.t0_um, c.polish, c.coverage), stress_scale=1.0)
         pv.append(r.sag.pv_um("center"))
-        print(f"{c.label:28s} paper {c.pv_center_um:5.2f}  model(scale 1) {pv[-1]:.4f}", flush=True)
+        if progress is not None:
+            progress(c, pv[-1])
     pv = np.array(pv)
     use = np.array([c.calibrate for c in cases])
     paper = np.array([c.pv_center_um for c in cases])
     sigma = np.array([TABLE_SIGMA[c.table] for c in cases])
-    s, res = fit_stress_scale(pv[use], paper[use], sigma[use])
-    print(f"\nSTRESS_SCALE = {s:.4f}   (mesh {model.ndof} DOFs, {use.sum()} rows)")
-    allres = s * pv / paper - 1
-    for c, e in zip(cases, allres):
-        print(f"  {c.label:28s} {100 * e:+6.1f} %{'' if c.calibrate else '   (excluded)'}")
-    print(f"calibrated rows: RMS {100 * np.sqrt(np.mean(res**2)):.2f} %, max |.| {100 * np.abs(res).max():.2f} %")
-    if a.out:
-        out = Path(a.out)
-        out.mkdir(parents=True, exist_ok=True)
-        with (out / "calibration.csv").open("w") as fh:
-            fh.write("case,paper_pv_um,model_pv_scale1_um,calibrated_error,used\n")
-            for c, m, e in zip(cases, pv, allres):
-                fh.write(f"{c.label},{c.pv_center_um},{m:.5f},{e:+.4f},{c.calibrate}\n")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+    s, _ = fit_stress_scale(pv[use], paper[use], sigma[use])
+    return Calibration(cases, pv, s, s * pv / paper - 1, use, int(model.ndof))

@@ -23,6 +23,7 @@ curvature and almost nothing to the quilting.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from .errors import ParameterError
 
 __all__ = ["Coating", "COVERAGES", "SURFACE_GROUPS"]
 
@@ -54,13 +55,13 @@ class Coating:
 
     def __post_init__(self) -> None:
         if self.coverage not in COVERAGES:
-            raise ValueError(f"coverage={self.coverage!r} is unknown; valid values are {list(COVERAGES)}")
+            raise ParameterError("coverage", self.coverage, f"coverage={self.coverage!r} is unknown; valid values are {list(COVERAGES)}")
         if not (0.0 < self.t0_um <= 2000.0):
-            raise ValueError(f"t0_um={self.t0_um} is outside the valid range (0, 2000] µm")
+            raise ParameterError("t0_um", self.t0_um, f"t0_um={self.t0_um} is outside the valid range (0, 2000] µm")
         for name in ("polish_front", "polish_back"):
             v = getattr(self, name)
             if not (0.0 < v <= 1.0):
-                raise ValueError(f"{name}={v} is outside the valid range (0, 1]")
+                raise ParameterError(name, v, f"{name}={v} is outside the valid range (0, 1]")
 
     @classmethod
     def symmetric(cls, t0_um: float, polish: float, coverage: str = "all") -> "Coating":

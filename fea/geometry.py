@@ -31,6 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import ParameterError
+
 __all__ = ["Blank", "MIN_WALL_MM"]
 
 #: Thinnest wall (hole edge to face) accepted, mm.  Thinner walls cannot be
@@ -101,23 +103,23 @@ class Blank:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(
                     value, (int, float, np.integer, np.floating)):
-                raise ValueError(f"{name}={value!r}: must be a real number")
+                raise ParameterError(name, value, f"{name}={value!r}: must be a real number")
             if not math.isfinite(value):
-                raise ValueError(f"{name}={value!r}: must be finite")
+                raise ParameterError(name, value, f"{name}={value!r}: must be finite")
         for name in ("size_x_mm", "size_y_mm", "thickness_mm",
                      "hole_diameter_mm", "pitch_x_mm", "pitch_y_mm"):
             value = getattr(self, name)
             if value <= 0:
-                raise ValueError(f"{name}={value!r}: valid range is > 0 mm")
+                raise ParameterError(name, value, f"{name}={value!r}: valid range is > 0 mm")
         for name in ("n_holes_x", "n_holes_y"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(
                     value, (int, np.integer)):
-                raise ValueError(
-                    f"{name}={value!r}: must be an integer >= 0")
+                raise ParameterError(
+                    name, value, f"{name}={value!r}: must be an integer >= 0")
             if value < 0:
-                raise ValueError(
-                    f"{name}={value!r}: valid range is integers >= 0")
+                raise ParameterError(
+                    name, value, f"{name}={value!r}: valid range is integers >= 0")
         if not self.has_holes:
             return
         d = self.hole_diameter_mm
@@ -125,7 +127,8 @@ class Blank:
         max_d = self.thickness_mm - 2 * abs(self.hole_axis_z_mm) \
             - 2 * MIN_WALL_MM
         if d > max_d:
-            raise ValueError(
+            raise ParameterError(
+                "hole_diameter_mm", d,
                 f"hole_diameter_mm={d!r}: with thickness_mm="
                 f"{self.thickness_mm!r} and hole_axis_z_mm="
                 f"{self.hole_axis_z_mm!r} the hole breaks through (or comes "
@@ -139,14 +142,16 @@ class Blank:
             pitch = getattr(self, pitch_name)
             size = getattr(self, size_name)
             if n >= 2 and d >= pitch:
-                raise ValueError(
+                raise ParameterError(
+                    pitch_name, pitch,
                     f"{pitch_name}={pitch!r}: neighbouring holes of diameter "
                     f"{d!r} mm overlap; valid range is {pitch_name} > "
                     f"hole_diameter_mm = {d!r} mm")
             if n >= 1:
                 reach = (n - 1) / 2 * pitch + d / 2
                 if reach >= size / 2:
-                    raise ValueError(
+                    raise ParameterError(
+                        n_name, n,
                         f"{n_name}={n!r} (with {pitch_name}={pitch!r}, "
                         f"hole_diameter_mm={d!r}): the outermost hole edge is "
                         f"at {reach:g} mm, outside the side face at "

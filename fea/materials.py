@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import ParameterError
+
 __all__ = ["Material", "AL6061_T6", "NIP_HIGH_P", "ALSI40", "MATERIALS", "get_material"]
 
 T_REF_K = 293.0
@@ -90,7 +92,8 @@ class Material:
         """Raise ValueError if ``temperature_K`` is outside the material data's range."""
         lo, hi = self.valid_range_K
         if not (lo <= temperature_K <= hi):
-            raise ValueError(
+            raise ParameterError(
+                parameter, temperature_K,
                 f"{parameter}={temperature_K} K is outside the thermal-strain data range of "
                 f"{self.name} ({lo:g}..{hi:g} K)"
             )

@@ -34,6 +34,7 @@ import numpy as np
 from skfem import MeshTet2
 
 from .geometry import Blank
+from .errors import ParameterError
 from .mesh_cache import (FORMAT_VERSION, cached_mesh, gmsh_session,
                          tet2_from_gmsh)
 
@@ -90,10 +91,10 @@ class MeshSpec:
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or isinstance(v, bool) \
                     or not math.isfinite(v) or v <= 0:
-                raise ValueError(f"{name}={v!r}: valid range is a finite "
+                raise ParameterError(name, v, f"{name}={v!r}: valid range is a finite "
                                  "number > 0 mm")
         if self.size_bulk_mm < self.size_mm:
-            raise ValueError(f"size_bulk_mm={self.size_bulk_mm!r}: valid "
+            raise ParameterError("size_bulk_mm", self.size_bulk_mm, f"size_bulk_mm={self.size_bulk_mm!r}: valid "
                              f"range is >= size_mm={self.size_mm!r}")
         if self.symmetry not in SYMMETRIES:
             raise ValueError(f"symmetry={self.symmetry!r}: valid values are "

@@ -28,6 +28,7 @@ from .assembly import FilmOperators, _shared_csr, bulk_stiffness, film_operators
 from .coating import SURFACE_GROUPS, Coating
 from .linsolve import SPDFactor, _rigid_modes, solve_spd, solve_spd_perturbed
 from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
+from .errors import ParameterError
 from .mesh_cache import default_cache_dir
 from .operator_cache import load_film_ops, operator_key, save_film_ops
 from .reduced import FilmPolynomial, ReducedBasis
@@ -55,9 +56,9 @@ class ThermalLoad:
         for name in ("warm_K", "cold_K"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
-                raise ValueError(f"{name}={v} must be a positive temperature in kelvin")
+                raise ParameterError(name, v, f"{name}={v} must be a positive temperature in kelvin")
         if not self.heating and not self.cold_K < self.warm_K:
-            raise ValueError(f"cold_K={self.cold_K:g} K must be below warm_K={self.warm_K:g} K (a cool-down); "
+            raise ParameterError("cold_K", self.cold_K, f"cold_K={self.cold_K:g} K must be below warm_K={self.warm_K:g} K (a cool-down); "
                              "a warm-up is solved only through the API, with ThermalLoad(heating=True)")
 
 

@@ -85,9 +85,13 @@ def _cmd_sweep(a) -> int:
 
 
 def _cmd_calibrate(a) -> int:
-    from fea.calibration import main as calibrate
+    from pipeline.calibration_run import format_calibration, run_calibration
 
-    return calibrate(["--out", str(a.out)] if a.out else [])
+    cal = run_calibration(a.out, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm, progress=not a.quiet)
+    print(f"\n{format_calibration(cal)}")
+    if a.out:
+        print(f"written: {Path(a.out) / 'calibration.csv'}")
+    return 0
 
 
 def _study_config(config: str | None, preset: str | None, overrides=None):
@@ -200,6 +204,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     q = sub.add_parser("calibrate", help="refit the film stress scale to the paper's tables")
     q.add_argument("--out", default=None, help="directory for the fit's CSV (optional)")
+    q.add_argument("--mesh-size-mm", type=float, default=None, help="element size near walls and faces (mm)")
+    q.add_argument("--mesh-bulk-mm", type=float, default=None, help="element size in the bulk (mm)")
+    q.add_argument("--quiet", action="store_true")
     q.set_defaults(func=_cmd_calibrate)
 
     from pipeline.diagnosis.cli import register as register_diagnosis

@@ -19,10 +19,10 @@ selected for profiles and figures by *selectors*, inline tables of parameter val
 
 :func:`load_study_config` reads and validates a file; :class:`StudyConfig` can also be
 built in Python (``pipeline.study.default_study()`` does). Validation happens on
-construction: every FEA case goes through :class:`fea.geometry.Blank`,
-:class:`fea.coating.Coating`, :class:`fea.mesh.MeshSpec`, :class:`fea.model.ThermalLoad`
-and the materials' temperature range, every line through the grating equation of
-:mod:`optics.grating`, each error re-worded to name the config key.
+construction: every FEA case goes through :meth:`fea.case.FEACase.from_params` (the
+blank, coating, mesh, thermal load, the materials' temperature range, the caps and the
+mesh's memory estimate), every line through the grating equation of
+:mod:`optics.grating`, each error re-worded to name the config key it concerns.
 """
 
 from __future__ import annotations
@@ -81,48 +81,23 @@ def _token(v) -> str:
     return canonical_token(v)
 
 
-def _resolved_defaults() -> dict:
-    from fea.geometry import Blank
-    from fea.mesh import MeshSpec
-    from pipeline.fea_cases import FEA_PARAMETERS
-
-    d = {k: v[0] for k, v in FEA_PARAMETERS.items()}
-    d.update(Blank().key())
-    d["mesh_size_mm"], d["mesh_bulk_mm"] = MeshSpec().size_mm, MeshSpec().size_bulk_mm
-    return d
-
-
 def _resolve(combo: dict) -> dict:
     """A group's combination → every FEA parameter with its effective value."""
-    from fea.calibration import STRESS_SCALE
+    from fea.case import PARAMETERS, resolve_params
 
-    full = {**_resolved_defaults(), **combo}
-    if full["polish_back"] is None:
-        full["polish_back"] = full["polish"]
-    if full["stress_scale"] is None:
-        full["stress_scale"] = STRESS_SCALE
-    return {k: full[k] for k in FEA_KEYS if k != "polish_front"}
-
-
-# validators word their errors "name=value: ..."; their field names → config keys
-_FIELD_TO_KEY = {"polish_front": "polish", "size_mm": "mesh_size_mm", "size_bulk_mm": "mesh_bulk_mm"}
+    full = resolve_params(combo)
+    return {k: full[k] for k in PARAMETERS}
 
 
 def _check_case(combo: dict, full: dict) -> None:
-    """Run one resolved case through the FEA validators; blame the config key they name."""
-    from fea.materials import get_material
-    from pipeline.fea_cases import _split
+    """Run one resolved case through the FEA case's checks; blame the config key they name."""
+    from fea import case as fea_case  # (this module's FEACase is a study's case, not the model's)
+    from fea.errors import ParameterError
 
     try:
-        if full["stress_scale"] <= 0:
-            raise ValueError(f"stress_scale={full['stress_scale']} must be > 0")
-        for mat in ("substrate", "film"):  # the material's data range first: the most specific message
-            for t in ("cold_K", "warm_K"):
-                get_material(full[mat]).check_temperature(full[t], t)
-        _split(_case_params(full, [k for k in full if k not in _CORE]))
+        fea_case.FEACase.from_params(full)
     except ValueError as exc:
-        m = re.match(r"\s*(\w+)=", str(exc))
-        key = _FIELD_TO_KEY.get(m.group(1), m.group(1)) if m else None
+        key = exc.parameter if isinstance(exc, ParameterError) else None
         if key == "polish" and "polish" not in combo and "polish_front" in combo:
             key = "polish_front"
         case = ", ".join(f"{k}={v!r}" for k, v in combo.items())

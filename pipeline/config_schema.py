@@ -16,11 +16,9 @@ from __future__ import annotations
 
 import difflib
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
-from fea.coating import COVERAGES
-from fea.geometry import Blank
-from fea.materials import MATERIALS
+from fea.case import PARAMETERS
 
 __all__ = [
     "FEA_KEYS",
@@ -110,44 +108,15 @@ class Param:
     choices: tuple[str, ...] = ()
 
 
-_BLANK_DEFAULT = Blank()
-_BLANK_DOC = {
-    "size_x_mm": "blank extent along x (dispersion)",
-    "size_y_mm": "blank extent along y (grooves)",
-    "thickness_mm": "blank thickness along z",
-    "hole_diameter_mm": "diameter of every lightweighting hole",
-    "pitch_x_mm": "spacing in x of the holes drilled along y",
-    "n_holes_x": "number of holes drilled along y (0 = none)",
-    "pitch_y_mm": "spacing in y of the holes drilled along x",
-    "n_holes_y": "number of holes drilled along x (0 = none)",
-    "hole_axis_z_mm": "z of the hole axes (0 = mid-plane)",
-}
-
-#: Every FEA parameter a config may set ([fea] defaults and each [[fea.cases]] table).
-FEA_KEYS: dict[str, Param] = {
-    "coverage": Param("str", "", "which surfaces carry NiP (Table 1: all; Table 2: holes, surfaces)",
-                      f"one of {', '.join(COVERAGES)}", COVERAGES),
-    "t0_um": Param("float", "µm", "as-plated NiP thickness", "(0, 2000]"),
-    "polish": Param("float", "", "fraction of t0 left on both faces after polishing", "(0, 1]"),
-    "polish_front": Param("float", "", "fraction of t0 left on the front face (instead of polish)", "(0, 1]"),
-    "polish_back": Param("float", "", "fraction of t0 left on the back face (default: as the front)", "(0, 1]"),
-    "cold_K": Param("float", "K", "operating temperature", "4..300 (material data range)"),
-    "warm_K": Param("float", "K", "temperature at which the blank is stress-free", "4..300 (material data range)"),
-    "substrate": Param("str", "", "blank material", f"one of {', '.join(sorted(MATERIALS))}",
-                       tuple(sorted(MATERIALS))),
-    "film": Param("str", "", "plating material", f"one of {', '.join(sorted(MATERIALS))}",
-                  tuple(sorted(MATERIALS))),
-    "stress_scale": Param("float", "", "film mismatch-stress multiplier (default: calibrated 0.7913; "
-                          "1 = nominal material data)", "> 0"),
-    **{f.name: Param("int" if f.name.startswith("n_holes") else "float",
-                     "" if f.name.startswith("n_holes") else "mm", _BLANK_DOC[f.name],
-                     "integer >= 0; holes must stay inside the blank" if f.name.startswith("n_holes")
-                     else ("any; the holes must keep 0.5 mm walls to both faces" if f.name == "hole_axis_z_mm"
-                           else "> 0; holes must not overlap nor break through a face"))
-       for f in fields(Blank)},
-    "mesh_size_mm": Param("float", "mm", "element size near the faces and hole walls (default 1.4)", "> 0"),
-    "mesh_bulk_mm": Param("float", "mm", "element size in the bulk (default 2.8)", ">= mesh_size_mm"),
-}
+#: Every FEA parameter a config may set ([fea] defaults and each [[fea.cases]] table): the
+#: FEA case's own parameters (:data:`fea.case.PARAMETERS`), plus ``polish_front``.
+FEA_KEYS: dict[str, Param] = {}
+for _p in PARAMETERS.values():
+    FEA_KEYS[_p.name] = Param(_p.kind, _p.unit, _p.doc, _p.valid, _p.choices)
+    if _p.name == "polish":
+        FEA_KEYS["polish_front"] = Param("float", "", "fraction of t0 left on the front face (instead of polish)",
+                                         _p.valid)
+del _p
 
 #: The keys of one [[profiles]] table (besides ``set`` and ``deformation``).
 PROFILE_KEYS: dict[str, Param] = {

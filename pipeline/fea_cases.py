@@ -2,8 +2,8 @@
 
 Units: µm for film thickness and sag, mm for geometry, K for temperatures.
 
-A case is a flat dict of scalars (see :data:`FEA_PARAMETERS` for names, defaults and
-valid ranges); :class:`FEACaseRunner` turns it into outputs (P/V and RMS over the
+A case is a flat dict of scalars (see :data:`fea.case.PARAMETERS` for names, units,
+defaults and valid ranges; :class:`fea.case.FEACase` checks it); :class:`FEACaseRunner` turns it into outputs (P/V and RMS over the
 centre and the whole face, the quilt direction, and the sag map on a fixed grid) and
 keeps one prepared model (mesh + bulk stiffness) per geometry/mesh/substrate so that a
 sweep over coatings and temperatures assembles the bulk once.
@@ -12,77 +12,35 @@ sweep over coatings and temperatures assembles the bulk once.
 from __future__ import annotations
 
 import csv
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from fea.api import mesh_spec_for
 from fea.calibration import STRESS_SCALE, paper_cases
-from fea.coating import COVERAGES, Coating
+from fea.case import PARAMETERS, FEACase, model_namespace
 from fea.front_figure import front_figure_outputs
 from fea.geometry import Blank
-from fea.materials import MATERIALS
 from fea.mesh import MeshSpec
-from fea.model import PreparedBlank, ThermalLoad
+from fea.model import PreparedBlank
 
-__all__ = ["FEA_PARAMETERS", "FEACaseRunner", "fea_grid", "run_fea_sweep", "run_tables",
+__all__ = ["FEACaseRunner", "fea_grid", "run_fea_sweep", "run_tables",
            "TableRow", "format_table", "SAG_GRID_X_MM", "SAG_GRID_Y_MM", "FIGURE_KEYS", "case_namespace",
-           "write_figure_summary"]
+           "write_figure_summary", "quilt_direction_um", "field_path", "save_field", "load_field"]
 
 #: Fixed output grid of the sag maps (covers the default 160 x 140 mm face).
 SAG_SPACING_MM = 0.5
 SAG_GRID_X_MM = np.round(np.arange(-80.0, 80.0 + 1e-9, SAG_SPACING_MM), 6)
 SAG_GRID_Y_MM = np.round(np.arange(-70.0, 70.0 + 1e-9, SAG_SPACING_MM), 6)
 
-_BLANK_FIELDS = {f.name for f in fields(Blank)}
-_MESH_FIELDS = {"size_mm": "mesh_size_mm", "size_bulk_mm": "mesh_bulk_mm"}
 
-#: name -> (default, description with unit and valid range). Blank geometry fields
-#: (size_x_mm, pitch_x_mm, hole_diameter_mm, n_holes_x, ...) are accepted too.
-FEA_PARAMETERS: dict[str, tuple[object, str]] = {
-    "coverage": ("all", f"film coverage, one of {list(COVERAGES)}"),
-    "t0_um": (200.0, "as-plated NiP thickness, µm, (0, 2000]"),
-    "polish": (0.75, "fraction of t0 left on the front face, (0, 1]"),
-    "polish_back": (None, "fraction left on the back face, (0, 1]; default = polish"),
-    "cold_K": (80.0, "cold temperature, K, 4..300"),
-    "warm_K": (293.0, "warm temperature, K, 4..300"),
-    "substrate": ("Al6061-T6", f"blank material, one of {sorted(MATERIALS)}"),
-    "film": ("NiP", f"film material, one of {sorted(MATERIALS)}"),
-    "stress_scale": (None, "film mismatch-stress multiplier (default: the calibrated one)"),
-    "mesh_size_mm": (None, "element size near walls/faces, mm (default: MeshSpec)"),
-    "mesh_bulk_mm": (None, "element size in the bulk, mm (default: MeshSpec)"),
-}
+def _case(params: dict):
+    """Case dict -> (FEACase, its solver objects); ValueError naming the parameter."""
+    case = FEACase.from_params(params)
+    return case, case.to_objects()
 
 
-def _check_names(params: dict) -> None:
-    unknown = sorted(set(params) - set(FEA_PARAMETERS) - _BLANK_FIELDS)
-    if unknown:
-        raise ValueError(f"unknown FEA parameter(s) {unknown}; valid names are "
-                         f"{sorted(set(FEA_PARAMETERS) | _BLANK_FIELDS)}")
-
-
-def _split(params: dict):
-    """Case dict → (Blank, MeshSpec, substrate, Coating, film, ThermalLoad, stress scale)."""
-    _check_names(params)
-    p = {k: v[0] for k, v in FEA_PARAMETERS.items()}
-    p.update(params)
-    blank = Blank(**{k: (int(v) if k.startswith("n_holes") else float(v))
-                     for k, v in params.items() if k in _BLANK_FIELDS})
-    polish_back = p["polish"] if p["polish_back"] is None else p["polish_back"]
-    coating = Coating(t0_um=float(p["t0_um"]), polish_front=float(p["polish"]),
-                      polish_back=float(polish_back), coverage=str(p["coverage"]))
-    sizes = {k: float(p[name]) for k, name in _MESH_FIELDS.items() if p[name] is not None}
-    spec = mesh_spec_for(coating, replace(MeshSpec(), **sizes), blank)  # one replace: sizes validated together
-    for name in ("substrate", "film"):
-        if p[name] not in MATERIALS:
-            raise ValueError(f"{name}={p[name]!r} is unknown; valid values are {sorted(MATERIALS)}")
-    load = ThermalLoad(warm_K=float(p["warm_K"]), cold_K=float(p["cold_K"]))
-    scale = STRESS_SCALE if p["stress_scale"] is None else float(p["stress_scale"])
-    return blank, spec, p["substrate"], coating, p["film"], load, scale
-
-
-def _quilt_direction_um(sag, blank: Blank) -> float:
+def quilt_direction_um(sag, blank: Blank) -> float:
     """Sag over the central hole crossing minus over the adjacent rib crossing (µm)."""
     xs, ys = blank.hole_x_positions_mm, blank.hole_y_positions_mm
     if len(xs) == 0 or len(ys) == 0:
@@ -98,7 +56,7 @@ def field_path(fields_dir, params: dict):
     from pipeline import store
 
     norm = {k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v)) for k, v in params.items()}
-    return store.entry(fields_dir, f"field-{_namespace()}", norm)
+    return store.entry(fields_dir, f"field-{model_namespace()}", norm)
 
 
 def save_field(entry, result) -> None:
@@ -181,53 +139,58 @@ class FEACaseRunner:
 
     def _solve_block(self, params: dict):
         """Solve the planned block that holds ``params``; returns its FEAResult or None."""
-        key = _params_key(params)
+        try:
+            case, obj = _case(params)
+        except ValueError:
+            return None
+        key = case.cache_key()
         if key in getattr(self, "_solved", {}):
             return self._solved.pop(key)
         planned = getattr(self, "_planned", None)
         if not planned:
             return None
-        try:
-            blank, spec, substrate, _, film, load, scale = _split(params)
-        except ValueError:
-            return None
+
+        def shared(c: FEACase, o) -> tuple:  # what the cases of one block have in common
+            return o.blank, o.mesh, c.substrate, c.film, o.load, o.stress_scale
+
         same, rest = [], []
         for p in planned:  # this case first, then the planned ones that share its model
             try:
-                b, sp_, sub, c, f, ld, sc = _split(p)
+                c, o = _case(p)
             except ValueError:
                 rest.append(p)
                 continue
-            if (b, sp_, sub, f, ld, sc) != (blank, spec, substrate, film, load, scale):
+            if shared(c, o) != shared(case, obj):
                 rest.append(p)
-            elif _params_key(p) == key:
-                same.insert(0, (p, c))
+            elif c.cache_key() == key:
+                same.insert(0, (p, c.cache_key(), o.coating))
             else:
-                same.append((p, c))
-        if not same or _params_key(same[0][0]) != key or len(same) < 2:
+                same.append((p, c.cache_key(), o.coating))
+        if not same or same[0][1] != key or len(same) < 2:
             return None
         same, later = same[:self.block_size], same[self.block_size:]
-        self._planned = rest + [p for p, _ in later]
-        model = self.model(blank, spec, substrate)
+        self._planned = rest + [p for p, _, _ in later]
+        model = self.model(obj.blank, obj.mesh, case.substrate)
         try:
-            results = model.solve_many([c for _, c in same], film, load, stress_scale=scale)
+            results = model.solve_many([c for _, _, c in same], case.film, obj.load, stress_scale=obj.stress_scale)
         except ValueError:  # e.g. one case the model refuses: let each case say it on its own
             return None
-        for (p, _), r in zip(same, results):
-            self._solved[_params_key(p)] = r
+        for (_, k, _), r in zip(same, results):
+            self._solved[k] = r
         return self._solved.pop(key)
 
     def __call__(self, params: dict) -> dict:
-        blank, spec, substrate, coating, film, load, scale = _split(params)
-        model = self.model(blank, spec, substrate)
-        r = self._solve_block(params) or model.solve(coating, film, load, stress_scale=scale)
+        case, o = _case(params)
+        blank, scale = o.blank, o.stress_scale
+        model = self.model(blank, o.mesh, case.substrate)
+        r = self._solve_block(params) or model.solve(o.coating, case.film, o.load, stress_scale=scale)
         if self.fields_dir is not None and dict(params) in self.fields_for:
             save_field(field_path(self.fields_dir, params), r)
         s = r.sag
         out = {
             "pv_center_um": s.pv_um("center"), "rms_center_um": s.rms_um("center"),
             "pv_full_um": s.pv_um("full"), "rms_full_um": s.rms_um("full"),
-            "quilt_direction_um": _quilt_direction_um(s, blank),
+            "quilt_direction_um": quilt_direction_um(s, blank),
             "ndof": int(r.info["ndof"]), "solve_s": float(r.info["solve_s"]),
             "stress_scale_used": float(scale),
         }
@@ -240,33 +203,20 @@ class FEACaseRunner:
         return out
 
 
-def _params_key(params: dict) -> str:
-    import json
-
-    return json.dumps({k: params[k] for k in sorted(params)}, sort_keys=True, default=str)
-
-
 def fea_grid(**axes) -> list:
     """Cartesian product of FEA parameter values, validated before any meshing."""
     from pipeline.sweep import grid
 
     cases = grid(**axes)
     for c in cases:
-        _split(c.as_dict())  # raises with the parameter's name, value and range
+        FEACase.from_params(c.as_dict())  # raises with the parameter's name, value and range
     return cases
-
-
-def _namespace() -> str:
-    # the cache must not survive a recalibration or a change of the solver's physics
-    from fea import MODEL_VERSION
-
-    return f"fea-v{MODEL_VERSION}-scale{STRESS_SCALE:.8g}"
 
 
 def case_namespace() -> str:
     """Cache namespace of :class:`FEACaseRunner` outputs: the model's, plus the version of the
     output set (cases cached before the rigid-body/power outputs are recomputed, not reused)."""
-    return f"{_namespace()}-outputs2"
+    return f"{model_namespace()}-outputs2"
 
 
 #: Per-case outputs of the front face's rigid-body motion and low-order figure
@@ -318,7 +268,7 @@ def run_fea_sweep(axes: dict, out_dir, *, scheduler: str | None = None, workers:
     from pipeline.sweep import run_sweep
 
     # the table always names the case: unswept core parameters appear as one-value axes
-    core = {k: [FEA_PARAMETERS[k][0]] for k in ("coverage", "t0_um", "polish")}
+    core = {k: [PARAMETERS[k].default] for k in ("coverage", "t0_um", "polish")}
     axes = {**core, **axes}
     cases = fea_grid(**axes)
     runner = FEACaseRunner(with_maps)

@@ -527,11 +527,11 @@ def study_renders(cases) -> dict:
 def _entry(out: Path, file: str, params: list):
     """The render's store entry: the PNG in ``out``, its sidecar in ``out/fea/render3d``."""
     from pipeline import store
-    from pipeline.fea_cases import _namespace
+    from fea.case import model_namespace
 
     cases = [{k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v)) for k, v in p.items()}
              for p in params]
-    return store.Entry(f"render3d-{_namespace()}", {"file": file, "cases": cases}, out / file,
+    return store.Entry(f"render3d-{model_namespace()}", {"file": file, "cases": cases}, out / file,
                        out / "fea" / "render3d" / (Path(file).stem + ".json"), format_version=_RENDER_VERSION)
 
 
@@ -556,7 +556,8 @@ def _render_child(out: Path, renders: dict) -> dict:
     from fea.model import PreparedBlank
     from types import SimpleNamespace
 
-    from pipeline.fea_cases import _split, field_path, load_field
+    from fea.case import FEACase
+    from pipeline.fea_cases import field_path, load_field
 
     from pipeline import store
 
@@ -569,7 +570,10 @@ def _render_child(out: Path, renders: dict) -> dict:
         t0 = time.perf_counter()
         results = []
         for c in params:
-            blank, spec, substrate, coating, film, load, scale = _split(c)
+            case = FEACase.from_params(c)
+            o = case.to_objects()
+            blank, spec, substrate, coating, film, load, scale = (o.blank, o.mesh, case.substrate, o.coating,
+                                                                  case.film, o.load, o.stress_scale)
             saved = load_field(field_path(out / "fea" / "fields", c))  # kept by the study's FEA run
             if saved is not None:
                 results.append((SimpleNamespace(mesh=blank_mesh(blank, spec)), saved))

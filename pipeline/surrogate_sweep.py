@@ -25,19 +25,16 @@ from pathlib import Path
 
 import numpy as np
 
+from fea.case import PARAMETERS, FEACase, model_namespace
 from fea.surrogate import FEASurrogate, SurrogateDomain, build_surrogate
 
 from .fea_cases import (
-    FEA_PARAMETERS,
     SAG_GRID_X_MM,
     SAG_GRID_Y_MM,
     SAG_SPACING_MM,
     FEACaseRunner,
-    _namespace,
-    _params_key,
-    _quilt_direction_um,
-    _split,
     fea_grid,
+    quilt_direction_um,
 )
 
 __all__ = ["SURROGATE_PARAMETERS", "SurrogateCaseRunner", "run_surrogate_sweep"]
@@ -71,10 +68,11 @@ class SurrogateCaseRunner:
 
     def build(self) -> FEASurrogate:
         if self.surrogate is None:
-            blank, spec, substrate, _, film, _, scale = _split(self.params0)
-            model = FEACaseRunner(with_maps=False).model(blank, spec, substrate)
-            self.blank = blank
-            self.surrogate = build_surrogate(model, self.domain, film, stress_scale=scale, tol=self.tol,
+            case = FEACase.from_params(self.params0)
+            o = case.to_objects()
+            model = FEACaseRunner(with_maps=False).model(o.blank, o.mesh, case.substrate)
+            self.blank = o.blank
+            self.surrogate = build_surrogate(model, self.domain, case.film, stress_scale=o.stress_scale, tol=self.tol,
                                              seed=self.seed, progress=self.log)
             model.release_preconditioner()
             if self.with_maps:
@@ -97,12 +95,13 @@ class SurrogateCaseRunner:
         ok = []
         for case in cases:
             params = case.as_dict() if hasattr(case, "as_dict") else dict(case)
-            _, _, _, coating, _, load, scale = _split(params)
+            case = FEACase.from_params(params)
+            o = case.to_objects()
             try:
-                s.check(coating, load)
+                s.check(o.coating, o.load)
             except ValueError:
                 continue
-            ok.append((_params_key(params), coating, load, scale))
+            ok.append((case.cache_key(), o.coating, o.load, o.stress_scale))
         stats = s.statistics_many([o[1] for o in ok], [o[2] for o in ok], [o[3] for o in ok])
         self._batch = {o[0]: st for o, st in zip(ok, stats)}
 
@@ -111,13 +110,15 @@ class SurrogateCaseRunner:
         if getattr(self, "_planned", None):
             planned, self._planned = self._planned, None
             self.precompute(planned)
-        _, _, _, coating, _, load, scale = _split(params)
+        case = FEACase.from_params(params)
+        o = case.to_objects()
+        coating, load, scale = o.coating, o.load, o.stress_scale
         s.check(coating, load)
-        batch = getattr(self, "_batch", {}).get(_params_key(params))
+        batch = getattr(self, "_batch", {}).get(case.cache_key())
         out = dict(batch) if batch is not None else s.statistics(coating, load, stress_scale=scale)
         a, _ = s.coefficients(coating, load, stress_scale=scale)
         if self._quilt_rows is None:  # the quilt direction is linear in the sag: one row per basis vector
-            self._quilt_rows = np.array([_quilt_direction_um(replace(s.sag_template, sag_um=col), self.blank)
+            self._quilt_rows = np.array([quilt_direction_um(replace(s.sag_template, sag_um=col), self.blank)
                                          for col in s.sag_basis_um.T])
         out.update(quilt_direction_um=float(self._quilt_rows @ a), surrogate_basis=s.size,
                    stress_scale_used=float(scale))
@@ -138,7 +139,7 @@ def _domain_for(cases) -> tuple[SurrogateDomain, dict]:
                              f"one mesh, blank and material pair; only {list(SURROGATE_PARAMETERS)} may vary "
                              "(run a full sweep instead, or one surrogate sweep per value)")
         fixed[name] = params[0].get(name)
-    coatings = [_split(p)[3] for p in params]
+    coatings = [FEACase.from_params(p).to_objects().coating for p in params]
     bad = [c for c in coatings if c.polish_front != c.polish_back]
     if bad:
         raise ValueError(f"polish_back={bad[0].polish_back} differs from polish={bad[0].polish_front}: "
@@ -178,12 +179,12 @@ def run_surrogate_sweep(axes: dict, out_dir, *, validate: int = 3, tol: float = 
         raise ValueError(f"validate={validate!r} must be an int >= 0")
     if not (0 < tol < 1):
         raise ValueError(f"tol={tol!r} must be in (0, 1)")
-    core = {k: [FEA_PARAMETERS[k][0]] for k in ("coverage", "t0_um", "polish")}
+    core = {k: [PARAMETERS[k].default] for k in ("coverage", "t0_um", "polish")}
     cases = fea_grid(**{**core, **axes})
     domain, _ = _domain_for(cases)
     ident = json.dumps({"domain": [domain.t0_um, domain.polish, domain.coverages], "tol": tol,
                         "seed": seed}, sort_keys=True)
-    namespace = f"surrogate-{_namespace()}-{hashlib.sha256(ident.encode()).hexdigest()[:12]}"
+    namespace = f"surrogate-{model_namespace()}-{hashlib.sha256(ident.encode()).hexdigest()[:12]}"
 
     def log(d):
         if progress:

@@ -29,7 +29,7 @@ def test_no_film_gives_zero_sag(eighth):
 
 
 def test_table2_cases_deform_in_opposite_directions(eighth):
-    from pipeline.fea_cases import _quilt_direction_um
+    from pipeline.fea_cases import quilt_direction_um as _quilt_direction_um
 
     holes = solve(200, 1.0, "holes", prepared=eighth)
     surf = solve(200, 1.0, "surfaces", prepared=eighth)

@@ -163,20 +163,21 @@ def test_solve_many_lockstep_equals_one_by_one(model):
 def test_sweep_runner_solves_planned_cases_in_blocks(tmp_path):
     """An inline sweep plans its cases: the FEA runner solves them as one lockstep block,
     with the answers of one-by-one solves."""
-    from pipeline.fea_cases import FEACaseRunner, _split, fea_grid
+    from fea.case import FEACase
+    from pipeline.fea_cases import FEACaseRunner, fea_grid
     from pipeline.sweep import run_sweep
 
     cases = fea_grid(coverage=["all", "holes"], t0_um=[200, 100], polish=[0.75],
                      mesh_size_mm=[COARSE.size_mm], mesh_bulk_mm=[COARSE.size_bulk_mm])
     runner = FEACaseRunner(with_maps=False)
-    blank, spec, substrate, *_ = _split(cases[0].as_dict())
-    model = runner.model(blank, spec, substrate)
+    first = FEACase.from_params(cases[0].as_dict())
+    model = runner.model(first.to_objects().blank, first.to_objects().mesh, first.substrate)
     model.explicit_offset_max_dof = 0  # the block path is for large meshes; force it here
     res = run_sweep(runner, cases, tmp_path, namespace="test-blocks", workers=1, progress=False,
                     planner=runner.plan)
     direct = prepare(mesh=COARSE)
     for case, out in res:
-        _, _, _, coating, *_ = _split(case.as_dict())
+        coating = FEACase.from_params(case.as_dict()).to_objects().coating
         ref = direct.solve(coating, stress_scale=STRESS_SCALE).sag.pv_um("center")
         assert out["pv_center_um"] == pytest.approx(ref, rel=1e-5)
     assert not runner._planned and not runner._solved  # every planned case was used

@@ -213,7 +213,7 @@ def test_run_sweep_tells_the_planner_the_uncached_cases_only_when_asked(tmp_path
 # ----------------------------------------------------------------- diagnosis nominal maps
 @pytest.fixture
 def fake_fea(monkeypatch):
-    """fea.api.solve replaced by a hand-made map, so a cache test costs no FEA."""
+    """fea.api.prepare(...).solve replaced by a hand-made map, so a cache test costs no FEA."""
     import fea.api
     from optics.sagmap import SagMap
 
@@ -221,12 +221,11 @@ def fake_fea(monkeypatch):
     x, y = np.linspace(-2.0, 2.0, 5), np.linspace(-1.0, 1.0, 3)
     sag = 0.1 * x[None, :] ** 2 + 0.2 * y[:, None]
 
-    def solve(t0_um, polish, coverage, cold_K, warm_K, prepared=None):
-        calls.append(t0_um)
-        return SimpleNamespace(sag=SimpleNamespace(sag_map=lambda spacing_mm: SagMap(x, y, sag * t0_um / 200)))
+    def solve(coating, film, load, stress_scale=None):
+        calls.append(coating.t0_um)
+        return SimpleNamespace(sag=SimpleNamespace(sag_map=lambda spacing_mm: SagMap(x, y, sag * coating.t0_um / 200)))
 
-    monkeypatch.setattr(fea.api, "solve", solve)
-    monkeypatch.setattr(fea.api, "prepare", lambda mesh=None: None)
+    monkeypatch.setattr(fea.api, "prepare", lambda *args, **kw: SimpleNamespace(solve=solve))
     return calls, sag
 
 

@@ -64,7 +64,8 @@ from pipeline.interchange import write_psf_image_csv
 
 from .effects import LIBRARY
 from .engine import Criteria, diagnose
-from .nominal import fea_sag_map, thermal_factor
+from .manifest import NOMINAL_SIMULATION, Simulation
+from .nominal import case_sag_map, thermal_factor
 from .synth import (quilt_shape_map, shape_discrepancy, synthetic_profile, synthetic_psf_image, synthetic_surface,
                     unmodelled_shape, write_profile_csv)
 
@@ -184,6 +185,9 @@ def parse_types(text: str | None, truth: str = "model") -> tuple | None:
     return tuple(out)
 
 
+_COLD_K = NOMINAL_SIMULATION["cold_K"]
+
+
 def _signed(rng, lo, hi):
     return float(rng.choice([-1.0, 1.0]) * rng.uniform(lo, hi))
 
@@ -191,7 +195,7 @@ def _signed(rng, lo, hi):
 def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, out: Path,
               cfg: CampaignConfig) -> tuple[dict, dict]:
     """Write one synthetic case into ``out``; returns (manifest dict, injected truth)."""
-    sim = {"coverage": "all", "t0_um": 200.0, "polish": 0.75, "cold_K": 80.0, "mesh": cfg.nominal_mesh}
+    sim = {**NOMINAL_SIMULATION, "mesh": cfg.nominal_mesh}
     truth = {}
     if kind == "surface":
         scale, T = 1.0, SURFACE_T_K
@@ -205,7 +209,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
             truth = {"quilt_fund_xy_ratio": float(rng.choice([rng.uniform(0.7, 0.85), rng.uniform(1.2, 1.4)])),
                      "quilt_harmonics_ratio": float(rng.choice([rng.uniform(0.0, 0.4), rng.uniform(1.6, 2.5)]))}
             base = quilt_shape_map(base, truth["quilt_fund_xy_ratio"], truth["quilt_harmonics_ratio"])
-        t = DISCREPANCIES[cfg.discrepancy](base.scaled(scale * thermal_factor(T, 80.0)), rng)
+        t = DISCREPANCIES[cfg.discrepancy](base.scaled(scale * thermal_factor(T, _COLD_K)), rng)
         extra = None
         if effect == "astigmatism":
             a, th = rng.uniform(0.04, 0.15), rng.uniform(0, 2 * np.pi)
@@ -238,7 +242,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         truth = {"scale_J": scale}
     elif effect == "temperature":
         dT = rng.uniform(35.0, 75.0)
-        scale, truth = thermal_factor(80.0 + dT, 80.0), {"temperature_offset_K": dT}
+        scale, truth = thermal_factor(_COLD_K + dT, _COLD_K), {"temperature_offset_K": dT}
     elif effect == "pupil_shift":
         params = truth = {"pupil_x_mm": _signed(rng, 3.0, 8.0), "pupil_y_mm": rng.uniform(-3.0, 3.0)}
     elif effect == "collimator_wfe":
@@ -270,7 +274,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         # temperature offset is one of the cryostat's reading, so it applies here too.
         # Drawn after the profiles: the profiles are those of the profile-only campaign.
         dT = truth.get("temperature_offset_K", 0.0)
-        m = synthetic_surface(t.scaled(thermal_factor(cfg.profile_map_K + dT, 80.0 + dT)), rng, noise_um=cfg.noise_um)
+        m = synthetic_surface(t.scaled(thermal_factor(cfg.profile_map_K + dT, _COLD_K + dT)), rng, noise_um=cfg.noise_um)
         np.savez(out / "map.npz", x_mm=m.x_mm, y_mm=m.y_mm, sag_um=m.sag_um)
         meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K, "aperture_diameter_mm": 137.0})
     if cfg.psf_image is not None:
@@ -458,8 +462,9 @@ def _log(row: dict, progress) -> dict:
 
 def campaign_maps(cfg: CampaignConfig, cache_dir=None) -> tuple[SagMap, SagMap]:
     """(diagnosed nominal, truth base) FEA maps of 200 µm / 75 % at 80 K."""
-    nominal = fea_sag_map(200.0, 0.75, "all", 80.0, cfg.nominal_mesh, cache_dir=cache_dir)
-    base = fea_sag_map(200.0, 0.75, "all", 80.0, cfg.truth_mesh, cache_dir=cache_dir)
+    nominal = case_sag_map(Simulation.from_params({**NOMINAL_SIMULATION, "mesh": cfg.nominal_mesh}),
+                           cache_dir=cache_dir)
+    base = case_sag_map(Simulation.from_params({**NOMINAL_SIMULATION, "mesh": cfg.truth_mesh}), cache_dir=cache_dir)
     return nominal, base
 
 

@@ -237,7 +237,7 @@ def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, Fi
     """Forward models, the nominal (nuisance-only) fit, noise, n_eff and weights."""
     sim = manifest.simulation
     kinds = {"surface": SurfaceForward, "line_profile": ProfileForward, "psf_image": PsfImageForward}
-    fws = [kinds[d.measurement.kind](d, nominal, sim.cold_K, sim.warm_K) for d in data]
+    fws = [kinds[d.measurement.kind](d, nominal, sim.cold_K, sim.warm_K, materials=sim.materials) for d in data]
     prob = Problem(fws, {f.name: 1.0 for f in fws}, {f.name: float(f.n) for f in fws})
     nom = fit(prob, ())
     for f in fws:

@@ -32,7 +32,7 @@ from optics.zernike import zernike_xy
 from .effects import BOW_REF_RADIUS_MM, NOMINAL_SLIT_UM, PLATING_GRADIENT_REF_MM, parameter_spec
 from .manifest import ProfileData, SurfaceData
 from .noise import estimate_noise
-from .nominal import thermal_factor
+from .nominal import DEFAULT_MATERIALS, thermal_factor
 from .quilt import QuiltComponents, quilt_components
 
 __all__ = ["FIT_LSF_SETTINGS", "PROFILE_KEYS", "SurfaceForward", "SpectrographImageModel", "ProfileForward", "profile_curve", "collimator_terms", "plating_gradient_map", "bow_um",
@@ -121,12 +121,14 @@ class SurfaceForward:
     #: nuisances solved inside :meth:`residual` (piston, x and y tilt); no position nuisance
     nuisance_count, n_shift, delta0_um = 3, 0, 0.0
 
-    def __init__(self, data: SurfaceData, nominal: SagMap, cold_K: float, warm_K: float = 293.0):
+    def __init__(self, data: SurfaceData, nominal: SagMap, cold_K: float, warm_K: float = 293.0,
+                 materials: tuple[str, str] = DEFAULT_MATERIALS):
         m = data.measurement
         self.name, self.blank, self.data = m.name, m.blank, np.asarray(data.sag_um, float)
         self.x, self.y = np.asarray(data.x_mm, float), np.asarray(data.y_mm, float)
         self.n = self.data.size
         self.T_K, self.cold_K, self.warm_K = m.temperature_K, cold_K, warm_K
+        self.materials = tuple(materials)  # (substrate, film): their mismatch sets the thermal factor
         self.radius_mm = 0.5 * m.aperture_diameter_mm
         s = np.where(np.isfinite(nominal.sag_um), nominal.sag_um, 0.0)
         self._interp = RegularGridInterpolator((nominal.y_mm, nominal.x_mm), s, bounds_error=False, fill_value=np.nan)
@@ -150,7 +152,7 @@ class SurfaceForward:
         return np.where(self._valid(pts) > 0.999, v, np.nan)
 
     def factor(self, p: dict) -> float:
-        k = thermal_factor(self.T_K + p.get("temperature_offset_K", 0.0), self.cold_K, self.warm_K)
+        k = thermal_factor(self.T_K + p.get("temperature_offset_K", 0.0), self.cold_K, self.warm_K, *self.materials)
         return k * p.get(f"scale_{self.blank}", 1.0)
 
     def predict(self, p: dict) -> np.ndarray:
@@ -230,8 +232,10 @@ class SpectrographImageModel:
 
     _KEYS = PROFILE_KEYS
 
-    def _setup(self, m, nominal: SagMap, cold_K: float, warm_K: float, settings, cache_size: int) -> None:
+    def _setup(self, m, nominal: SagMap, cold_K: float, warm_K: float, settings, cache_size: int,
+               materials: tuple[str, str] = DEFAULT_MATERIALS) -> None:
         self.m, self.name, self.blank = m, m.name, m.blank
+        self.materials = tuple(materials)  # (substrate, film): their mismatch sets the thermal factor
         self.nominal, self.cold_K, self.warm_K, self.settings = nominal, cold_K, warm_K, settings
         self._grid = nominal.grid()
         self.quilt = quilt_components(nominal)
@@ -242,7 +246,8 @@ class SpectrographImageModel:
         self.noise_known = m.noise_rel
 
     def factor(self, p: dict) -> float:
-        k = thermal_factor(self.cold_K + p.get("temperature_offset_K", 0.0), self.cold_K, self.warm_K)
+        k = thermal_factor(self.cold_K + p.get("temperature_offset_K", 0.0), self.cold_K, self.warm_K,
+                           *self.materials)
         return k * p.get(f"scale_{self.blank}", 1.0)
 
     def _memo(self, p: dict, build):
@@ -269,8 +274,9 @@ class ProfileForward(SpectrographImageModel):
     nuisance_count, n_shift = 2, 1
 
     def __init__(self, data: ProfileData, nominal: SagMap, cold_K: float, warm_K: float = 293.0,
-                 settings: LsfSettings = FIT_LSF_SETTINGS, cache_size: int = 512):
-        self._setup(data.measurement, nominal, cold_K, warm_K, settings, cache_size)
+                 settings: LsfSettings = FIT_LSF_SETTINGS, cache_size: int = 512,
+                 materials: tuple[str, str] = DEFAULT_MATERIALS):
+        self._setup(data.measurement, nominal, cold_K, warm_K, settings, cache_size, materials)
         self.x = np.asarray(data.offset_um, float)
         self.data = np.asarray(data.intensity, float)
         self.n = self.data.size

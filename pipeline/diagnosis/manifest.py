@@ -2,11 +2,12 @@
 
 A manifest names the nominal simulation and the measurements it is compared with::
 
-    [simulation]              # the nominal model
-    coverage = "all"          # all | holes | surfaces
+    [simulation]              # the nominal model: any FEA case parameter (fea.case.PARAMETERS)
+    coverage = "all"          # all | holes | surfaces | faces | none
     t0_um = 200
     polish = 0.75
     cold_K = 80
+    substrate = "Al6061-T6"   # optional, as every other FEA parameter (blank geometry, film, warm_K)
     mesh = "default"          # optional: coarse | default | refined (FEA mesh of the nominal model)
     sag_file = "nominal.npz"  # optional: use this map (at cold_K) instead of solving the FEA
 
@@ -64,12 +65,22 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Simulation", "Measurement", "Manifest", "SurfaceData", "ProfileData", "PsfImageData",
+from fea.case import PARAMETERS, FEACase
+
+__all__ = ["Simulation", "MESH_SPECS", "NOMINAL_SIMULATION", "Measurement", "Manifest", "SurfaceData", "ProfileData", "PsfImageData",
            "MEASUREMENT_KEYS", "SIMULATION_KEYS", "recentre", "unit_line_peak", "unknown_keys_error",
            "load_manifest", "parse_manifest", "load_data"]
 
-_COVERAGES = ("all", "holes", "surfaces")
-_MESHES = ("coarse", "default", "refined")
+#: Named FEA meshes of the nominal model (element size near surfaces / in the bulk, mm); see
+#: ``benchmarks/results_mesh_convergence.md``: P/V_center of "default" is 1.2-1.6 %,
+#: of "refined" 0.4-1.0 % below the Richardson-extrapolated value.
+MESH_SPECS = {"coarse": dict(size_mm=5.0, size_bulk_mm=10.0), "default": dict(size_mm=1.4, size_bulk_mm=2.8),
+              "refined": dict(size_mm=1.0, size_bulk_mm=2.0)}
+#: The [simulation] table the synthetic generators write (campaign, scenarios): the FEA
+#: case's defaults, the paper's 200 µm / 75 % "all" coating at 80 K, named explicitly.
+NOMINAL_SIMULATION = {k: PARAMETERS[k].default for k in ("coverage", "t0_um", "polish", "cold_K")}
+#: FEA parameters a [simulation] table may set: all but the element sizes, which ``mesh`` names.
+_SIMULATION_FEA_KEYS = tuple(k for k in PARAMETERS if k not in ("mesh_size_mm", "mesh_bulk_mm"))
 _KINDS = ("surface", "line_profile", "psf_image")
 _PIXEL_SCALES = (25, 100, 250)
 _COMMON_KEYS = ("name", "kind", "file", "blank")
@@ -81,34 +92,53 @@ MEASUREMENT_KEYS = {
                                     "noise_rel"),
     "psf_image": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_um", "noise_rel"),
 }
-SIMULATION_KEYS = ("coverage", "t0_um", "polish", "cold_K", "warm_K", "mesh", "sag_file")
+SIMULATION_KEYS = (*_SIMULATION_FEA_KEYS, "mesh", "sag_file")
 #: Fraction of a profile's or image's samples at or below its floor (background estimate).
 FLOOR_PERCENTILE = 20.0
 
 
 @dataclass(frozen=True)
 class Simulation:
-    """The nominal model: FEA case (µm, fraction, K) or a given sag map at ``cold_K``."""
+    """The nominal model: an FEA case on a named mesh, or a given sag map at ``case.cold_K``.
 
-    coverage: str = "all"
-    t0_um: float = 200.0
-    polish: float = 0.75
-    cold_K: float = 80.0
-    warm_K: float = 293.0
+    Build it with :meth:`from_params` (a [simulation] table); ``cold_K``, ``warm_K`` and the
+    other case parameters are read through the case (``sim.case.substrate``).
+    """
+
+    case: FEACase = FEACase(mesh_size_mm=MESH_SPECS["default"]["size_mm"],
+                            mesh_bulk_mm=MESH_SPECS["default"]["size_bulk_mm"])
     mesh: str = "default"
     sag_file: Path | None = None
 
-    def __post_init__(self) -> None:
-        if self.coverage not in _COVERAGES:
-            raise ValueError(f"[simulation] coverage={self.coverage!r} is unknown; valid: {list(_COVERAGES)}")
-        if not self.t0_um > 0:
-            raise ValueError(f"[simulation] t0_um={self.t0_um!r} must be > 0 µm")
-        if not 0 < self.polish <= 1:
-            raise ValueError(f"[simulation] polish={self.polish!r} must be in (0, 1]")
-        if not 4 <= self.cold_K < self.warm_K:
-            raise ValueError(f"[simulation] cold_K={self.cold_K!r} must be in [4, warm_K={self.warm_K}) K")
-        if self.mesh not in _MESHES:
-            raise ValueError(f"[simulation] mesh={self.mesh!r} is unknown; valid: {list(_MESHES)}")
+    @classmethod
+    def from_params(cls, params: dict) -> Simulation:
+        """Validate a [simulation] table (keys :data:`SIMULATION_KEYS`); errors name the field."""
+        mesh = params.get("mesh", "default")
+        if mesh not in MESH_SPECS:
+            raise ValueError(f"[simulation] mesh={mesh!r} is unknown; valid: {list(MESH_SPECS)}")
+        fea = {k: v for k, v in params.items() if k in _SIMULATION_FEA_KEYS}
+        sizes = MESH_SPECS[mesh]
+        try:
+            case = FEACase.from_params({**fea, "mesh_size_mm": sizes["size_mm"],
+                                        "mesh_bulk_mm": sizes["size_bulk_mm"]})
+        except ValueError as exc:
+            raise ValueError(f"[simulation] {exc}") from None
+        return cls(case, mesh, params.get("sag_file"))
+
+    @property
+    def cold_K(self) -> float:
+        """Temperature of the nominal map (K)."""
+        return self.case.cold_K
+
+    @property
+    def warm_K(self) -> float:
+        """Stress-free temperature of the nominal model (K)."""
+        return self.case.warm_K
+
+    @property
+    def materials(self) -> tuple[str, str]:
+        """(substrate, film) names: their mismatch strain rescales the nominal in temperature."""
+        return self.case.substrate, self.case.film
 
 
 @dataclass(frozen=True)
@@ -321,7 +351,7 @@ def parse_manifest(data: dict, base_dir: str | Path = ".", source: str = "") -> 
         sim["sag_file"] = p if p.is_absolute() else base / p
         if not sim["sag_file"].is_file():
             raise ValueError(f"[simulation] sag_file={str(p)!r} does not exist (resolved to {sim['sag_file']})")
-    simulation = Simulation(**sim)
+    simulation = Simulation.from_params(sim)
     entries = data.get("measurement", [])
     if not isinstance(entries, list) or not entries:
         raise ValueError("manifest has no [[measurement]] entries")

@@ -1,7 +1,7 @@
 """The nominal simulation: one FEA sag map per manifest, cached, and exact thermal rescaling.
 
 Why one map is enough: the FEA sag is exactly linear in the film mismatch strain
-``eps_m(T) = NiP.strain_between(warm, T) - Al6061.strain_between(warm, T)``, so the
+``eps_m(T) = film.strain_between(warm, T) - substrate.strain_between(warm, T)``, so the
 map at any other cold temperature is ``eps_m(T) / eps_m(cold_K)`` times the map at
 ``cold_K``. The same linearity makes a temperature change and an amplitude scale
 indistinguishable on a single surface map.
@@ -14,34 +14,41 @@ from pathlib import Path
 from optics.sagmap import SagMap
 from pipeline import store
 
-from .manifest import Simulation
+from .manifest import MESH_SPECS, Simulation
 
-__all__ = ["mismatch_strain", "thermal_factor", "nominal_sag_map", "fea_sag_map", "MESH_SPECS"]
+__all__ = ["mismatch_strain", "thermal_factor", "nominal_sag_map", "fea_sag_map", "case_sag_map", "MESH_SPECS",
+           "DEFAULT_MATERIALS"]
 
-#: Named FEA meshes (element size near surfaces / in the bulk, mm); see
-#: ``benchmarks/results_mesh_convergence.md``: P/V_center of "default" is 1.2-1.6 %,
-#: of "refined" 0.4-1.0 % below the Richardson-extrapolated value.
-MESH_SPECS = {"coarse": dict(size_mm=5.0, size_bulk_mm=10.0), "default": dict(size_mm=1.4, size_bulk_mm=2.8),
-              "refined": dict(size_mm=1.0, size_bulk_mm=2.0)}
+#: (substrate, film) of the FEA case's defaults: Al 6061-T6 plated with NiP.
+DEFAULT_MATERIALS = ("Al6061-T6", "NiP")
+
+#: Parameters every nominal-map cache key names (its other parameters only when they differ
+#: from the default, so the keys of the default blank and materials stay what they were).
+_KEYED = ("t0_um", "polish", "coverage", "cold_K", "warm_K")
 #: Store namespace of the nominal maps (the FEA model version is among the parameters).
 _NAMESPACE = "diagnosis-fea-sag-map"
 
 
-def mismatch_strain(temperature_K: float, warm_K: float = 293.0) -> float:
+def mismatch_strain(temperature_K: float, warm_K: float = 293.0, substrate: str = DEFAULT_MATERIALS[0],
+                    film: str = DEFAULT_MATERIALS[1]) -> float:
     """Film-minus-substrate thermal strain from ``warm_K`` to ``temperature_K`` (dimensionless)."""
-    from fea.materials import AL6061_T6, NIP_HIGH_P
+    from fea.materials import get_material
 
-    return float(NIP_HIGH_P.strain_between(warm_K, temperature_K) - AL6061_T6.strain_between(warm_K, temperature_K))
+    return float(get_material(film).strain_between(warm_K, temperature_K)
+                 - get_material(substrate).strain_between(warm_K, temperature_K))
 
 
-def thermal_factor(temperature_K: float, reference_K: float, warm_K: float = 293.0) -> float:
+def thermal_factor(temperature_K: float, reference_K: float, warm_K: float = 293.0,
+                   substrate: str = DEFAULT_MATERIALS[0], film: str = DEFAULT_MATERIALS[1]) -> float:
     """Sag at ``temperature_K`` divided by the sag at ``reference_K`` (exact for the linear FEA)."""
-    return mismatch_strain(temperature_K, warm_K) / mismatch_strain(reference_K, warm_K)
+    return (mismatch_strain(temperature_K, warm_K, substrate, film)
+            / mismatch_strain(reference_K, warm_K, substrate, film))
 
 
 def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh: str = "coarse",
                 spacing_mm: float = 0.5, cache_dir: str | Path | None = None, warm_K: float = 293.0) -> SagMap:
-    """Front-face sag map (µm on a ``spacing_mm`` grid) of one FEA case, cached as npz.
+    """Front-face sag map (µm on a ``spacing_mm`` grid) of one FEA case of the default blank
+    and materials, cached as npz (see :func:`case_sag_map`).
 
     Parameters
     ----------
@@ -56,13 +63,27 @@ def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh:
         Directory for ``fea-<key>.npz`` and its sidecar (:mod:`pipeline.store`); None
         disables the disk cache. A damaged or mismatched file is rebuilt with a warning.
     """
-    from fea import MODEL_VERSION
-    from fea.calibration import STRESS_SCALE
+    sim = Simulation.from_params(dict(t0_um=t0_um, polish=polish, coverage=coverage, cold_K=cold_K,
+                                      warm_K=warm_K, mesh=mesh))
+    return case_sag_map(sim, spacing_mm, cache_dir)
 
-    key = dict(t0_um=float(t0_um), polish=float(polish), coverage=coverage, cold_K=float(cold_K),
-               warm_K=float(warm_K), mesh=mesh, spacing_mm=float(spacing_mm), stress_scale=float(STRESS_SCALE),
+
+def case_sag_map(sim: Simulation, spacing_mm: float = 0.5, cache_dir: str | Path | None = None) -> SagMap:
+    """Front-face sag map (µm on a ``spacing_mm`` grid) of the simulation's FEA case on its
+    named mesh, cached as ``cache_dir/fea-<hash>.npz`` (None: no disk cache)."""
+    from fea import MODEL_VERSION
+    from fea.case import PARAMETERS
+
+    case, mesh = sim.case, sim.mesh
+    resolved = case.resolved()
+    key = {k: getattr(case, k) for k in _KEYED}
+    key.update(mesh=mesh, spacing_mm=float(spacing_mm), stress_scale=float(resolved.stress_scale),
                fea_model_version=MODEL_VERSION)
-    label = f"FEA {coverage} t0={t0_um:g} polish={polish:g} {cold_K:g} K ({mesh} mesh)"
+    key.update({k: v for k, v in case.as_params().items() if k not in key and k not in
+                ("mesh_size_mm", "mesh_bulk_mm") and v != PARAMETERS[k].default})
+    other = "".join(f" {case.as_params()[k]}" for k in ("substrate", "film") if k in key)
+    label = (f"FEA {case.coverage} t0={case.t0_um:g} polish={case.polish:g} {case.cold_K:g} K"
+             f"{other} ({mesh} mesh)")
     entry = None
     if cache_dir is not None:
         entry = store.entry(cache_dir, _NAMESPACE, key, prefix="fea-")
@@ -73,17 +94,10 @@ def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh:
             pass
         except (store.CacheMiss, KeyError, ValueError) as exc:  # KeyError/ValueError: arrays not a map
             store.warn_rebuild(entry, exc, "nominal FEA map")
-    from fea.api import prepare, solve
-    from fea.mesh import MeshSpec
+    from fea.api import prepare
 
-    if mesh not in MESH_SPECS:
-        raise ValueError(f"mesh={mesh!r} is unknown; valid: {list(MESH_SPECS)}")
-    spec = MeshSpec(**MESH_SPECS[mesh])
-    from fea.api import mesh_spec_for
-    from fea.coating import Coating
-
-    spec = mesh_spec_for(Coating(t0_um=t0_um, polish_front=polish, polish_back=polish, coverage=coverage), spec)
-    r = solve(t0_um, polish, coverage, cold_K, warm_K, prepared=prepare(mesh=spec))
+    o = case.to_objects()
+    r = prepare(o.blank, o.mesh, o.substrate).solve(o.coating, o.film, o.load, stress_scale=o.stress_scale)
     sm = r.sag.sag_map(spacing_mm)
     out = SagMap(sm.x_mm, sm.y_mm, sm.sag_um, label, dict(key))
     if entry is not None:
@@ -101,5 +115,4 @@ def nominal_sag_map(sim: Simulation, cache_dir: str | Path | None = None) -> Sag
             return read_sag_map(sim.sag_file)
         except ValueError as exc:
             raise ValueError(f"[simulation] sag_file={str(sim.sag_file)!r}: {exc}") from None
-    return fea_sag_map(sim.t0_um, sim.polish, sim.coverage, sim.cold_K, sim.mesh, cache_dir=cache_dir,
-                       warm_K=sim.warm_K)
+    return case_sag_map(sim, cache_dir=cache_dir)

@@ -252,7 +252,7 @@ def measurement_problems(manifest, data: tuple, nominal, rules: Plausibility = P
         if isinstance(d, ProfileData):
             out += profile_problems(m.name, d.offset_um, d.intensity, _nominal_fwhm_um(m, nominal), m.noise_rel, rules)
         elif isinstance(d, SurfaceData):
-            k = thermal_factor(m.temperature_K, sim.cold_K, sim.warm_K)
+            k = thermal_factor(m.temperature_K, sim.cold_K, sim.warm_K, *sim.materials)
             out += map_problems(m.name, d.x_mm, d.y_mm, d.sag_um, k * _nominal_at(nominal, d.x_mm, d.y_mm),
                                 m.noise_um, rules)
         elif isinstance(d, PsfImageData):

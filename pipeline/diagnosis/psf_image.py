@@ -30,6 +30,7 @@ from optics.sagmap import SagMap
 
 from .forward import SpectrographImageModel, collimator_terms
 from .manifest import PsfImageData
+from .nominal import DEFAULT_MATERIALS
 from .noise import estimate_noise, estimate_noise_band_limited
 
 __all__ = ["PsfImageSettings", "FIT_PSF_SETTINGS", "FIT_PSF_SETTINGS_FINE", "psf_image_model", "PsfImageForward"]
@@ -106,11 +107,12 @@ class PsfImageForward(SpectrographImageModel):
     nuisance_count, n_shift = 2, 2
 
     def __init__(self, data: PsfImageData, nominal: SagMap, cold_K: float, warm_K: float = 293.0,
-                 settings: PsfImageSettings | None = None, cache_size: int = 256):
+                 settings: PsfImageSettings | None = None, cache_size: int = 256,
+                 materials: tuple[str, str] = DEFAULT_MATERIALS):
         m = data.measurement
         if settings is None:
             settings = FIT_PSF_SETTINGS if m.pixel_um >= 6.0 else FIT_PSF_SETTINGS_FINE
-        self._setup(m, nominal, cold_K, warm_K, settings, cache_size)
+        self._setup(m, nominal, cold_K, warm_K, settings, cache_size, materials)
         self.x, self.y = np.asarray(data.x_um, float), np.asarray(data.y_um, float)
         self.data = np.asarray(data.intensity, float)
         self.n = self.data.size

@@ -32,16 +32,23 @@ import numpy as np
 from scipy.optimize import brentq
 
 from optics.zernike import zernike_xy
-from pipeline.diagnosis.nominal import fea_sag_map, thermal_factor
+from pipeline.diagnosis.manifest import NOMINAL_SIMULATION, Simulation
+from pipeline.diagnosis.nominal import case_sag_map, thermal_factor
 from pipeline.diagnosis.synth import shape_discrepancy, synthetic_profile, synthetic_surface, write_profile_csv
 from pipeline.interchange import write_sag_map
 
 HERE = Path(__file__).parent
-SIM = '[simulation]\ncoverage = "all"\nt0_um = 200\npolish = 0.75\ncold_K = 80\nmesh = "default"\n'
+SIM = "[simulation]\n" + "".join(f'{k} = "{v}"\n' if isinstance(v, str) else f"{k} = {v:g}\n"
+                                  for k, v in {**NOMINAL_SIMULATION, "mesh": "default"}.items())
+_COLD_K = NOMINAL_SIMULATION["cold_K"]
+
+
+def _nominal_case(mesh: str, **changes) -> Simulation:
+    return Simulation.from_params({**NOMINAL_SIMULATION, **changes, "mesh": mesh})
 
 
 def _truth(polish: float, cache_dir, rng, scale: float = 1.0):
-    m = fea_sag_map(200.0, polish, "all", 80.0, "refined", cache_dir=cache_dir)
+    m = case_sag_map(_nominal_case("refined", polish=polish), cache_dir=cache_dir)
     return shape_discrepancy(m.scaled(scale), rng)
 
 
@@ -52,13 +59,13 @@ def quilt_ratio(truth, cache_dir) -> float:
     deformation's shape differs (200/50 vs 200/75)."""
     from optics.fitting import fit_fourier
 
-    nom = fea_sag_map(200.0, 0.75, "all", 80.0, "default", cache_dir=cache_dir)
+    nom = case_sag_map(_nominal_case("default"), cache_dir=cache_dir)
     return float(fit_fourier(truth, aperture="pupil", harmonics=2).component(1, 0)[0]
                  / fit_fourier(nom, aperture="pupil", harmonics=2).component(1, 0)[0])
 
 
 def cryo_astigmatism(out: Path, rng, cache_dir) -> dict:
-    base = _truth(0.75, cache_dir, rng, thermal_factor(128.0, 80.0))
+    base = _truth(0.75, cache_dir, rng, thermal_factor(128.0, _COLD_K))
     base = base.scaled(0.60 / base.remove_piston_tilt("center").pv_um("center"))
     X, Y = base.grid()
 

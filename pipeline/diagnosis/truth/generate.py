@@ -16,11 +16,15 @@ from scipy.ndimage import gaussian_filter
 
 from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
 
+from ..manifest import NOMINAL_SIMULATION
 from ..nominal import thermal_factor
 from .abbe import GRATINGS, RELATIVE_NA, AbbeSettings, abbe_line_profile, zernike_noll
 from .detector import measure_profile
 from .families import PROFILE_OOL, SURFACE_OOL, draw_profile_ool, draw_surface_ool
 from .gratings import GratingTruth, mixed_grating, sag_function
+
+#: cold temperature of the nominal map (K): the FEA case's default
+_COLD_K = NOMINAL_SIMULATION["cold_K"]
 
 __all__ = ["CASE_TYPES", "FAMILIES", "SURFACE_T_K", "truth_grating", "measured_map", "make_case"]
 
@@ -94,7 +98,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
     if getattr(cfg, "psf_image", None) is not None:
         raise ValueError("the independent truth makes no point-source images; use truth='model' with psf_image")
     g = truth_grating(nominal, fea, rng)
-    sim = {"coverage": "all", "t0_um": 200.0, "polish": 0.75, "cold_K": 80.0, "mesh": cfg.nominal_mesh}
+    sim = {**NOMINAL_SIMULATION, "mesh": cfg.nominal_mesh}
     meta = {"family": g.family, "mix": g.mix, "harmonic_distance": g.distance}
     truth: dict = {}
     if kind == "surface":
@@ -121,7 +125,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
             truth, extra = draw_surface_ool(effect, rng)
         else:
             raise ValueError(f"make_case: surface effect={effect!r} is not a case type of the independent truth")
-        x, y, z = measured_map(g, scale * thermal_factor(T, 80.0), rng, extra, reg, cfg.noise_um)
+        x, y, z = measured_map(g, scale * thermal_factor(T, _COLD_K), rng, extra, reg, cfg.noise_um)
         np.savez(out / "map.npz", x_mm=x, y_mm=y, sag_um=z)
         meas = [{"kind": "surface", "file": "map.npz", "temperature_K": SURFACE_T_K, "aperture_diameter_mm": APERTURE_MM}]
         return {"simulation": sim, "measurement": meas}, {**truth, "_present": ["quilt_shape"], "_truth": meta}
@@ -131,7 +135,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
         truth = {"scale_J": scale}
     elif effect == "temperature":
         dT = rng.uniform(35.0, 75.0)
-        scale, truth = thermal_factor(80.0 + dT, 80.0), {"temperature_offset_K": dT}
+        scale, truth = thermal_factor(_COLD_K + dT, _COLD_K), {"temperature_offset_K": dT}
     elif effect == "pupil_shift":
         truth = {"pupil_x_mm": _signed(rng, 3.0, 8.0), "pupil_y_mm": rng.uniform(-3.0, 3.0)}
         shift = (truth["pupil_x_mm"], truth["pupil_y_mm"])
@@ -163,7 +167,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
                      "order": order, "wavelength_um": wl, "pixel_scale_mas": ps})
     if cfg.profile_map_K is not None:
         dT = truth.get("temperature_offset_K", 0.0)
-        x, y, z = measured_map(g, scale * thermal_factor(cfg.profile_map_K + dT, 80.0 + dT), rng, None, None, cfg.noise_um)
+        x, y, z = measured_map(g, scale * thermal_factor(cfg.profile_map_K + dT, _COLD_K + dT), rng, None, None, cfg.noise_um)
         np.savez(out / "map.npz", x_mm=x, y_mm=y, sag_um=z)
         meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K,
                      "aperture_diameter_mm": APERTURE_MM})
