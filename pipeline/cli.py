@@ -53,6 +53,7 @@ def _cmd_sweep(a) -> int:
             raise SystemExit(f"--param {item!r}: expected NAME=VALUES, e.g. hole_diameter_mm=14,15,16")
         name, text = item.split("=", 1)
         axes[name.strip()] = _values(text)
+    _check_sweep_size(axes, a.surrogate, a.validate)
     if a.surrogate:
         from pipeline.surrogate_sweep import run_surrogate_sweep
 
@@ -82,6 +83,28 @@ def _cmd_sweep(a) -> int:
             print(f"validation against {len(rows)} full solves at random points: max |P/V error| "
                   f"{100 * err:.3f} % ({Path(a.out) / 'surrogate_validation.csv'})")
     return 0
+
+
+def _check_sweep_size(axes: dict, surrogate: bool, validate: int) -> None:
+    """Refuse a sweep past its cap, and say up front when it will take more than an hour."""
+    from pipeline.bounds import (MAX_FEA_CASES, MAX_SURROGATE_CASES, SECONDS, fea_case_seconds,
+                                 product_count, warn_if_long)
+
+    n = product_count(len(v) if isinstance(v, list) else 1 for v in axes.values())
+    cap = MAX_SURROGATE_CASES if surrogate else MAX_FEA_CASES
+    if n > cap:
+        raise ValueError(f"{n} sweep cases (the product of the value lists given) is outside the valid range "
+                         f"1..{cap}; give fewer values" + ("" if surrogate else " or use --surrogate"))
+    mesh = axes.get("mesh_size_mm")
+    per = fea_case_seconds(min(mesh) if isinstance(mesh, list) and mesh and all(
+        isinstance(m, float) for m in mesh) else None)
+    if surrogate:
+        warn_if_long(n * SECONDS["surrogate_case"] + (max(validate, 0) + 20) * per, "sweep",
+                     f"{n} surrogate cases x ~{SECONDS['surrogate_case']:g} s + ~20 training and {validate} "
+                     f"validation solves x ~{per:.1f} s")
+    else:
+        # the solver already uses both cores: more workers do not divide the time
+        warn_if_long(n * per, "sweep", f"{n} FEA cases x ~{per:.1f} s")
 
 
 def _cmd_calibrate(a) -> int:

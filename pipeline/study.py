@@ -266,6 +266,17 @@ def _figures(config: StudyConfig, maps: dict, results: list, out: Path) -> dict:
     return figs
 
 
+def _warn_if_long(config: StudyConfig) -> None:
+    """One stderr line before any work when the study is estimated to take over an hour."""
+    from pipeline.bounds import SECONDS, fea_case_seconds, warn_if_long
+
+    cases, n_prof = config.cases(), config.n_profile_jobs()
+    fea_s = [fea_case_seconds(c.full["mesh_size_mm"]) for c in cases]
+    warn_if_long(sum(fea_s) + n_prof * SECONDS["line_profile"], "run",
+                 f"{len(cases)} FEA cases x ~{max(fea_s):.1f} s + {n_prof} line profiles x "
+                 f"~{SECONDS['line_profile']:g} s")
+
+
 def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progress: bool = True,
               mesh_size_mm: float | None = None, mesh_bulk_mm: float | None = None) -> dict:
     """Run a study and write tables, profiles, figures and ``report.html`` into ``out_dir``.
@@ -301,6 +312,7 @@ def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progre
     config = config.with_mesh(mesh_size_mm, mesh_bulk_mm)
     out = Path(out_dir)
     _prepare_out(out)
+    _warn_if_long(config)
     t0 = time.perf_counter()
     cases, outputs, maps, rows, in_paper = _run_fea(config, out / "fea", progress)
     table = format_table(rows) if rows else ""
