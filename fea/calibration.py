@@ -19,6 +19,7 @@ and a slow test checks that a refit reproduces them.
 from __future__ import annotations
 
 import csv
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -97,6 +98,11 @@ def main(argv: list[str] | None = None) -> int:
 
     from fea.mesh import MeshSpec
 
+    out = Path(a.out) if a.out else None
+    if out is not None:  # an unusable --out fails now, not after the 15 solves
+        out.mkdir(parents=True, exist_ok=True)
+        if not out.is_dir() or not os.access(out, os.W_OK):
+            raise PermissionError(f"--out {str(out)!r} is not a writable directory")
     sizes = {k: v for k, v in (("size_mm", a.mesh_size_mm), ("size_bulk_mm", a.mesh_bulk_mm)) if v is not None}
     model = prepare(mesh=replace(MeshSpec(), **sizes))
     cases = paper_cases()
@@ -115,9 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     for c, e in zip(cases, allres):
         print(f"  {c.label:28s} {100 * e:+6.1f} %{'' if c.calibrate else '   (excluded)'}")
     print(f"calibrated rows: RMS {100 * np.sqrt(np.mean(res**2)):.2f} %, max |.| {100 * np.abs(res).max():.2f} %")
-    if a.out:
-        out = Path(a.out)
-        out.mkdir(parents=True, exist_ok=True)
+    if out is not None:
         with (out / "calibration.csv").open("w") as fh:
             fh.write("case,paper_pv_um,model_pv_scale1_um,calibrated_error,used\n")
             for c, m, e in zip(cases, pv, allres):

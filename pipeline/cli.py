@@ -109,7 +109,10 @@ def _check_sweep_size(axes: dict, surrogate: bool, validate: int) -> None:
 
 def _cmd_calibrate(a) -> int:
     from fea.calibration import main as calibrate
+    from pipeline.io_common import ensure_writable_dir
 
+    if a.out:
+        ensure_writable_dir(a.out, "--out")  # before the 15 solves, not after them
     return calibrate(["--out", str(a.out)] if a.out else [])
 
 
@@ -160,6 +163,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cryograting", description=(
         "Cryogenic deformation of lightweighted, NiP-plated grating blanks and its effect on "
         "spectral line profiles (SINFONI/SPIFFI)."))
+    p.add_argument("--debug", action="store_true", help="on an error, show the Python traceback instead of "
+                   "one line (also accepted after the command)")
     sub = p.add_subparsers(dest="command", required=True)
 
     q = sub.add_parser("run", help="a study (default: the paper's): FEA cases, sag maps, line profiles, "
@@ -236,13 +241,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    a = parser.parse_args(argv)
-    try:
-        return int(a.func(a) or 0)
-    except (ValueError, OSError) as exc:  # OSError: unwritable or full output, missing file
-        print(f"cryograting {a.command}: error: {exc}", file=sys.stderr)
-        return 2
+    """Run one subcommand; a user error is one line on stderr and exit code 2
+    (:mod:`pipeline.errors`), ``--debug`` anywhere shows the traceback instead."""
+    from pipeline.errors import pop_debug, run_command
+
+    argv, debug = pop_debug(argv)
+    a = build_parser().parse_args(argv)
+    return run_command(a.func, a, a.command, debug)
 
 
 if __name__ == "__main__":

@@ -137,10 +137,13 @@ def register(subparsers) -> None:
 
 def main(argv=None) -> int:
     """Stand-alone entry point for the two subcommands."""
+    from pipeline.errors import pop_debug, run_command
+
+    argv, debug = pop_debug(argv)
     parser = argparse.ArgumentParser(prog="cryograting")
     register(parser.add_subparsers(dest="command", required=True))
     a = parser.parse_args(argv)
-    try:
-        return a.func(a)
-    except (ValueError, OSError) as exc:  # OSError: unwritable or full output
-        parser.exit(2, f"cryograting {a.command}: error: {exc}\n")
+    code = run_command(a.func, a, a.command, debug)
+    if code:
+        raise SystemExit(code)
+    return 0

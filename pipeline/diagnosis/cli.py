@@ -119,15 +119,14 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    from pipeline.errors import pop_debug, run_command
+
+    argv, debug = pop_debug(argv)
     ap = argparse.ArgumentParser(prog="cryograting")
     sub = ap.add_subparsers(dest="command", required=True)
     register(sub)
     args = ap.parse_args(argv)
-    try:
-        return args.func(args)
-    except ValueError as exc:
-        print(f"cryograting diagnose: error: {exc}", file=sys.stderr)
-        return 2
+    return run_command(args.func, args, args.command, debug)
 
 
 if __name__ == "__main__":

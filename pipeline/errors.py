@@ -1,0 +1,95 @@
+"""One error path for every ``cryograting`` command.
+
+A mistake in what the user gave (a file, an option, data) ends a command with one line
+on stderr, ``cryograting <command>: error: <what was wrong>``, and exit code 2; an
+interrupt (Ctrl-C) with ``interrupted`` and 130. ``--debug`` (anywhere on the command
+line) shows the Python traceback instead. Anything else is a bug and keeps its traceback.
+
+The line names the file or option: an ``OSError`` by its file name, and an error whose
+text names none of the files the command was given gets them appended
+(``(inputs: --sag map.npz)``), so a decoding or numeric error deep in a reader still
+points at the file that caused it.
+"""
+
+from __future__ import annotations
+
+import sys
+import zipfile
+from pathlib import Path
+
+__all__ = ["USER_ERRORS", "describe", "pop_debug", "run_command"]
+
+#: What bad input raises: missing or unwritable files (OSError), wrong values and
+#: undecodable text (ValueError, UnicodeDecodeError), numbers out of range
+#: (OverflowError, ZeroDivisionError, FloatingPointError), empty or truncated files
+#: (EOFError, zipfile.BadZipFile), an optional dependency not installed (ImportError).
+USER_ERRORS = (OSError, ValueError, ArithmeticError, EOFError, zipfile.BadZipFile, ImportError)
+
+#: argparse destinations that name input files -> their spelling on the command line.
+INPUT_OPTIONS = {"sag": "--sag", "manifest": "MANIFEST", "config": "CONFIG.toml", "check": "--check",
+                 "result": "RESULT", "displacement_csv": "--displacement-csv"}
+#: ... and those that name output locations.
+OUTPUT_OPTIONS = {"out": "--out", "cache_dir": "--cache-dir"}
+
+
+def pop_debug(argv) -> tuple[list[str], bool]:
+    """``argv`` without ``--debug`` and whether it was there (accepted before or after the command)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    return [a for a in argv if a != "--debug"], "--debug" in argv
+
+
+def _paths(args, options: dict) -> list[tuple[str, str]]:
+    return [(options[k], str(v)) for k, v in sorted(vars(args).items()) if k in options and v]
+
+
+def describe(exc: BaseException, args=None) -> str:
+    """One line saying what was wrong, naming the file or the inputs of ``args``."""
+    if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+        files = " -> ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
+        return f"{files}: {exc.strerror}"
+    text = " ".join(str(exc).split())  # one line, whatever the library wrote
+    if isinstance(exc, UnicodeDecodeError):
+        text = (f"a file is not {exc.encoding.upper()} text (undecodable byte at offset {exc.start}); "
+                "save it as UTF-8")
+    elif isinstance(exc, ArithmeticError):
+        text = f"numeric {type(exc).__name__} ({text}): an input is outside the range the computation supports"
+    elif isinstance(exc, (EOFError, zipfile.BadZipFile)):
+        text = f"a file is empty, truncated or not what its name says ({type(exc).__name__}: {text})"
+    elif not text:
+        text = type(exc).__name__
+    if args is None:
+        return text
+    if isinstance(exc, OSError):  # e.g. a full disk: no file name in the error
+        given = _paths(args, {**INPUT_OPTIONS, **OUTPUT_OPTIONS})
+    elif isinstance(exc, (UnicodeDecodeError, ArithmeticError, EOFError, zipfile.BadZipFile)):
+        given = _paths(args, INPUT_OPTIONS)
+    else:  # ValueErrors of the toolkit name their parameter themselves
+        given = []
+    if given and not any(v in text for _, v in given):  # the library could not know the file
+        text += " (files given: " + ", ".join(f"{o} {v}" if o.startswith("--") else v for o, v in given) + ")"
+    return text
+
+
+def run_command(func, args, command: str, debug: bool = False) -> int:
+    """Run ``func(args)``; a user error becomes one stderr line and exit code 2.
+
+    Under ``debug`` the exception propagates (Python prints the traceback)."""
+    from pipeline.sweep import SweepError
+
+    try:
+        return int(func(args) or 0)
+    except KeyboardInterrupt:
+        if debug:
+            raise
+        print(f"cryograting {command}: interrupted", file=sys.stderr)
+        return 130
+    except SweepError as exc:  # a summary of the failed cases (one line each), not a traceback
+        if debug:
+            raise
+        print(f"cryograting {command}: error: {exc}", file=sys.stderr)
+        return 2
+    except USER_ERRORS as exc:
+        if debug:
+            raise
+        print(f"cryograting {command}: error: {describe(exc, args)}", file=sys.stderr)
+        return 2
