@@ -243,11 +243,12 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Run one subcommand; a user error is one line on stderr and exit code 2
     (:mod:`pipeline.errors`), ``--debug`` anywhere shows the traceback instead."""
-    from pipeline.errors import pop_debug, run_command
+    from pipeline.errors import command_options, pop_debug, run_command
 
     argv, debug = pop_debug(argv)
-    a = build_parser().parse_args(argv)
-    return run_command(a.func, a, a.command, debug)
+    parser = build_parser()
+    a = parser.parse_args(argv)
+    return run_command(a.func, a, a.command, debug, command_options(parser, a.command))
 
 
 if __name__ == "__main__":

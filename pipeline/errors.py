@@ -13,11 +13,12 @@ points at the file that caused it.
 
 from __future__ import annotations
 
+import re
 import sys
 import zipfile
 from pathlib import Path
 
-__all__ = ["USER_ERRORS", "describe", "pop_debug", "run_command"]
+__all__ = ["USER_ERRORS", "command_options", "describe", "pop_debug", "run_command"]
 
 #: What bad input raises: missing or unwritable files (OSError), wrong values and
 #: undecodable text (ValueError, UnicodeDecodeError), numbers out of range
@@ -38,12 +39,34 @@ def pop_debug(argv) -> tuple[list[str], bool]:
     return [a for a in argv if a != "--debug"], "--debug" in argv
 
 
+def command_options(parser, command: str) -> dict[str, str]:
+    """``dest -> --option`` of the long options of ``parser``'s subcommand ``command``."""
+    sub = next((a.choices[command] for a in parser._actions  # argparse keeps its actions here
+                if isinstance(getattr(a, "choices", None), dict) and command in a.choices), None)
+    if sub is None:
+        return {}
+    return {a.dest: a.option_strings[-1] for a in sub._actions
+            if a.option_strings and a.option_strings[-1].startswith("--") and a.dest != "help"}
+
+
+def cli_spelling(text: str, options: dict[str, str]) -> str:
+    """``text`` with the API names of the command's options in their command-line spelling:
+    ``window_um=0.0`` -> ``--window-um 0.0``, ``window_um`` -> ``--window-um``. A dotted or
+    prefixed name (``LsfSettings.window_um``, ``fea.t0_um``) is another thing and stays."""
+    for dest, opt in options.items():
+        text = re.sub(rf"(?<![\w.\-]){re.escape(dest)}=", f"{opt} ", text)
+        if "_" in dest:  # identifiers only: 'profiles' or 'seed' are also English words
+            text = re.sub(rf"(?<![\w.\-]){re.escape(dest)}(?![\w=])", opt, text)
+    return text
+
+
 def _paths(args, options: dict) -> list[tuple[str, str]]:
     return [(options[k], str(v)) for k, v in sorted(vars(args).items()) if k in options and v]
 
 
-def describe(exc: BaseException, args=None) -> str:
-    """One line saying what was wrong, naming the file or the inputs of ``args``."""
+def describe(exc: BaseException, args=None, options: dict[str, str] | None = None) -> str:
+    """One line saying what was wrong, naming the file or the inputs of ``args``; the
+    command's ``options`` (:func:`command_options`) are named as on the command line."""
     if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
         files = " -> ".join(str(f) for f in (exc.filename, exc.filename2) if f is not None)
         return f"{files}: {exc.strerror}"
@@ -57,6 +80,7 @@ def describe(exc: BaseException, args=None) -> str:
         text = f"a file is empty, truncated or not what its name says ({type(exc).__name__}: {text})"
     elif not text:
         text = type(exc).__name__
+    text = cli_spelling(text, options or {})
     if args is None:
         return text
     if isinstance(exc, OSError):  # e.g. a full disk: no file name in the error
@@ -70,7 +94,7 @@ def describe(exc: BaseException, args=None) -> str:
     return text
 
 
-def run_command(func, args, command: str, debug: bool = False) -> int:
+def run_command(func, args, command: str, debug: bool = False, options: dict[str, str] | None = None) -> int:
     """Run ``func(args)``; a user error becomes one stderr line and exit code 2.
 
     Under ``debug`` the exception propagates (Python prints the traceback)."""
@@ -91,5 +115,5 @@ def run_command(func, args, command: str, debug: bool = False) -> int:
     except USER_ERRORS as exc:
         if debug:
             raise
-        print(f"cryograting {command}: error: {describe(exc, args)}", file=sys.stderr)
+        print(f"cryograting {command}: error: {describe(exc, args, options)}", file=sys.stderr)
         return 2

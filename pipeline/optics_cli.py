@@ -137,13 +137,13 @@ def register(subparsers) -> None:
 
 def main(argv=None) -> int:
     """Stand-alone entry point for the two subcommands."""
-    from pipeline.errors import pop_debug, run_command
+    from pipeline.errors import command_options, pop_debug, run_command
 
     argv, debug = pop_debug(argv)
     parser = argparse.ArgumentParser(prog="cryograting")
     register(parser.add_subparsers(dest="command", required=True))
     a = parser.parse_args(argv)
-    code = run_command(a.func, a, a.command, debug)
+    code = run_command(a.func, a, a.command, debug, command_options(parser, a.command))
     if code:
         raise SystemExit(code)
     return 0

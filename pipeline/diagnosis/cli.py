@@ -119,14 +119,14 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    from pipeline.errors import pop_debug, run_command
+    from pipeline.errors import command_options, pop_debug, run_command
 
     argv, debug = pop_debug(argv)
     ap = argparse.ArgumentParser(prog="cryograting")
     sub = ap.add_subparsers(dest="command", required=True)
     register(sub)
     args = ap.parse_args(argv)
-    return run_command(args.func, args, args.command, debug)
+    return run_command(args.func, args, args.command, debug, command_options(ap, args.command))
 
 
 if __name__ == "__main__":
