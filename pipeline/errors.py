@@ -55,8 +55,8 @@ def cli_spelling(text: str, options: dict[str, str]) -> str:
     prefixed name (``LsfSettings.window_um``, ``fea.t0_um``) is another thing and stays."""
     for dest, opt in options.items():
         text = re.sub(rf"(?<![\w.\-]){re.escape(dest)}=", f"{opt} ", text)
-        if "_" in dest:  # identifiers only: 'profiles' or 'seed' are also English words
-            text = re.sub(rf"(?<![\w.\-]){re.escape(dest)}(?![\w=])", opt, text)
+        if "_" in dest:  # identifiers only ('profiles' is also a word), not quoted names (a list of keys)
+            text = re.sub(rf"(?<![\w.\-'\"]){re.escape(dest)}(?![\w='\"])", opt, text)
     return text
 
 
