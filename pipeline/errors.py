@@ -89,7 +89,8 @@ def describe(exc: BaseException, args=None, options: dict[str, str] | None = Non
         given = _paths(args, INPUT_OPTIONS)
     else:  # ValueErrors of the toolkit name their parameter themselves
         given = []
-    if given and not any(v in text for _, v in given):  # the library could not know the file
+    mentioned = any(re.search(rf"(?<![\w./-]){re.escape(v)}(?![\w/-])", text) for _, v in given)
+    if given and not mentioned:  # the library could not know the file
         text += " (files given: " + ", ".join(f"{o} {v}" if o.startswith("--") else v for o, v in given) + ")"
     return text
 

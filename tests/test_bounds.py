@@ -1,0 +1,403 @@
+"""Bounded work, one error path for every command, and paths that mean what the caller meant.
+
+Every bad input is generated here (TOML text, value lists, garbage files, a manifest that
+points out of its directory). The caps and ranges expected are the stated ones of
+pipeline/bounds.py and pipeline/diagnosis/manifest.py; work that must not start is
+replaced by a stub that fails the test if it is called.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import pipeline.config as config_module
+from pipeline.bounds import (LONG_RUN_S, MAX_CAMPAIGN_CASES, MAX_FEA_CASES, MAX_PROFILE_JOBS, SECONDS,
+                             campaign_seconds, warn_if_long)
+from pipeline.cli import main
+from pipeline.config import ConfigError, FEAGroup, StudyConfig, loads_study_config
+from pipeline.diagnosis.campaign import CampaignConfig
+from pipeline.diagnosis.manifest import load_manifest, parse_manifest
+from pipeline.errors import cli_spelling, describe, run_command
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _never(*a, **k):
+    raise AssertionError("work started although the input should have been refused first")
+
+
+def _one_error_line(capsys, needle):
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    assert needle in err[0], err[0]
+    return err[0]
+
+
+# ------------------------------------------------------------------ bounded work
+def test_study_case_cap_refused_before_any_case_is_validated(monkeypatch):
+    monkeypatch.setattr(config_module, "_check_case", _never)
+    text = "[fea]\nt0_um = {start = 0.1, stop = 2000, num = %d}\n" % (MAX_FEA_CASES + 1)
+    with pytest.raises(ConfigError, match=rf"fea: {MAX_FEA_CASES + 1} FEA cases is outside the valid range "
+                                          rf"1\.\.{MAX_FEA_CASES}"):
+        loads_study_config(text)
+
+
+def test_case_cap_counts_every_table_of_the_study(monkeypatch):
+    monkeypatch.setattr(config_module, "MAX_FEA_CASES", 5)
+    text = ("[fea]\nmesh_size_mm = 5\nmesh_bulk_mm = 5\n[[fea.cases]]\nt0_um = [100, 150, 200]\n"
+            "[[fea.cases]]\nname = 'b'\nt0_um = [120, 170, 220]\n")
+    with pytest.raises(ConfigError, match=r"fea\.cases\[1\]: 6 FEA cases up to this table .* 1\.\.5"):
+        loads_study_config(text)
+    groups = [FEAGroup(f"g{i}", {"t0_um": [100 + i, 200 + i], "mesh_size_mm": 5, "mesh_bulk_mm": 5})
+              for i in range(3)]
+    with pytest.raises(ConfigError, match=r"fea: 6 FEA cases in the study is outside the valid range 1\.\.5"):
+        StudyConfig(fea=groups)
+
+
+def test_profile_cap_refused_before_the_grating_equation_runs():
+    n = MAX_PROFILE_JOBS + 1
+    text = f"[[profiles]]\ngrating = 'J'\npixel_scale_mas = 25\nwavelength_um = '1.1:1.4:{n}n'\n"
+    with pytest.raises(ConfigError, match=rf"profiles\[0\]: {n} line profiles in one \[\[profiles\]\] table "
+                                          rf"is outside the valid range 1\.\.{MAX_PROFILE_JOBS}"):
+        loads_study_config(text)
+
+
+def test_profile_cap_counts_the_whole_study(monkeypatch):
+    monkeypatch.setattr(config_module, "MAX_PROFILE_JOBS", 10)
+    # 2 tables x 3 pixel scales x (perfect + 1 case) = 12 profiles
+    table = "[[profiles]]\ngrating = 'J'\ndeformation = ['perfect', {t0_um = 200}]\n"
+    text = "[fea]\nmesh_size_mm = 5\nmesh_bulk_mm = 5\n" + table + table.replace("'J'", "'K'")
+    with pytest.raises(ConfigError, match=r"profiles: 12 line profiles in the study .* 1\.\.10"):
+        loads_study_config(text)
+
+
+def _selector_study(n):
+    vals = [round(100 + 0.5 * i, 1) for i in range(n)]
+    sels = ", ".join(f"{{t0_um = {v}}}" for v in vals)
+    return (f"[fea]\nt0_um = {vals}\nmesh_size_mm = 5\nmesh_bulk_mm = 5\n"
+            f"[[profiles]]\ngrating = 'J'\npixel_scale_mas = 25\ndeformation = ['perfect', {sels}]\n")
+
+
+def test_config_check_is_linear_in_the_number_of_cases(monkeypatch):
+    """A selector per case: value lookups grow as the cases (a scan per selector grew as n^2)."""
+    calls = {"n": 0}
+    token = config_module._token
+
+    def counting(v):
+        calls["n"] += 1
+        return token(v)
+
+    monkeypatch.setattr(config_module, "_token", counting)
+    counts = []
+    for n in (150, 300):
+        calls["n"] = 0
+        cfg = loads_study_config(_selector_study(n))
+        assert cfg.n_profile_jobs() == len(cfg.profile_jobs()) == n + 1
+        counts.append(calls["n"])
+    assert counts[1] / counts[0] < 2.5, counts  # quadratic would be ~4
+    # the index finds exactly what CaseSelector.matches finds
+    cfg = loads_study_config(_selector_study(20) + "[[fea.cases]]\nname = 'a'\n[[fea.cases]]\nname = 'hot'\n"
+                             "cold_K = 120\n")
+    for sel in [{"t0_um": 100.5}, {"group": "hot"}, {"group": "hot", "t0_um": 101.0}, {"cold_K": 80}]:
+        s = config_module.CaseSelector(sel)
+        assert cfg.select(s) == [c for c in cfg.cases() if s.matches(c)]
+
+
+def test_sweep_past_its_cap_is_refused_before_anything_is_written(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("pipeline.fea_cases.run_fea_sweep", _never)
+    out = tmp_path / "sweep"
+    assert main(["sweep", "--param", "t0_um=1:2000:0.1", "--out", str(out), "--quiet"]) == 2
+    _one_error_line(capsys, f"19991 sweep cases (the product of the value lists given) is outside the valid "
+                            f"range 1..{MAX_FEA_CASES}")
+    assert not out.exists()
+
+
+def test_fea_sweep_api_cap():
+    from pipeline.fea_cases import run_fea_sweep
+
+    with pytest.raises(ValueError, match=rf"cases=20000 is outside the valid range 1\.\.{MAX_FEA_CASES}"):
+        run_fea_sweep({"t0_um": list(np.linspace(1, 2000, 200)), "polish": list(np.linspace(0.01, 1, 100))},
+                      "unused")
+
+
+@pytest.mark.parametrize("n", [0, -1, MAX_CAMPAIGN_CASES + 1])
+def test_campaign_size_outside_its_range_is_refused(n, tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", _never)
+    with pytest.raises(ValueError, match=rf"n_cases={n} must be an integer in the valid range 1\.\.{MAX_CAMPAIGN_CASES}"):
+        CampaignConfig(n_cases=n)
+    assert main(["diagnose", "--validate", "--cases", str(n), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, f"--cases {n} is outside the valid range 1..{MAX_CAMPAIGN_CASES}")
+    with pytest.raises(ValueError, match="workers=0 must be an integer >= 1"):
+        CampaignConfig(workers=0)
+
+
+def test_long_run_warning_is_one_line_and_only_past_an_hour(capsys):
+    assert not warn_if_long(LONG_RUN_S, "x", "d")
+    assert capsys.readouterr().err == ""
+    assert warn_if_long(2 * 86400 + 1, "sweep", "50000 FEA cases x ~3.5 s")
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "cryograting sweep: warning: estimated run time 2.0 days (50000 FEA cases" in err[0]
+    # a campaign case is one core's work; two workers halve the wall time, more do not (2 cores)
+    assert campaign_seconds(100, 2, False, False) == pytest.approx(100 * SECONDS["campaign_profiles"] / 2)
+    assert campaign_seconds(100, 8, True, True) == campaign_seconds(100, 2, True, True)
+
+
+def _stop(*a, **k):
+    raise ValueError("stub: stopped after the estimate")
+
+
+def test_sweep_run_and_campaign_warn_up_front(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("pipeline.fea_cases.run_fea_sweep", _stop)
+    n = int(LONG_RUN_S / SECONDS["fea_case"]) + 50  # just past an hour of default-mesh cases
+    assert main(["sweep", "--param", f"t0_um=1:2000:{n}n", "--out", str(tmp_path / "s"), "--quiet"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2 and "warning: estimated run time" in err[0] and f"{n} FEA cases" in err[0]
+    assert "stub" in err[1]
+    assert main(["sweep", "--t0-um", "100", "200", "--out", str(tmp_path / "s"), "--quiet"]) == 2
+    assert "warning" not in capsys.readouterr().err  # two cases: seconds
+
+    monkeypatch.setattr("pipeline.study._run_fea", _stop)
+    cfg = tmp_path / "big.toml"
+    cfg.write_text(f"[fea]\nt0_um = {{start = 1, stop = 2000, num = {n}}}\n")
+    assert main(["run", str(cfg), "--out", str(tmp_path / "r"), "--quiet"]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2 and "cryograting run: warning: estimated run time" in err[0] and "stub" in err[1]
+
+    monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", _stop)
+    cases = int(2 * LONG_RUN_S / SECONDS["campaign_profiles"]) + 10
+    assert main(["diagnose", "--validate", "--cases", str(cases), "--workers", "2", "--out", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2 and "cryograting diagnose: warning" in err[0] and f"{cases} campaign cases" in err[0]
+
+
+# ------------------------------------------------------------------ one error path
+@pytest.mark.parametrize("exc, needle", [
+    (OSError(28, "No space left on device", "/full/disk/psf.npz"), "/full/disk/psf.npz: No space left on device"),
+    (PermissionError(13, "Permission denied", "out/x"), "out/x: Permission denied"),
+    (OSError(28, "No space left on device"), "(files given: --out o, --sag in.npz)"),
+    (UnicodeDecodeError("utf-8", b"\xff", 0, 1, "invalid start byte"),
+     "not UTF-8 text (undecodable byte at offset 0); save it as UTF-8 (files given: --sag in.npz)"),
+    (OverflowError("(34, 'Numerical result out of range')"), "numeric OverflowError"),
+    (ZeroDivisionError("float division by zero"), "numeric ZeroDivisionError"),
+    (FloatingPointError("overflow encountered in square"), "numeric FloatingPointError"),
+    (EOFError("No data left in file"), "empty, truncated or not what its name says (EOFError"),
+    (zipfile.BadZipFile("File is not a zip file"), "(BadZipFile: File is not a zip file) (files given: --sag in.npz)"),
+    (ValueError("line one\n  line two"), "error: line one line two"),
+    (ImportError("scheduler='local' needs Dask"), "needs Dask"),
+])
+def test_every_user_error_is_one_line_and_exit_2(exc, needle, capsys):
+    from types import SimpleNamespace
+
+    def fail(a):
+        raise exc
+
+    args = SimpleNamespace(sag="in.npz", out="o", quiet=False)
+    assert run_command(fail, args, "psf") == 2
+    _one_error_line(capsys, needle)
+    with pytest.raises(type(exc)):  # --debug: the exception and its traceback
+        run_command(fail, args, "psf", debug=True)
+
+
+def test_interrupt_is_one_line_and_exit_130(capsys):
+    def interrupted(a):
+        raise KeyboardInterrupt
+
+    assert run_command(interrupted, None, "run") == 130
+    _one_error_line(capsys, "cryograting run: interrupted")
+
+
+def test_a_bug_keeps_its_traceback():
+    def bug(a):
+        raise KeyError("a programming error, not bad input")
+
+    with pytest.raises(KeyError):
+        run_command(bug, None, "run")
+
+
+def test_debug_flag_before_or_after_the_command_shows_the_traceback(tmp_path):
+    args = ["psf", "--grating", "J", "--wavelength-um", "1.25", "--quilt-pv-um", "0", "--detector-step-um", "0",
+            "--out", str(tmp_path / "o")]
+    for argv in (["--debug", *args], [*args, "--debug"]):
+        with pytest.raises(ValueError, match="detector_step_um=0.0 must be"):
+            main(argv)
+
+
+def test_option_names_in_messages_are_the_commands_spelling():
+    opts = {"window_um": "--window-um", "detector_step_um": "--detector-step-um", "out": "--out",
+            "profiles": "--profiles"}
+    assert cli_spelling("window_um=0.0 must be > 0; change detector_step_um or window_um", opts) == \
+        "--window-um 0.0 must be > 0; change --detector-step-um or --window-um"
+    for kept in ("LsfSettings.window_um=1 too small", "timeout=3", "fea.window_um = 3", "valid: ['window_um']",
+                 "line profiles differ"):
+        assert cli_spelling(kept, opts) == kept
+
+
+def _foreign_int(path):
+    """A CODE V INT with no grid size (no EXTENT_MM in its title), as a metrology tool writes it."""
+    path.write_text("interferogram\nGRD 4 4 SUR WVL 0.6328 SSZ 1000 NDA -32768\n"
+                    "0 1 2 3\n1 2 3 4\n2 3 4 5\n3 4 5 6\n")
+    return path
+
+
+@pytest.mark.parametrize("command", ["lsf", "psf"])
+def test_int_without_grid_names_what_the_command_can_do(command, tmp_path, capsys):
+    f = _foreign_int(tmp_path / "tool.int")
+    argv = [command, "--grating", "J", "--wavelength-um", "1.25", "--sag", str(f), "--out", str(tmp_path / "o")]
+    argv += ["--pixel-scale-mas", "25"] if command == "lsf" else []
+    assert main(argv) == 2
+    line = _one_error_line(capsys, "add EXTENT_MM x0 x1 y0 y1")
+    assert "spacing_mm" not in line and "extent_mm" not in line  # options that lsf/psf do not have
+
+
+@pytest.mark.parametrize("name, content", [("empty.npz", b""), ("zip.npz", b"PK\x03\x04garbage"),
+                                           ("noise.nc", bytes(range(256)) * 2), ("u16.csv", "x,y\n1,2\n".encode("utf-16"))])
+def test_garbage_sag_files_fail_in_one_line_naming_the_file(name, content, tmp_path, capsys):
+    f = tmp_path / name
+    f.write_bytes(content)
+    assert main(["psf", "--grating", "J", "--wavelength-um", "1.25", "--sag", str(f), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, name)
+
+
+def test_garbage_fe_result_fails_in_one_line(tmp_path, capsys):
+    f = tmp_path / "result.vtu"
+    f.write_bytes(bytes(range(256)))
+    assert main(["import-fe", str(f), "--surface", "+z", "--out", str(tmp_path / "o.npz")]) == 2
+    out = capsys.readouterr()
+    err = out.err.strip().splitlines()
+    assert len(err) == 1 and "result.vtu" in err[0] and out.out == ""  # meshio's own complaint folded in
+
+
+@pytest.mark.parametrize("text", [b"\xff\xfe[\x00f\x00e\x00a\x00]\x00", bytes(range(128, 256))])
+def test_undecodable_config_fails_in_one_line(text, tmp_path, capsys):
+    f = tmp_path / "study.toml"
+    f.write_bytes(text)
+    assert main(["config", "--check", str(f)]) == 2
+    _one_error_line(capsys, "study.toml")
+
+
+def test_calibrate_checks_its_output_before_solving(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("fea.api.prepare", _never)
+    taken = tmp_path / "taken"
+    taken.write_text("a file where the output directory should go")
+    for out in (taken, taken / "sub"):
+        assert main(["calibrate", "--out", str(out)]) == 2
+        _one_error_line(capsys, f"--out '{out}'")
+
+
+def _profile_manifest(dirpath, file_field="p.csv", extra=""):
+    dirpath.mkdir(parents=True, exist_ok=True)
+    x = np.arange(-60.0, 60.01, 1.0)
+    np.savetxt(dirpath / "p.csv", np.column_stack([x, np.exp(-0.5 * (x / 10) ** 2)]), delimiter=",",
+               header="offset_um,intensity", comments="")
+    m = dirpath / "m.toml"
+    m.write_text(f"[[measurement]]\nkind = 'line_profile'\nfile = '{file_field}'\ngrating = 'J'\n"
+                 f"wavelength_um = 1.25\npixel_scale_mas = 250\n{extra}")
+    return m
+
+
+def test_diagnose_checks_its_output_before_any_work(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("pipeline.diagnosis.engine.diagnose", _never)
+    monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", _never)
+    m = _profile_manifest(tmp_path / "data")
+    taken = tmp_path / "taken"
+    taken.write_text("x")
+    assert main(["diagnose", str(m), "--out", str(taken)]) == 2
+    _one_error_line(capsys, "--out")
+    assert main(["diagnose", "--validate", "--cases", "2", "--out", str(taken)]) == 2
+    _one_error_line(capsys, "--out")
+
+
+@pytest.mark.parametrize("field, value, valid", [("noise_rel", "1e-300", "[1e-06, 1]"), ("noise_rel", "2.0", "[1e-06, 1]"),
+                                                 ("noise_rel", "-0.01", "[1e-06, 1]")])
+def test_noise_outside_its_range_is_refused_with_the_range(field, value, valid, tmp_path, capsys):
+    m = _profile_manifest(tmp_path / "data", extra=f"{field} = {value}\n")
+    with pytest.raises(ValueError, match=rf"{field}={float(value)!r} is outside the valid range {re.escape(valid)}"):
+        load_manifest(m)
+    assert main(["diagnose", str(m), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, f"{field}={float(value)!r} is outside the valid range")
+
+
+def test_noise_um_range(tmp_path):
+    f = tmp_path / "map.npz"
+    f.write_bytes(b"")
+    entry = {"kind": "surface", "file": "map.npz", "temperature_K": 128}
+    with pytest.raises(ValueError, match=r"noise_um=1e-300 is outside the valid range \[1e-06, 10\] µm"):
+        parse_manifest({"measurement": [{**entry, "noise_um": 1e-300}]}, tmp_path)
+
+
+def test_unreachable_dask_scheduler_is_one_line(tmp_path):
+    pytest.importorskip("distributed")
+    from pipeline.sweep import run_sweep
+
+    with pytest.raises(ConnectionError) as e:
+        run_sweep(abs, [{"x": 1.0}], tmp_path / "s", namespace="t", scheduler="tcp://127.0.0.1:9",
+                  connect_timeout_s=0.5, progress=False)
+    line = describe(e.value)
+    assert "\n" not in line and "cannot reach Dask scheduler at 'tcp://127.0.0.1:9'" in line
+    assert "scheduler=None" not in line  # an API argument the sweep command does not have
+
+
+# ------------------------------------------------------------------ paths
+
+@pytest.mark.parametrize("where", ["../outside.csv", "ABSOLUTE", "link.csv"])
+def test_manifest_paths_leaving_its_directory_need_the_flag(where, tmp_path, capsys):
+    outside = tmp_path / "outside.csv"
+    m = _profile_manifest(tmp_path / "data")
+    outside.write_text((tmp_path / "data" / "p.csv").read_text())
+    if where == "link.csv":
+        (tmp_path / "data" / "link.csv").symlink_to(outside)
+    field = str(outside) if where == "ABSOLUTE" else where
+    m.write_text(m.read_text().replace("file = 'p.csv'", f"file = '{field}'"))
+    with pytest.raises(ValueError, match=r"leaves the manifest's directory .*--allow-outside-paths "
+                                         r"\(API: allow_outside=True\)"):
+        load_manifest(m)
+    assert load_manifest(m, allow_outside=True).measurements[0].file.resolve() == outside.resolve()
+    assert main(["diagnose", str(m), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "--allow-outside-paths")
+
+
+def test_manifest_paths_inside_its_directory_resolve_against_it(tmp_path, monkeypatch):
+    m = _profile_manifest(tmp_path / "data")
+    sub = tmp_path / "data" / "profiles"
+    sub.mkdir()
+    (tmp_path / "data" / "p.csv").rename(sub / "p.csv")
+    m.write_text(m.read_text().replace("file = 'p.csv'", "file = 'profiles/../profiles/p.csv'"))
+    monkeypatch.chdir(tmp_path)  # the working directory plays no part
+    assert load_manifest(Path("data/m.toml")).measurements[0].file.resolve() == (sub / "p.csv").resolve()
+    nominal = tmp_path / "nominal.npz"
+    nominal.write_bytes(b"")
+    m.write_text(f"[simulation]\nsag_file = '{nominal}'\n" + m.read_text())
+    with pytest.raises(ValueError, match=r"\[simulation\] sag_file=.* leaves the manifest's directory"):
+        load_manifest(m)
+
+
+def test_render_child_works_in_the_callers_directory(tmp_path, monkeypatch):
+    """The child starts in the caller's directory with the output as an absolute path; a
+    'pipeline' package there does not shadow the toolkit's."""
+    from pipeline.render3d import StudyRender
+
+    decoy = tmp_path / "pipeline"
+    decoy.mkdir()
+    (decoy / "__init__.py").write_text("raise ImportError('decoy package imported')\n")
+    monkeypatch.chdir(tmp_path)
+    seen = {}
+    real_popen = subprocess.Popen
+
+    def spy(cmd, **kw):
+        seen.update(cmd=cmd, cwd=kw.get("cwd"))
+        return real_popen(cmd, **kw)
+
+    monkeypatch.setattr(subprocess, "Popen", spy)
+    render = StudyRender(Path("rel_out"), {}, timeout_s=120, progress=False)
+    res = render.result()
+    assert res["error"] is None, res["error"]
+    assert Path(seen["cwd"]) == tmp_path
+    study = Path(seen["cmd"][seen["cmd"].index("--study") + 1])
+    assert study.is_absolute() and study == tmp_path / "rel_out"
+    assert not (REPO / "rel_out").exists()
