@@ -22,9 +22,21 @@ def _values(text: str) -> list:
         return [t.strip() for t in text.split(",") if t.strip()]
 
 
+def _check_mesh_options(a) -> None:
+    """Element sizes given on the command line, checked before any case is queued."""
+    import math
+
+    for opt, v in (("--mesh-size-mm", a.mesh_size_mm), ("--mesh-bulk-mm", a.mesh_bulk_mm)):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{opt} {v} must be a finite number > 0 (mm)")
+    if a.mesh_size_mm is not None and a.mesh_bulk_mm is not None and a.mesh_bulk_mm < a.mesh_size_mm:
+        raise ValueError(f"--mesh-bulk-mm {a.mesh_bulk_mm} must be >= --mesh-size-mm {a.mesh_size_mm}")
+
+
 def _cmd_tables(a) -> int:
     from pipeline.fea_cases import format_table, run_tables
 
+    _check_mesh_options(a)
     rows = run_tables(a.out, progress=not a.quiet, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm)
     print(format_table(rows))
     print(f"\nwritten: {Path(a.out) / 'tables.csv'}, {Path(a.out) / 'sweep.nc'}, {Path(a.out) / 'figure_summary.csv'}")
@@ -135,6 +147,7 @@ def _study_config(config: str | None, preset: str | None, overrides=None):
 def _cmd_run(a) -> int:
     from pipeline.study import run_study
 
+    _check_mesh_options(a)
     config = _study_config(a.config, a.preset, a.set)  # validated before anything is written
     run_study(a.out, config, progress=not a.quiet, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm)
     return 0
@@ -248,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
     argv, debug = pop_debug(argv)
     parser = build_parser()
     a = parser.parse_args(argv)
-    return run_command(a.func, a, a.command, debug, command_options(parser, a.command))
+    return run_command(a.func, a, a.command, debug, command_options(parser, a.command, a))
 
 
 if __name__ == "__main__":

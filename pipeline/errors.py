@@ -39,14 +39,23 @@ def pop_debug(argv) -> tuple[list[str], bool]:
     return [a for a in argv if a != "--debug"], "--debug" in argv
 
 
-def command_options(parser, command: str) -> dict[str, str]:
-    """``dest -> --option`` of the long options of ``parser``'s subcommand ``command``."""
+#: Destinations of a study config source: a command with one also knows config keys named
+#: like its options (``mesh_size_mm``), so only the options the user gave are re-spelled.
+CONFIG_SOURCES = ("config", "check", "preset", "set")
+
+
+def command_options(parser, command: str, args=None) -> dict[str, str]:
+    """``dest -> --option`` of the long options of ``parser``'s subcommand ``command``
+    (with ``args`` of a command that reads a study config: only the options given)."""
     sub = next((a.choices[command] for a in parser._actions  # argparse keeps its actions here
                 if isinstance(getattr(a, "choices", None), dict) and command in a.choices), None)
     if sub is None:
         return {}
-    return {a.dest: a.option_strings[-1] for a in sub._actions
+    opts = {a.dest: a.option_strings[-1] for a in sub._actions
             if a.option_strings and a.option_strings[-1].startswith("--") and a.dest != "help"}
+    if args is not None and any(d in vars(args) for d in CONFIG_SOURCES):
+        opts = {d: o for d, o in opts.items() if getattr(args, d, None) != sub.get_default(d)}
+    return opts
 
 
 def cli_spelling(text: str, options: dict[str, str]) -> str:

@@ -143,7 +143,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="cryograting")
     register(parser.add_subparsers(dest="command", required=True))
     a = parser.parse_args(argv)
-    code = run_command(a.func, a, a.command, debug, command_options(parser, a.command))
+    code = run_command(a.func, a, a.command, debug, command_options(parser, a.command, a))
     if code:
         raise SystemExit(code)
     return 0

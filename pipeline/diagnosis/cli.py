@@ -126,7 +126,7 @@ def main(argv=None) -> int:
     sub = ap.add_subparsers(dest="command", required=True)
     register(sub)
     args = ap.parse_args(argv)
-    return run_command(args.func, args, args.command, debug, command_options(ap, args.command))
+    return run_command(args.func, args, args.command, debug, command_options(ap, args.command, args))
 
 
 if __name__ == "__main__":
