@@ -20,6 +20,7 @@ import sys
 __all__ = [
     "MAX_CAMPAIGN_CASES",
     "MAX_FEA_CASES",
+    "MAX_MEASUREMENTS",
     "MAX_PROFILE_JOBS",
     "MAX_SURROGATE_CASES",
     "LONG_RUN_S",
@@ -40,6 +41,9 @@ MAX_PROFILE_JOBS = 100_000
 MAX_SURROGATE_CASES = 100_000
 #: Cases of an injection-recovery campaign (``diagnose --validate --cases``): 8-24 s each.
 MAX_CAMPAIGN_CASES = 10_000
+#: Measurements in one diagnosis manifest (each a file read and fitted; the paper's data: 4 maps
+#: and a few dozen line profiles).
+MAX_MEASUREMENTS = 1_000
 #: A run estimated longer than this (s) says so before it starts.
 LONG_RUN_S = 3600.0
 

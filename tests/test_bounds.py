@@ -401,3 +401,32 @@ def test_render_child_works_in_the_callers_directory(tmp_path, monkeypatch):
     study = Path(seen["cmd"][seen["cmd"].index("--study") + 1])
     assert study.is_absolute() and study == tmp_path / "rel_out"
     assert not (REPO / "rel_out").exists()
+
+
+def test_manifest_measurement_count_is_capped_before_any_file_is_read(tmp_path):
+    from pipeline.bounds import MAX_MEASUREMENTS
+
+    entries = [{"kind": "line_profile", "file": f"p{i}.csv"} for i in range(MAX_MEASUREMENTS + 1)]
+    with pytest.raises(ValueError, match=rf"{MAX_MEASUREMENTS + 1} \[\[measurement\]\] entries, outside the valid "
+                                         rf"range 1\.\.{MAX_MEASUREMENTS}"):
+        parse_manifest({"measurement": entries}, tmp_path)
+
+
+def test_element_sizes_are_checked_before_any_case(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("pipeline.fea_cases.run_tables", _never)
+    monkeypatch.setattr("pipeline.study.run_study", _never)
+    for argv, needle in ((["tables", "--mesh-size-mm", "0"], "--mesh-size-mm 0.0 must be a finite number > 0"),
+                         (["run", "--mesh-size-mm", "nan"], "--mesh-size-mm nan must be"),
+                         (["tables", "--mesh-size-mm", "3", "--mesh-bulk-mm", "2"], "--mesh-bulk-mm 2.0 must be >=")):
+        assert main([*argv, "--out", str(tmp_path / "o")]) == 2
+        _one_error_line(capsys, needle)
+
+
+def test_a_config_key_is_not_renamed_to_an_option_the_user_did_not_give(tmp_path, capsys):
+    cfg = tmp_path / "s.toml"
+    cfg.write_text("[fea]\nmesh_size_mm = -1\n")
+    assert main(["config", "--check", str(cfg)]) == 2
+    line = _one_error_line(capsys, "fea.mesh_size_mm")
+    assert "--mesh-size-mm" not in line  # it came from the file, not from an option
+    assert main(["run", str(cfg), "--out", str(tmp_path / "o")]) == 2
+    assert "--mesh-size-mm" not in _one_error_line(capsys, "mesh_size_mm")

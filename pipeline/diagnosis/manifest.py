@@ -358,6 +358,11 @@ def parse_manifest(data: dict, base_dir: str | Path | None = None, source: str =
     entries = data.get("measurement", [])
     if not isinstance(entries, list) or not entries:
         raise ValueError("manifest has no [[measurement]] entries")
+    from pipeline.bounds import MAX_MEASUREMENTS
+
+    if len(entries) > MAX_MEASUREMENTS:  # before any file is looked at
+        raise ValueError(f"manifest has {len(entries)} [[measurement]] entries, outside the valid range "
+                         f"1..{MAX_MEASUREMENTS}")
     ms = tuple(_measurement(e, i, base, contained) for i, e in enumerate(entries))
     names = [m.name for m in ms]
     dup = sorted({n for n in names if names.count(n) > 1})
