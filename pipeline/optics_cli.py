@@ -39,6 +39,8 @@ def _sag_from_args(a):
 
     if a.sag:
         return load_sag_map(a.sag)
+    if not (np.isfinite(a.quilt_pv_um) and a.quilt_pv_um >= 0):
+        raise ValueError(f"--quilt-pv-um {a.quilt_pv_um} must be a finite number >= 0 (µm)")
     return None if a.quilt_pv_um == 0 else quilt_sag_map(a.quilt_pv_um, form=a.quilt_form)
 
 

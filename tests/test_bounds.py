@@ -430,3 +430,10 @@ def test_a_config_key_is_not_renamed_to_an_option_the_user_did_not_give(tmp_path
     assert "--mesh-size-mm" not in line  # it came from the file, not from an option
     assert main(["run", str(cfg), "--out", str(tmp_path / "o")]) == 2
     assert "--mesh-size-mm" not in _one_error_line(capsys, "mesh_size_mm")
+
+
+@pytest.mark.parametrize("value", ["-1", "nan", "inf"])
+def test_quilt_amplitude_named_as_the_option(value, tmp_path, capsys):
+    assert main(["lsf", "--grating", "J", "--wavelength-um", "1.25", "--pixel-scale-mas", "25", "--quilt-pv-um",
+                 value, "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, f"--quilt-pv-um {float(value)} must be a finite number >= 0")
