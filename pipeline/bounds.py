@@ -15,6 +15,7 @@ day. :func:`warn_if_long` prints that one line (stderr) when the estimate exceed
 from __future__ import annotations
 
 import math
+import os
 import sys
 
 __all__ = [
@@ -28,6 +29,7 @@ __all__ = [
     "campaign_seconds",
     "check_count",
     "fea_case_seconds",
+    "max_workers",
     "format_duration",
     "product_count",
     "warn_if_long",
@@ -63,6 +65,13 @@ SECONDS = {
 }
 #: The element size (mm) at which ``SECONDS["fea_case"]`` was measured.
 _REFERENCE_MESH_MM = 1.4
+
+
+def max_workers() -> int:
+    """Most local worker processes a command may start: twice this machine's cores (at least
+    4). Each FEA or campaign worker holds 1-4 GB, so 64 workers on a laptop is a typo that
+    ends in the out-of-memory killer, not a speed-up."""
+    return max(4, 2 * (os.cpu_count() or 1))
 
 
 def check_count(n: int, name: str, cap: int, hint: str = "") -> int:
@@ -109,6 +118,7 @@ def warn_if_long(seconds: float, command: str, detail: str, stream=None) -> bool
     if seconds <= LONG_RUN_S:
         return False
     print(f"cryograting {command}: warning: estimated run time {format_duration(seconds)} ({detail}, "
-          "per-case times of the 2-core reference machine); interrupt now if that was not intended",
+          "per-case times of the 2-core reference machine; cached cases take none); interrupt now if "
+          "that was not intended",
           file=stream or sys.stderr)
     return True

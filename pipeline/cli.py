@@ -66,6 +66,11 @@ def _cmd_sweep(a) -> int:
         name, text = item.split("=", 1)
         axes[name.strip()] = _values(text)
     _check_sweep_size(axes, a.surrogate, a.validate)
+    from pipeline.bounds import max_workers
+
+    if not 1 <= a.workers <= max_workers():
+        raise ValueError(f"--workers {a.workers} is outside the valid range 1..{max_workers()} (twice this "
+                         "machine's cores: each worker holds a whole FEA model)")
     if a.surrogate:
         from pipeline.surrogate_sweep import run_surrogate_sweep
 

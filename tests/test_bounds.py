@@ -437,3 +437,14 @@ def test_quilt_amplitude_named_as_the_option(value, tmp_path, capsys):
     assert main(["lsf", "--grating", "J", "--wavelength-um", "1.25", "--pixel-scale-mas", "25", "--quilt-pv-um",
                  value, "--out", str(tmp_path / "o")]) == 2
     _one_error_line(capsys, f"--quilt-pv-um {float(value)} must be a finite number >= 0")
+
+
+@pytest.mark.parametrize("command", [["sweep", "--t0-um", "200"], ["diagnose", "--validate", "--cases", "2"]])
+@pytest.mark.parametrize("workers", [0, 10_000])
+def test_worker_count_outside_its_range_is_refused_before_work(command, workers, tmp_path, capsys, monkeypatch):
+    from pipeline.bounds import max_workers
+
+    monkeypatch.setattr("pipeline.fea_cases.run_fea_sweep", _never)
+    monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", _never)
+    assert main([*command, "--workers", str(workers), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, f"--workers {workers} is outside the valid range 1..{max_workers()}")

@@ -29,8 +29,11 @@ def _run(args) -> int:
 
         if not 1 <= args.cases <= MAX_CAMPAIGN_CASES:
             raise ValueError(f"--cases {args.cases} is outside the valid range 1..{MAX_CAMPAIGN_CASES} (campaign cases)")
-        if args.workers < 1:
-            raise ValueError(f"--workers {args.workers} must be >= 1 (campaign worker processes)")
+        from pipeline.bounds import max_workers
+
+        if not 1 <= args.workers <= max_workers():
+            raise ValueError(f"--workers {args.workers} is outside the valid range 1..{max_workers()} (campaign "
+                             "worker processes: twice this machine's cores)")
         from .campaign import PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, parse_types, run_campaign, write_campaign
 
         cfg = CampaignConfig(n_cases=args.cases, seed=args.seed, workers=args.workers,
