@@ -54,8 +54,11 @@ LONG_RUN_S = 3600.0
 #: (1.4/2.8 mm), 50 s / 15 (results_tables.md); ``line_profile`` one detected profile at
 #: 250 mas, the slowest pixel scale (results_lsf.md); ``campaign_*`` one campaign case on
 #: one core, 2 workers x wall / cases (results_diagnosis.md: profiles 824 s / 208,
-#: profiles + map 1360 s / 208, profiles + map + image 2466 s / 208).
+#: profiles + map 1360 s / 208, profiles + map + image 2466 s / 208); ``study_overhead``
+#: what a study adds to its cases (preparing the blank, fits, exports, figures, 3-D renders,
+#: report): the default study's 120 s minus 15 x 3.5 s and 72 x 0.05 s (results_run.md).
 SECONDS = {
+    "study_overhead": 64.0,
     "fea_case": 3.5,
     "line_profile": 0.05,
     "surrogate_case": 0.002,
@@ -101,12 +104,12 @@ def campaign_seconds(n_cases: int, workers: int, with_map: bool, with_image: boo
 
 
 def format_duration(seconds: float) -> str:
-    """``"3.2 h"``, ``"45 min"`` or ``"2.1 days"``."""
+    """``"40 s"``, ``"45 min"``, ``"3.2 h"`` or ``"2.1 days"``."""
     if seconds >= 2 * 86400:
         return f"{seconds / 86400:.1f} days"
     if seconds >= 3600:
         return f"{seconds / 3600:.1f} h"
-    return f"{seconds / 60:.0f} min"
+    return f"{seconds / 60:.0f} min" if seconds >= 90 else f"{seconds:.0f} s"
 
 
 def warn_if_long(seconds: float, command: str, detail: str, stream=None) -> bool:

@@ -170,8 +170,13 @@ def _cmd_config(a) -> int:
     elif a.show:
         print(preset_path(a.show).read_text(encoding="utf-8"), end="")
     else:
+        from pipeline.bounds import format_duration
+        from pipeline.study import estimate_seconds
+
         config = _study_config(a.check, a.preset, a.set) or default_study()
         print(f"valid: {config.summary()}")
+        seconds, detail = estimate_seconds(config)
+        print(f"estimated run time: ~{format_duration(seconds)} ({detail}; cached cases take none)")
         for c in config.cases():
             print(f"  FEA  {c.label}")
     return 0

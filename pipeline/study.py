@@ -266,15 +266,24 @@ def _figures(config: StudyConfig, maps: dict, results: list, out: Path) -> dict:
     return figs
 
 
-def _warn_if_long(config: StudyConfig) -> None:
-    """One stderr line before any work when the study is estimated to take over an hour."""
-    from pipeline.bounds import SECONDS, fea_case_seconds, warn_if_long
+def estimate_seconds(config: StudyConfig) -> tuple[float, str]:
+    """A study's run time (s) from the benchmarks' per-case seconds (:mod:`pipeline.bounds`),
+    and what it is made of, e.g. ``"15 FEA cases x ~3.5 s + 72 line profiles x ~0.05 s"``."""
+    from pipeline.bounds import SECONDS, fea_case_seconds
 
     cases, n_prof = config.cases(), config.n_profile_jobs()
     fea_s = [fea_case_seconds(c.full["mesh_size_mm"]) for c in cases]
-    warn_if_long(sum(fea_s) + n_prof * SECONDS["line_profile"], "run",
-                 f"{len(cases)} FEA cases x ~{max(fea_s):.1f} s + {n_prof} line profiles x "
-                 f"~{SECONDS['line_profile']:g} s")
+    return (SECONDS["study_overhead"] + sum(fea_s) + n_prof * SECONDS["line_profile"],
+            f"{len(cases)} FEA cases x ~{max(fea_s):.1f} s + {n_prof} line profiles x ~{SECONDS['line_profile']:g} s "
+            f"+ ~{SECONDS['study_overhead']:.0f} s of figures, renders and report")
+
+
+def _warn_if_long(config: StudyConfig) -> None:
+    """One stderr line before any work when the study is estimated to take over an hour."""
+    from pipeline.bounds import warn_if_long
+
+    seconds, detail = estimate_seconds(config)
+    warn_if_long(seconds, "run", detail)
 
 
 def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progress: bool = True,

@@ -448,3 +448,10 @@ def test_worker_count_outside_its_range_is_refused_before_work(command, workers,
     monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", _never)
     assert main([*command, "--workers", str(workers), "--out", str(tmp_path / "o")]) == 2
     _one_error_line(capsys, f"--workers {workers} is outside the valid range 1..{max_workers()}")
+
+
+def test_config_check_states_the_estimate(capsys):
+    """The paper's study: 15 FEA cases at the default mesh and its line profiles."""
+    assert main(["config", "--preset", "paper_default"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[1].startswith("estimated run time: ~") and "15 FEA cases x ~3.5 s" in out[1]
