@@ -5,10 +5,12 @@ on stderr, ``cryograting <command>: error: <what was wrong>``, and exit code 2; 
 interrupt (Ctrl-C) with ``interrupted`` and 130. ``--debug`` (anywhere on the command
 line) shows the Python traceback instead. Anything else is a bug and keeps its traceback.
 
-The line names the file or option: an ``OSError`` by its file name, and an error whose
-text names none of the files the command was given gets them appended
-(``(inputs: --sag map.npz)``), so a decoding or numeric error deep in a reader still
-points at the file that caused it.
+The line names the file or option: an ``OSError`` by its file name; an I/O, decoding or
+numeric error whose text names none of the files the command was given gets them appended
+(``(files given: --sag map.npz)``), so an error deep in a reader still points at the file
+that caused it; and the API names of the command's options are written as the command
+line spells them (``window_um=0`` -> ``--window-um 0``). A sweep whose cases failed lists
+them, one line each, after the cases that succeeded were cached.
 """
 
 from __future__ import annotations
@@ -16,9 +18,8 @@ from __future__ import annotations
 import re
 import sys
 import zipfile
-from pathlib import Path
 
-__all__ = ["USER_ERRORS", "command_options", "describe", "pop_debug", "run_command"]
+__all__ = ["USER_ERRORS", "cli_spelling", "command_options", "describe", "pop_debug", "run_command"]
 
 #: What bad input raises: missing or unwritable files (OSError), wrong values and
 #: undecodable text (ValueError, UnicodeDecodeError), numbers out of range
@@ -31,17 +32,15 @@ INPUT_OPTIONS = {"sag": "--sag", "manifest": "MANIFEST", "config": "CONFIG.toml"
                  "result": "RESULT", "displacement_csv": "--displacement-csv"}
 #: ... and those that name output locations.
 OUTPUT_OPTIONS = {"out": "--out", "cache_dir": "--cache-dir"}
+#: Destinations of a study config source: a command with one also knows config keys named
+#: like its options (``mesh_size_mm``), so only the options the user gave are re-spelled.
+CONFIG_SOURCES = ("config", "check", "preset", "set")
 
 
 def pop_debug(argv) -> tuple[list[str], bool]:
     """``argv`` without ``--debug`` and whether it was there (accepted before or after the command)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     return [a for a in argv if a != "--debug"], "--debug" in argv
-
-
-#: Destinations of a study config source: a command with one also knows config keys named
-#: like its options (``mesh_size_mm``), so only the options the user gave are re-spelled.
-CONFIG_SOURCES = ("config", "check", "preset", "set")
 
 
 def command_options(parser, command: str, args=None) -> dict[str, str]:
