@@ -455,3 +455,17 @@ def test_config_check_states_the_estimate(capsys):
     assert main(["config", "--preset", "paper_default"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[1].startswith("estimated run time: ~") and "15 FEA cases x ~3.5 s" in out[1]
+
+
+def test_dense_scattered_points_name_no_option_psf_lacks(tmp_path, capsys):
+    """Scattered points each with a partner 0.1 µm away: gridding at the points' own
+    (median nearest-neighbour) spacing would need (200 mm / 0.1 µm)^2 nodes; the message
+    names no spacing option, which psf does not have."""
+    rng = np.random.default_rng(3)
+    pts = rng.uniform(-100, 100, (500, 2))
+    xy = np.vstack([pts, pts + 1e-4])
+    f = tmp_path / "points.csv"
+    np.savetxt(f, np.column_stack([xy, np.zeros(len(xy))]), delimiter=",", header="x_mm,y_mm,sag_um", comments="")
+    assert main(["psf", "--grating", "J", "--wavelength-um", "1.25", "--sag", str(f), "--out", str(tmp_path / "o")]) == 2
+    line = _one_error_line(capsys, "median nearest-neighbour distance")
+    assert "spacing_mm" not in line and "--spacing" not in line
