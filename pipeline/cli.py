@@ -107,6 +107,8 @@ def _check_sweep_size(axes: dict, surrogate: bool, validate: int) -> None:
     from pipeline.bounds import (MAX_FEA_CASES, MAX_SURROGATE_CASES, SECONDS, fea_case_seconds,
                                  product_count, warn_if_long)
 
+    if surrogate and not 0 <= validate <= MAX_FEA_CASES:  # each is a full FEA solve
+        raise ValueError(f"--validate {validate} is outside the valid range 0..{MAX_FEA_CASES}")
     n = product_count(len(v) if isinstance(v, list) else 1 for v in axes.values())
     cap = MAX_SURROGATE_CASES if surrogate else MAX_FEA_CASES
     if n > cap:

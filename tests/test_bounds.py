@@ -469,3 +469,10 @@ def test_dense_scattered_points_name_no_option_psf_lacks(tmp_path, capsys):
     assert main(["psf", "--grating", "J", "--wavelength-um", "1.25", "--sag", str(f), "--out", str(tmp_path / "o")]) == 2
     line = _one_error_line(capsys, "median nearest-neighbour distance")
     assert "spacing_mm" not in line and "--spacing" not in line
+
+
+def test_surrogate_validation_solves_are_capped(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("pipeline.surrogate_sweep.run_surrogate_sweep", _never)
+    assert main(["sweep", "--surrogate", "--t0-um", "100", "200", "--validate", str(MAX_FEA_CASES + 1),
+                 "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, f"--validate {MAX_FEA_CASES + 1} is outside the valid range 0..{MAX_FEA_CASES}")
