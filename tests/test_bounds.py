@@ -129,7 +129,8 @@ def test_fea_sweep_api_cap():
 @pytest.mark.parametrize("n", [0, -1, MAX_CAMPAIGN_CASES + 1])
 def test_campaign_size_outside_its_range_is_refused(n, tmp_path, capsys, monkeypatch):
     monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", _never)
-    with pytest.raises(ValueError, match=rf"n_cases={n} must be an integer in the valid range 1\.\.{MAX_CAMPAIGN_CASES}"):
+    with pytest.raises(ValueError, match=rf"n_cases={n} must be an integer in the valid range "
+                                         rf"1\.\.{MAX_CAMPAIGN_CASES}"):
         CampaignConfig(n_cases=n)
     assert main(["diagnose", "--validate", "--cases", str(n), "--out", str(tmp_path / "o")]) == 2
     _one_error_line(capsys, f"--cases {n} is outside the valid range 1..{MAX_CAMPAIGN_CASES}")
@@ -256,11 +257,13 @@ def test_int_without_grid_names_what_the_command_can_do(command, tmp_path, capsy
 
 
 @pytest.mark.parametrize("name, content", [("empty.npz", b""), ("zip.npz", b"PK\x03\x04garbage"),
-                                           ("noise.nc", bytes(range(256)) * 2), ("u16.csv", "x,y\n1,2\n".encode("utf-16"))])
+                                           ("noise.nc", bytes(range(256)) * 2),
+                                           ("u16.csv", "x,y\n1,2\n".encode("utf-16"))])
 def test_garbage_sag_files_fail_in_one_line_naming_the_file(name, content, tmp_path, capsys):
     f = tmp_path / name
     f.write_bytes(content)
-    assert main(["psf", "--grating", "J", "--wavelength-um", "1.25", "--sag", str(f), "--out", str(tmp_path / "o")]) == 2
+    assert main(["psf", "--grating", "J", "--wavelength-um", "1.25", "--sag", str(f),
+                 "--out", str(tmp_path / "o")]) == 2
     _one_error_line(capsys, name)
 
 
@@ -313,7 +316,8 @@ def test_diagnose_checks_its_output_before_any_work(tmp_path, capsys, monkeypatc
     _one_error_line(capsys, "--out")
 
 
-@pytest.mark.parametrize("field, value, valid", [("noise_rel", "1e-300", "[1e-06, 1]"), ("noise_rel", "2.0", "[1e-06, 1]"),
+@pytest.mark.parametrize("field, value, valid", [("noise_rel", "1e-300", "[1e-06, 1]"),
+                                                 ("noise_rel", "2.0", "[1e-06, 1]"),
                                                  ("noise_rel", "-0.01", "[1e-06, 1]")])
 def test_noise_outside_its_range_is_refused_with_the_range(field, value, valid, tmp_path, capsys):
     m = _profile_manifest(tmp_path / "data", extra=f"{field} = {value}\n")
@@ -466,7 +470,8 @@ def test_dense_scattered_points_name_no_option_psf_lacks(tmp_path, capsys):
     xy = np.vstack([pts, pts + 1e-4])
     f = tmp_path / "points.csv"
     np.savetxt(f, np.column_stack([xy, np.zeros(len(xy))]), delimiter=",", header="x_mm,y_mm,sag_um", comments="")
-    assert main(["psf", "--grating", "J", "--wavelength-um", "1.25", "--sag", str(f), "--out", str(tmp_path / "o")]) == 2
+    assert main(["psf", "--grating", "J", "--wavelength-um", "1.25", "--sag", str(f),
+                 "--out", str(tmp_path / "o")]) == 2
     line = _one_error_line(capsys, "median nearest-neighbour distance")
     assert "spacing_mm" not in line and "--spacing" not in line
 

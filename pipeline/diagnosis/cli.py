@@ -25,12 +25,11 @@ def _run(args) -> int:
     from pipeline.io_common import ensure_writable_dir
 
     if args.validate:
-        from pipeline.bounds import MAX_CAMPAIGN_CASES, campaign_seconds, warn_if_long
+        from pipeline.bounds import MAX_CAMPAIGN_CASES, campaign_seconds, max_workers, warn_if_long
 
         if not 1 <= args.cases <= MAX_CAMPAIGN_CASES:
-            raise ValueError(f"--cases {args.cases} is outside the valid range 1..{MAX_CAMPAIGN_CASES} (campaign cases)")
-        from pipeline.bounds import max_workers
-
+            raise ValueError(f"--cases {args.cases} is outside the valid range 1..{MAX_CAMPAIGN_CASES} "
+                             "(campaign cases)")
         if not 1 <= args.workers <= max_workers():
             raise ValueError(f"--workers {args.workers} is outside the valid range 1..{max_workers()} (campaign "
                              "worker processes: twice this machine's cores)")

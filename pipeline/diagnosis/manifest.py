@@ -406,8 +406,8 @@ def _read_surface(m: Measurement) -> SurfaceData:
     try:
         sm = read_sag_map(m.file, **m.read_options)
     except GridUnknownError as exc:
-        raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: " + str(exc.with_remedy(
-            "give extent_mm = [x0, x1, y0, y1] or spacing_mm = 0.5 (or [dx, dy]) (mm) in its [[measurement]]"))) from None
+        remedy = "give extent_mm = [x0, x1, y0, y1] or spacing_mm = 0.5 (or [dx, dy]) (mm) in its [[measurement]]"
+        raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc.with_remedy(remedy)}") from None
     except ValueError as exc:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
     X, Y = sm.grid()
