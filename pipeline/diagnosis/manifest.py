@@ -400,7 +400,6 @@ def load_manifest(path_or_obj, allow_outside: bool = False) -> Manifest:
 
 def _read_surface(m: Measurement) -> SurfaceData:
     from pipeline.interchange import read_sag_map
-
     from pipeline.io_codev import GridUnknownError
 
     try:
