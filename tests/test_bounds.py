@@ -481,3 +481,16 @@ def test_surrogate_validation_solves_are_capped(tmp_path, capsys, monkeypatch):
     assert main(["sweep", "--surrogate", "--t0-um", "100", "200", "--validate", str(MAX_FEA_CASES + 1),
                  "--out", str(tmp_path / "o")]) == 2
     _one_error_line(capsys, f"--validate {MAX_FEA_CASES + 1} is outside the valid range 0..{MAX_FEA_CASES}")
+
+
+def test_surrogate_sweep_api_caps():
+    from pipeline.bounds import MAX_SURROGATE_CASES
+    from pipeline.surrogate_sweep import run_surrogate_sweep
+
+    with pytest.raises(ValueError, match=rf"validate={MAX_FEA_CASES + 1} is outside the valid range 0\.\."):
+        run_surrogate_sweep({"t0_um": [100.0, 200.0]}, "unused", validate=MAX_FEA_CASES + 1)
+    n_t0, n_polish = 1000, MAX_SURROGATE_CASES // 1000 + 1
+    with pytest.raises(ValueError, match=rf"cases={n_t0 * n_polish} is outside the valid range "
+                                         rf"1\.\.{MAX_SURROGATE_CASES}"):
+        run_surrogate_sweep({"t0_um": list(np.linspace(1, 2000, n_t0)),
+                             "polish": list(np.linspace(0.001, 1, n_polish))}, "unused")
