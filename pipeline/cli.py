@@ -62,7 +62,7 @@ def _cmd_sweep(a) -> int:
             axes[name] = v
     for item in a.param or []:
         if "=" not in item:
-            raise SystemExit(f"--param {item!r}: expected NAME=VALUES, e.g. hole_diameter_mm=14,15,16")
+            raise ValueError(f"--param {item!r}: expected NAME=VALUES, e.g. hole_diameter_mm=14,15,16")
         name, text = item.split("=", 1)
         axes[name.strip()] = _values(text)
     _check_sweep_size(axes, a.surrogate, a.validate)
@@ -75,7 +75,7 @@ def _cmd_sweep(a) -> int:
         from pipeline.surrogate_sweep import run_surrogate_sweep
 
         if a.scheduler is not None or a.workers != 1:
-            raise SystemExit("--surrogate runs in this process (milliseconds per case); "
+            raise ValueError("--surrogate runs in this process (milliseconds per case); "
                              "drop --scheduler/--workers")
         res, rows, info = run_surrogate_sweep(axes, a.out, validate=a.validate, tol=a.tol,
                                               progress=not a.quiet, with_maps=not a.no_maps)

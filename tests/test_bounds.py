@@ -494,3 +494,12 @@ def test_surrogate_sweep_api_caps():
                                          rf"1\.\.{MAX_SURROGATE_CASES}"):
         run_surrogate_sweep({"t0_um": list(np.linspace(1, 2000, n_t0)),
                              "polish": list(np.linspace(0.001, 1, n_polish))}, "unused")
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--param", "hole_diameter_mm"], "--param 'hole_diameter_mm': expected NAME=VALUES"),
+    (["--surrogate", "--workers", "2"], "--surrogate runs in this process (milliseconds per case); drop"),
+])
+def test_sweep_option_mistakes_take_the_error_path(argv, needle, tmp_path, capsys):
+    assert main(["sweep", "--t0-um", "200", *argv, "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, f"cryograting sweep: error: {needle}")
