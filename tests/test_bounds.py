@@ -32,8 +32,6 @@ def _one_error_line(capsys, needle):
 
 
 # ------------------------------------------------------------------ bounded work
-
-
 def test_study_case_cap_refused_before_any_case_is_validated(monkeypatch):
     monkeypatch.setattr(config_module, "_check_case", _never)
     text = "[fea]\nt0_um = {start = 0.1, stop = 2000, num = %d}\n" % (MAX_FEA_CASES + 1)

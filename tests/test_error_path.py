@@ -36,8 +36,6 @@ def _one_error_line(capsys, needle):
 
 
 # ------------------------------------------------------------------ one error path
-
-
 @pytest.mark.parametrize("exc, needle", [
     (OSError(28, "No space left on device", "/full/disk/psf.npz"), "/full/disk/psf.npz: No space left on device"),
     (PermissionError(13, "Permission denied", "out/x"), "out/x: Permission denied"),
@@ -208,8 +206,6 @@ def test_unreachable_dask_scheduler_is_one_line(tmp_path):
 
 
 # ------------------------------------------------------------------ paths
-
-
 @pytest.mark.parametrize("where", ["../outside.csv", "ABSOLUTE", "link.csv"])
 def test_manifest_paths_leaving_its_directory_need_the_flag(where, tmp_path, capsys):
     outside = tmp_path / "outside.csv"
