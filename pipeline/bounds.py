@@ -29,6 +29,7 @@ __all__ = [
     "campaign_seconds",
     "check_count",
     "fea_case_seconds",
+    "GEOMETRY_KEYS",
     "max_workers",
     "format_duration",
     "product_count",
@@ -56,9 +57,12 @@ LONG_RUN_S = 3600.0
 #: one core, 2 workers x wall / cases (results_diagnosis.md: profiles 824 s / 208,
 #: profiles + map 1360 s / 208, profiles + map + image 2466 s / 208); ``study_overhead``
 #: what a study adds to its cases (preparing the blank, fits, exports, figures, 3-D renders,
-#: report): the default study's 120 s minus 15 x 3.5 s and 72 x 0.05 s (results_run.md).
+#: report): the default study's 120 s minus 15 x 3.5 s and 72 x 0.05 s (results_run.md);
+#: ``new_blank`` meshing a blank geometry or element size not in the mesh cache ("the first
+#: run on a machine adds ~1 min of meshing", results_run.md).
 SECONDS = {
     "study_overhead": 64.0,
+    "new_blank": 60.0,
     "fea_case": 3.5,
     "line_profile": 0.05,
     "surrogate_case": 0.002,
@@ -66,6 +70,9 @@ SECONDS = {
     "campaign_profiles_map": 13.1,
     "campaign_profiles_map_image": 23.7,
 }
+#: FEA parameters that change the mesh: each distinct combination is meshed once.
+GEOMETRY_KEYS = ("size_x_mm", "size_y_mm", "thickness_mm", "hole_diameter_mm", "pitch_x_mm", "n_holes_x",
+                 "pitch_y_mm", "n_holes_y", "hole_axis_z_mm", "mesh_size_mm", "mesh_bulk_mm")
 #: The element size (mm) at which ``SECONDS["fea_case"]`` was measured.
 _REFERENCE_MESH_MM = 1.4
 
@@ -121,7 +128,7 @@ def warn_if_long(seconds: float, command: str, detail: str, stream=None) -> bool
     if seconds <= LONG_RUN_S:
         return False
     print(f"cryograting {command}: warning: estimated run time {format_duration(seconds)} ({detail}, "
-          "per-case times of the 2-core reference machine; cached cases take none); interrupt now if "
+          "per-case times of the 2-core reference machine; cached cases and meshes take none); interrupt now if "
           "that was not intended",
           file=stream or sys.stderr)
     return True

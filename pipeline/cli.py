@@ -104,7 +104,7 @@ def _cmd_sweep(a) -> int:
 
 def _check_sweep_size(axes: dict, surrogate: bool, validate: int) -> None:
     """Refuse a sweep past its cap, and say up front when it will take more than an hour."""
-    from pipeline.bounds import (MAX_FEA_CASES, MAX_SURROGATE_CASES, SECONDS, fea_case_seconds,
+    from pipeline.bounds import (GEOMETRY_KEYS, MAX_FEA_CASES, MAX_SURROGATE_CASES, SECONDS, fea_case_seconds,
                                  product_count, warn_if_long)
 
     if surrogate and not 0 <= validate <= MAX_FEA_CASES:  # each is a full FEA solve
@@ -123,7 +123,9 @@ def _check_sweep_size(axes: dict, surrogate: bool, validate: int) -> None:
                      f"validation solves x ~{per:.1f} s")
     else:
         # the solver already uses both cores: more workers do not divide the time
-        warn_if_long(n * per, "sweep", f"{n} FEA cases x ~{per:.1f} s")
+        n_geo = product_count(len(v) for k, v in axes.items() if k in GEOMETRY_KEYS and isinstance(v, list))
+        warn_if_long(n * per + n_geo * SECONDS["new_blank"], "sweep",
+                     f"{n} FEA cases x ~{per:.1f} s + {n_geo} mesh(es) x ~{SECONDS['new_blank']:.0f} s")
 
 
 def _cmd_calibrate(a) -> int:
@@ -178,7 +180,7 @@ def _cmd_config(a) -> int:
         config = _study_config(a.check, a.preset, a.set) or default_study()
         print(f"valid: {config.summary()}")
         seconds, detail = estimate_seconds(config)
-        print(f"estimated run time: ~{format_duration(seconds)} ({detail}; cached cases take none)")
+        print(f"estimated run time: ~{format_duration(seconds)} ({detail}; cached cases and meshes take none)")
         for c in config.cases():
             print(f"  FEA  {c.label}")
     return 0

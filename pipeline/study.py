@@ -269,13 +269,15 @@ def _figures(config: StudyConfig, maps: dict, results: list, out: Path) -> dict:
 def estimate_seconds(config: StudyConfig) -> tuple[float, str]:
     """A study's run time (s) from the benchmarks' per-case seconds (:mod:`pipeline.bounds`),
     and what it is made of, e.g. ``"15 FEA cases x ~3.5 s + 72 line profiles x ~0.05 s"``."""
-    from pipeline.bounds import SECONDS, fea_case_seconds
+    from pipeline.bounds import GEOMETRY_KEYS, SECONDS, fea_case_seconds
 
     cases, n_prof = config.cases(), config.n_profile_jobs()
     fea_s = [fea_case_seconds(c.full["mesh_size_mm"]) for c in cases]
-    return (SECONDS["study_overhead"] + sum(fea_s) + n_prof * SECONDS["line_profile"],
-            f"{len(cases)} FEA cases x ~{max(fea_s):.1f} s + {n_prof} line profiles x ~{SECONDS['line_profile']:g} s "
-            f"+ ~{SECONDS['study_overhead']:.0f} s of figures, renders and report")
+    n_geo = len({tuple(c.full[k] for k in GEOMETRY_KEYS) for c in cases})  # each meshed once (if not cached)
+    return (SECONDS["study_overhead"] + sum(fea_s) + n_prof * SECONDS["line_profile"] + n_geo * SECONDS["new_blank"],
+            f"{len(cases)} FEA cases x ~{max(fea_s):.1f} s + {n_geo} mesh(es) x ~{SECONDS['new_blank']:.0f} s + "
+            f"{n_prof} line profiles x ~{SECONDS['line_profile']:g} s + ~{SECONDS['study_overhead']:.0f} s of "
+            "figures, renders and report")
 
 
 def _warn_if_long(config: StudyConfig) -> None:
