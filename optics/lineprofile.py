@@ -167,7 +167,8 @@ def line_profile(grating: str | Grating, wavelength_um: float, pixel_scale_mas: 
     d_xi = wavelength_um * f_cam * anam / (s.n_fft * s.detector_step_um)
     xi = centred_axis(d_xi, R)
     if xi.size > s.n_fft:
-        raise ValueError(f"n_fft={s.n_fft} is smaller than the {xi.size} pupil samples; increase n_fft")
+        raise ValueError(f"LsfSettings.n_fft={s.n_fft} is smaller than the {xi.size} pupil samples at "
+                         f"wavelength_um={wavelength_um:g}; a larger LsfSettings.n_fft (API) is needed")
     r_src = ps.relative_na * R
     sx, sy, w = source_points(r_src, min(s.source_step_mm, r_src / s.min_source_rows))
     rows = pupil_rows(g, wavelength_um, xi, sy, beta, sag, shift, collimator_zernike_um, spectrograph, d_xi)

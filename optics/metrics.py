@@ -45,7 +45,10 @@ def fwhm_um(offset_um: np.ndarray, intensity: np.ndarray) -> float:
     above = np.nonzero(y >= half)[0]
     i0, i1 = above[0], above[-1]
     if i0 == 0 or i1 == y.size - 1:
-        raise ValueError("profile does not fall below half maximum inside the window; widen window_um")
+        # no option of any command sets the window: name what is wrong, and the API setting
+        raise ValueError(f"the profile does not fall below half its maximum inside its {x[0]:g}..{x[-1]:g} um "
+                         "window, so its FWHM is undefined: the line is broader than the window "
+                         "(API: a larger LsfSettings.window_um)")
     xl = np.interp(half, [y[i0 - 1], y[i0]], [x[i0 - 1], x[i0]])
     xr = np.interp(half, [y[i1 + 1], y[i1]], [x[i1 + 1], x[i1]])
     return float(xr - xl)

@@ -22,9 +22,21 @@ def _values(text: str) -> list:
         return [t.strip() for t in text.split(",") if t.strip()]
 
 
+def _check_mesh_options(a) -> None:
+    """Element sizes given on the command line, checked before any case is queued."""
+    import math
+
+    for opt, v in (("--mesh-size-mm", a.mesh_size_mm), ("--mesh-bulk-mm", a.mesh_bulk_mm)):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{opt} {v} must be a finite number > 0 (mm)")
+    if a.mesh_size_mm is not None and a.mesh_bulk_mm is not None and a.mesh_bulk_mm < a.mesh_size_mm:
+        raise ValueError(f"--mesh-bulk-mm {a.mesh_bulk_mm} must be >= --mesh-size-mm {a.mesh_size_mm}")
+
+
 def _cmd_tables(a) -> int:
     from pipeline.fea_cases import format_table, run_tables
 
+    _check_mesh_options(a)
     rows = run_tables(a.out, progress=not a.quiet, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm)
     print(format_table(rows))
     print(f"\nwritten: {Path(a.out) / 'tables.csv'}, {Path(a.out) / 'sweep.nc'}, {Path(a.out) / 'figure_summary.csv'}")
@@ -50,14 +62,20 @@ def _cmd_sweep(a) -> int:
             axes[name] = v
     for item in a.param or []:
         if "=" not in item:
-            raise SystemExit(f"--param {item!r}: expected NAME=VALUES, e.g. hole_diameter_mm=14,15,16")
+            raise ValueError(f"--param {item!r}: expected NAME=VALUES, e.g. hole_diameter_mm=14,15,16")
         name, text = item.split("=", 1)
         axes[name.strip()] = _values(text)
+    _check_sweep_size(axes, a.surrogate, a.validate)
+    from pipeline.bounds import max_workers
+
+    if not 1 <= a.workers <= max_workers():
+        raise ValueError(f"--workers {a.workers} is outside the valid range 1..{max_workers()} (twice this "
+                         "machine's cores: each worker holds a whole FEA model)")
     if a.surrogate:
         from pipeline.surrogate_sweep import run_surrogate_sweep
 
         if a.scheduler is not None or a.workers != 1:
-            raise SystemExit("--surrogate runs in this process (milliseconds per case); "
+            raise ValueError("--surrogate runs in this process (milliseconds per case); "
                              "drop --scheduler/--workers")
         res, rows, info = run_surrogate_sweep(axes, a.out, validate=a.validate, tol=a.tol,
                                               progress=not a.quiet, with_maps=not a.no_maps)
@@ -82,6 +100,32 @@ def _cmd_sweep(a) -> int:
             print(f"validation against {len(rows)} full solves at random points: max |P/V error| "
                   f"{100 * err:.3f} % ({Path(a.out) / 'surrogate_validation.csv'})")
     return 0
+
+
+def _check_sweep_size(axes: dict, surrogate: bool, validate: int) -> None:
+    """Refuse a sweep past its cap, and say up front when it will take more than an hour."""
+    from pipeline.bounds import (GEOMETRY_KEYS, MAX_FEA_CASES, MAX_SURROGATE_CASES, SECONDS, fea_case_seconds,
+                                 product_count, warn_if_long)
+
+    if surrogate and not 0 <= validate <= MAX_FEA_CASES:  # each is a full FEA solve
+        raise ValueError(f"--validate {validate} is outside the valid range 0..{MAX_FEA_CASES}")
+    n = product_count(len(v) if isinstance(v, list) else 1 for v in axes.values())
+    cap = MAX_SURROGATE_CASES if surrogate else MAX_FEA_CASES
+    if n > cap:
+        raise ValueError(f"{n} sweep cases (the product of the value lists given) is outside the valid range "
+                         f"1..{cap}; give fewer values" + ("" if surrogate else " or use --surrogate"))
+    mesh = axes.get("mesh_size_mm")
+    per = fea_case_seconds(min(mesh) if isinstance(mesh, list) and mesh and all(
+        isinstance(m, float) for m in mesh) else None)
+    if surrogate:
+        warn_if_long(n * SECONDS["surrogate_case"] + (max(validate, 0) + 20) * per, "sweep",
+                     f"{n} surrogate cases x ~{SECONDS['surrogate_case']:g} s + ~20 training and {validate} "
+                     f"validation solves x ~{per:.1f} s")
+    else:
+        # the solver already uses both cores: more workers do not divide the time
+        n_geo = product_count(len(v) for k, v in axes.items() if k in GEOMETRY_KEYS and isinstance(v, list))
+        warn_if_long(n * per + n_geo * SECONDS["new_blank"], "sweep",
+                     f"{n} FEA cases x ~{per:.1f} s + {n_geo} mesh(es) x ~{SECONDS['new_blank']:.0f} s")
 
 
 def _cmd_calibrate(a) -> int:
@@ -113,6 +157,7 @@ def _study_config(config: str | None, preset: str | None, overrides=None):
 def _cmd_run(a) -> int:
     from pipeline.study import run_study
 
+    _check_mesh_options(a)
     config = _study_config(a.config, a.preset, a.set)  # validated before anything is written
     run_study(a.out, config, progress=not a.quiet, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm)
     return 0
@@ -130,8 +175,13 @@ def _cmd_config(a) -> int:
     elif a.show:
         print(preset_path(a.show).read_text(encoding="utf-8"), end="")
     else:
+        from pipeline.bounds import format_duration
+        from pipeline.study import estimate_seconds
+
         config = _study_config(a.check, a.preset, a.set) or default_study()
         print(f"valid: {config.summary()}")
+        seconds, detail = estimate_seconds(config)
+        print(f"estimated run time: ~{format_duration(seconds)} ({detail}; cached cases and meshes take none)")
         for c in config.cases():
             print(f"  FEA  {c.label}")
     return 0
@@ -141,6 +191,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cryograting", description=(
         "Cryogenic deformation of lightweighted, NiP-plated grating blanks and its effect on "
         "spectral line profiles (SINFONI/SPIFFI)."))
+    p.add_argument("--debug", action="store_true", help="on an error, show the Python traceback instead of "
+                   "one line (also accepted after the command)")
     sub = p.add_subparsers(dest="command", required=True)
 
     q = sub.add_parser("run", help="a study (default: the paper's): FEA cases, sag maps, line profiles, "
@@ -220,13 +272,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one subcommand; a user error is one line on stderr and exit code 2
+    (:mod:`pipeline.errors`), ``--debug`` anywhere shows the traceback instead."""
+    from pipeline.errors import command_options, pop_debug, run_command
+
+    argv, debug = pop_debug(argv)
     parser = build_parser()
     a = parser.parse_args(argv)
-    try:
-        return int(a.func(a) or 0)
-    except (ValueError, OSError) as exc:  # OSError: unwritable or full output, missing file
-        print(f"cryograting {a.command}: error: {exc}", file=sys.stderr)
-        return 2
+    return run_command(a.func, a, a.command, debug, command_options(parser, a.command, a))
 
 
 if __name__ == "__main__":

@@ -35,6 +35,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from pipeline.bounds import MAX_FEA_CASES, MAX_PROFILE_JOBS, product_count
 from pipeline.config_schema import (
     FEA_KEYS,
     PROFILE_KEYS,
@@ -71,8 +72,7 @@ PRESET_DIR = Path(__file__).with_name("configs")
 _EXAMPLE = "example"
 #: Parameters that name every case (in labels and in the cache key), in this order.
 _CORE = ("coverage", "t0_um", "polish")
-#: Beyond this many FEA cases in one group, a config is almost certainly a typo.
-_MAX_CASES = 100_000
+_CAP_HINT = "check the ranges (a step too small, a list repeated?)"
 
 
 def _token(v) -> str:
@@ -151,11 +151,10 @@ class FEAGroup:
         if not isinstance(self.name, str):
             raise ConfigError("name", self.name, "must be a string")
         object.__setattr__(self, "axes", tuple(axes))
-        n = 1
-        for _, v in axes:
-            n *= len(v)
-        if n > _MAX_CASES:
-            raise ConfigError("", ..., f"{n} FEA cases in one group (more than {_MAX_CASES}); check the ranges")
+        n = product_count(len(v) for _, v in axes)
+        if n > MAX_FEA_CASES:  # before any case is validated: that alone is linear in n
+            raise ConfigError("", ..., f"{n} FEA cases in one group is outside the valid range "
+                              f"1..{MAX_FEA_CASES}; {_CAP_HINT}")
         for combo in self.combinations():
             alias = {("polish_front" if k == "polish" and "polish_front" in keys else k): v for k, v in combo.items()}
             _check_case(alias, _resolve(combo))
@@ -326,6 +325,11 @@ class ProfileSpec:
                 raise ConfigError(f"deformation[{i}]", d, 'must be "perfect" or a selector table such as '
                                   "{t0_um = 200, polish = 0.75}")
         object.__setattr__(self, "deformation", tuple(out))
+        n = product_count((len(self.grating), len(self.order), len(self.wavelength_um), len(self.pixel_scale_mas),
+                           len(self.pupil_shift_x_mm), len(self.pupil_shift_y_mm), len(self.deformation)))
+        if n > MAX_PROFILE_JOBS:  # before the grating equation runs on every wavelength
+            raise ConfigError("", ..., f"{n} line profiles in one [[profiles]] table is outside the valid range "
+                              f"1..{MAX_PROFILE_JOBS}; {_CAP_HINT}")
         for g in self.grating:
             for o in self.order:
                 for wl in self.wavelengths_for(g):
@@ -530,9 +534,18 @@ class StudyConfig:
                 raise ConfigError(f"study.{name}", getattr(self, name), "must be a string")
         if not self.fea:
             raise ConfigError("fea", ..., "no FEA case groups")
+        n = sum(product_count(len(v) for _, v in g.axes) for g in self.fea)
+        if n > MAX_FEA_CASES:
+            raise ConfigError("fea", ..., f"{n} FEA cases in the study is outside the valid range "
+                              f"1..{MAX_FEA_CASES}; {_CAP_HINT}")
         object.__setattr__(self, "_cases", _expand_cases(self.fea))
+        object.__setattr__(self, "_index", {})
         for i, spec in enumerate(self.profiles):
             self._check_profile(i, spec)
+        n = self.n_profile_jobs()
+        if n > MAX_PROFILE_JOBS:
+            raise ConfigError("profiles", ..., f"{n} line profiles in the study is outside the valid range "
+                              f"1..{MAX_PROFILE_JOBS}; {_CAP_HINT}")
         names = set()
         for i, fig in enumerate(self.figures):
             if fig.file in names:
@@ -546,8 +559,35 @@ class StudyConfig:
         return list(self._cases)
 
     def select(self, selector: CaseSelector | None) -> list[FEACase | None]:
-        """Cases matched by ``selector`` (``[None]`` for the perfect grating)."""
-        return [None] if selector is None else [c for c in self._cases if selector.matches(c)]
+        """Cases matched by ``selector`` (``[None]`` for the perfect grating), as
+        :meth:`CaseSelector.matches` would find them, through a per-key index of the
+        cases' values: a study with a selector per case stays linear in its size."""
+        if selector is None:
+            return [None]
+        hits = None
+        for k, v in selector.params:
+            found = self._value_index(k).get(v if k == "group" else _token(v), ())
+            hits = set(found) if hits is None else hits & set(found)
+        return [self._cases[i] for i in sorted(hits)]
+
+    def _value_index(self, key: str) -> dict:
+        """``value token -> indices of the cases with it`` for one parameter (or ``group``)."""
+        if key not in self._index:
+            index: dict = {}
+            for i, c in enumerate(self._cases):
+                index.setdefault(c.group if key == "group" else _token(c.full[key]), []).append(i)
+            self._index[key] = index
+        return self._index[key]
+
+    def n_profile_jobs(self) -> int:
+        """How many line profiles :meth:`profile_jobs` gives, counted without listing them."""
+        n = 0
+        for spec in self.profiles:
+            cases = sum(len(self.select(d)) for d in spec.deformation)
+            for g in spec.grating:
+                n += product_count((len(spec.order), len(spec.wavelengths_for(g)), len(spec.pixel_scale_mas),
+                                    len(spec.pupil_shift_x_mm), len(spec.pupil_shift_y_mm), cases))
+        return n
 
     def profile_jobs(self) -> list[ProfileJob]:
         """Every line profile of the study, table by table, in product order."""
@@ -571,7 +611,7 @@ class StudyConfig:
 
     def summary(self) -> str:
         """One line: how many FEA cases, profiles and figures."""
-        return (f"{self.title}: {len(self._cases)} FEA case(s), {len(self.profile_jobs())} line profile(s), "
+        return (f"{self.title}: {len(self._cases)} FEA case(s), {self.n_profile_jobs()} line profile(s), "
                 f"{len(self.figures) if self.output.figures else 0} figure(s)")
 
     # ---------------------------------------------------------------- checks
@@ -649,13 +689,24 @@ def _tables(data, path: str) -> list:
     return data
 
 
+def _axes_count(axes: dict) -> int:
+    """Cases of a group's axes as written (a value the group will refuse counts as one)."""
+    n = 1
+    for k, v in axes.items():
+        try:
+            n *= len(parse_axis(k, v, k, FEA_KEYS[k])) if k in FEA_KEYS else 1
+        except ConfigError:
+            pass
+    return n
+
+
 def _groups(fea: dict) -> tuple:
     check_keys(fea, (*FEA_KEYS, "cases"), "fea")
     shared = {k: v for k, v in fea.items() if k != "cases"}
     for k, v in shared.items():  # type errors of shared keys are theirs, whatever group uses them
         parse_axis(f"fea.{k}", v, k, FEA_KEYS[k])
     tables = _tables(fea.get("cases", [{}]), "fea.cases")
-    groups = []
+    groups, total = [], 0
     for i, t in enumerate(tables):
         path = f"fea.cases[{i}]" if "cases" in fea else "fea"
         check_keys(t, ("name", *FEA_KEYS), path)
@@ -663,6 +714,10 @@ def _groups(fea: dict) -> tuple:
         axes = {k: v for k, v in shared.items() if not (k in ("polish", "polish_front") and
                                                         ({"polish", "polish_front"} & own.keys()))}
         axes.update(own)
+        total += _axes_count(axes)
+        if total > MAX_FEA_CASES:  # before this group's cases are validated
+            raise ConfigError(path, ..., f"{total} FEA cases{' up to this table' if i else ''} is outside the "
+                              f"valid range 1..{MAX_FEA_CASES}; {_CAP_HINT}")
         try:
             groups.append(FEAGroup(t.get("name", ""), axes))
         except ConfigError as exc:

@@ -141,7 +141,7 @@ def iter_dask(func, jobs, scheduler: str, workers: int, connect_timeout_s: float
         except (OSError, TimeoutError) as exc:
             raise ConnectionError(
                 f"cannot reach Dask scheduler at {address!r} within {connect_timeout_s} s ({exc}); "
-                "start one (`dask scheduler` + `dask worker <address>`) or pass scheduler=None for local processes"
+                "start one (`dask scheduler` + `dask worker <address>`) or give no scheduler to run in local processes"
             ) from exc
         finished = False
         futures = {}

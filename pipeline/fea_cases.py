@@ -270,6 +270,10 @@ def run_fea_sweep(axes: dict, out_dir, *, scheduler: str | None = None, workers:
     # the table always names the case: unswept core parameters appear as one-value axes
     core = {k: [PARAMETERS[k].default] for k in ("coverage", "t0_um", "polish")}
     axes = {**core, **axes}
+    from pipeline.bounds import MAX_FEA_CASES, check_count, product_count
+
+    check_count(product_count(len(v) if isinstance(v, (list, tuple)) else 1 for v in axes.values()),
+                "cases", MAX_FEA_CASES, "the product of the axes' value counts; give fewer values")
     cases = fea_grid(**axes)
     runner = FEACaseRunner(with_maps)
     res = run_sweep(runner, cases, out_dir, namespace=case_namespace(), workers=workers, scheduler=scheduler,

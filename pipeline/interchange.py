@@ -343,7 +343,12 @@ def read_sag_map(path: str | Path, **options) -> SagMap:
 def load_sag_map(path: str | Path) -> SagMap:
     """Sag map for the CLI ``--sag FILE`` option (any :data:`SAG_FORMATS` suffix);
     errors are prefixed with ``--sag``."""
+    from pipeline.io_codev import GridUnknownError
+
     try:
         return read_sag_map(path)
+    except GridUnknownError as exc:  # the command line has no grid options: the title must carry it
+        remedy = "add EXTENT_MM x0 x1 y0 y1 (mm, first/last sample centres) to the title"
+        raise ValueError(f"--sag {exc.with_remedy(remedy)}") from None
     except ValueError as exc:
         raise ValueError(f"--sag {exc}") from None

@@ -67,7 +67,7 @@ from optics.sagmap import SagMap
 from pipeline.io_codev_quantity import check_request, grating_wfr_to_sag_factor, sag_factor
 from pipeline.io_common import atomic_write, numbered_lines, parse_error, read_text
 
-__all__ = ["write_codev_int", "read_codev_int", "grating_wfr_to_sag_factor", "choose_ssz",
+__all__ = ["GridUnknownError", "write_codev_int", "read_codev_int", "grating_wfr_to_sag_factor", "choose_ssz",
            "MAX_COUNT", "CODEV_NDA"]
 
 #: Largest |count| written: one below the no-data value.
@@ -176,6 +176,21 @@ def write_codev_int(
     return path
 
 
+class GridUnknownError(ValueError):
+    """A CODE V INT file without a physical grid size (no EXTENT_MM title, no argument).
+
+    ``problem`` says so; the message adds the remedy of :func:`read_codev_int`'s caller
+    (its ``extent_mm`` / ``spacing_mm`` arguments). Front ends that spell these otherwise
+    (a manifest key, none on the command line) re-word it with :meth:`with_remedy`."""
+
+    def __init__(self, problem: str):
+        self.problem = problem
+        super().__init__(f"{problem}; pass extent_mm=(xmin, xmax, ymin, ymax) or spacing_mm (mm)")
+
+    def with_remedy(self, remedy: str) -> ValueError:
+        return ValueError(f"{self.problem}; {remedy}")
+
+
 def _grid_coordinates(path, nx, ny, title, extent_mm, spacing_mm):
     if extent_mm is not None:
         x0, x1, y0, y1 = (float(v) for v in extent_mm)
@@ -197,10 +212,7 @@ def _grid_coordinates(path, nx, ny, title, extent_mm, spacing_mm):
         if not (x1 > x0 and y1 > y0):
             raise parse_error(path, None, f"title EXTENT_MM {m.group(0)!r} must have max > min")
         return np.linspace(x0, x1, nx), np.linspace(y0, y1, ny), "title EXTENT_MM"
-    raise ValueError(
-        f"{path}: CODE V INT files carry no physical grid size and the title has no EXTENT_MM; "
-        "pass extent_mm=(xmin, xmax, ymin, ymax) or spacing_mm (mm)"
-    )
+    raise GridUnknownError(f"{path}: CODE V INT files carry no physical grid size and the title has no EXTENT_MM")
 
 
 def _is_number(tok: str) -> bool:

@@ -159,13 +159,21 @@ def read_fe_result(path, *, displacement_csv=None, field: str | None = None,
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: file does not exist")
+    import contextlib
+    import io
+
+    said = io.StringIO()  # meshio prints its complaint before exiting: keep it for the one-line error
     try:
-        mesh = meshio.read(path)
+        with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
+            mesh = meshio.read(path)
     except ModuleNotFoundError as exc:  # e.g. h5py for XDMF with HDF5 data
         raise ValueError(f"{path}: reading this format needs the Python package {exc.name!r} "
                          "(pip install 'cryograting[xdmf]' for h5py)") from None
     except Exception as exc:  # meshio raises many types (ReadError, KeyError, ...) for files it cannot read
         raise ValueError(f"{path}: meshio cannot read it as an FE mesh ({type(exc).__name__}: {exc})") from None
+    except SystemExit:  # meshio ends the process (sys.exit(1)) when no reader of the suffix can read the file
+        why = " ".join(said.getvalue().split()) or "no reader of its suffix's format could read it"
+        raise ValueError(f"{path}: meshio cannot read it as an FE mesh ({why})") from None
     points = np.asarray(mesh.points, float)
     if points.shape[1] == 2:
         points = np.column_stack([points, np.zeros(len(points))])

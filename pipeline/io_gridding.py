@@ -189,9 +189,13 @@ def _scattered(x, y, s, spacing_mm, source):
     if nx < 2 or ny < 2:
         raise ValueError(f"{source}: the points span {x.max() - x.min():g} x {y.max() - y.min():g} mm, less than "
                          f"two grid steps of {spacing_mm:g} mm in x or y")
-    if nx * ny > MAX_GRID_NODES:
+    if nx * ny > MAX_GRID_NODES and how == "given":
         raise ValueError(f"{source}: gridding at spacing_mm={spacing_mm:g} gives {nx} x {ny} nodes; at most "
                          f"{MAX_GRID_NODES} are supported (give a larger spacing_mm)")
+    if nx * ny > MAX_GRID_NODES:  # no spacing given: name none (not every caller can give one)
+        raise ValueError(f"{source}: gridding at the points' median nearest-neighbour distance {spacing_mm:g} mm "
+                         f"gives {nx} x {ny} nodes; at most {MAX_GRID_NODES} are supported (points far apart "
+                         "from the rest, or denser than the map needs?)")
     gx = x.min() + spacing_mm * np.arange(nx)
     gy = y.min() + spacing_mm * np.arange(ny)
     try:

@@ -39,6 +39,8 @@ def _sag_from_args(a):
 
     if a.sag:
         return load_sag_map(a.sag)
+    if not (np.isfinite(a.quilt_pv_um) and a.quilt_pv_um >= 0):
+        raise ValueError(f"--quilt-pv-um {a.quilt_pv_um} must be a finite number >= 0 (µm)")
     return None if a.quilt_pv_um == 0 else quilt_sag_map(a.quilt_pv_um, form=a.quilt_form)
 
 
@@ -137,10 +139,13 @@ def register(subparsers) -> None:
 
 def main(argv=None) -> int:
     """Stand-alone entry point for the two subcommands."""
+    from pipeline.errors import command_options, pop_debug, run_command
+
+    argv, debug = pop_debug(argv)
     parser = argparse.ArgumentParser(prog="cryograting")
     register(parser.add_subparsers(dest="command", required=True))
     a = parser.parse_args(argv)
-    try:
-        return a.func(a)
-    except (ValueError, OSError) as exc:  # OSError: unwritable or full output
-        parser.exit(2, f"cryograting {a.command}: error: {exc}\n")
+    code = run_command(a.func, a, a.command, debug, command_options(parser, a.command, a))
+    if code:
+        raise SystemExit(code)
+    return 0

@@ -648,9 +648,13 @@ class StudyRender:
         json.dump(spec, self._spec, default=str)
         self._spec.close()
         try:
+            # The child works in the caller's directory, so a relative --out or cache path
+            # means there what it means here; the output goes as an absolute path anyway.
+            # -P keeps a 'pipeline' package in that directory from shadowing this one.
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "pipeline.render3d", "--study", str(out), "--spec", self._spec.name],
-                stdout=subprocess.PIPE, stderr=self._err, env=env, cwd=root)
+                [sys.executable, "-P", "-m", "pipeline.render3d", "--study", str(out.resolve()),
+                 "--spec", self._spec.name],
+                stdout=subprocess.PIPE, stderr=self._err, env=env, cwd=os.getcwd())
         except OSError as exc:
             self.proc = None
             self._result = self._fail(f"the render process could not start: {exc}")

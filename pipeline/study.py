@@ -266,6 +266,28 @@ def _figures(config: StudyConfig, maps: dict, results: list, out: Path) -> dict:
     return figs
 
 
+def estimate_seconds(config: StudyConfig) -> tuple[float, str]:
+    """A study's run time (s) from the benchmarks' per-case seconds (:mod:`pipeline.bounds`),
+    and what it is made of, e.g. ``"15 FEA cases x ~3.5 s + 72 line profiles x ~0.05 s"``."""
+    from pipeline.bounds import GEOMETRY_KEYS, SECONDS, fea_case_seconds
+
+    cases, n_prof = config.cases(), config.n_profile_jobs()
+    fea_s = [fea_case_seconds(c.full["mesh_size_mm"]) for c in cases]
+    n_geo = len({tuple(c.full[k] for k in GEOMETRY_KEYS) for c in cases})  # each meshed once (if not cached)
+    return (SECONDS["study_overhead"] + sum(fea_s) + n_prof * SECONDS["line_profile"] + n_geo * SECONDS["new_blank"],
+            f"{len(cases)} FEA cases x ~{max(fea_s):.1f} s + {n_geo} mesh(es) x ~{SECONDS['new_blank']:.0f} s + "
+            f"{n_prof} line profiles x ~{SECONDS['line_profile']:g} s + ~{SECONDS['study_overhead']:.0f} s of "
+            "figures, renders and report")
+
+
+def _warn_if_long(config: StudyConfig) -> None:
+    """One stderr line before any work when the study is estimated to take over an hour."""
+    from pipeline.bounds import warn_if_long
+
+    seconds, detail = estimate_seconds(config)
+    warn_if_long(seconds, "run", detail)
+
+
 def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progress: bool = True,
               mesh_size_mm: float | None = None, mesh_bulk_mm: float | None = None) -> dict:
     """Run a study and write tables, profiles, figures and ``report.html`` into ``out_dir``.
@@ -301,6 +323,7 @@ def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progre
     config = config.with_mesh(mesh_size_mm, mesh_bulk_mm)
     out = Path(out_dir)
     _prepare_out(out)
+    _warn_if_long(config)
     t0 = time.perf_counter()
     cases, outputs, maps, rows, in_paper = _run_fea(config, out / "fea", progress)
     table = format_table(rows) if rows else ""

@@ -179,8 +179,15 @@ def run_surrogate_sweep(axes: dict, out_dir, *, validate: int = 3, tol: float = 
         raise ValueError(f"validate={validate!r} must be an int >= 0")
     if not (0 < tol < 1):
         raise ValueError(f"tol={tol!r} must be in (0, 1)")
+    from pipeline.bounds import MAX_FEA_CASES, MAX_SURROGATE_CASES, check_count, product_count
+
+    if validate > MAX_FEA_CASES:
+        raise ValueError(f"validate={validate} is outside the valid range 0..{MAX_FEA_CASES} (full FEA solves)")
     core = {k: [PARAMETERS[k].default] for k in ("coverage", "t0_um", "polish")}
-    cases = fea_grid(**{**core, **axes})
+    axes = {**core, **axes}
+    check_count(product_count(len(v) if isinstance(v, (list, tuple)) else 1 for v in axes.values()),
+                "cases", MAX_SURROGATE_CASES, "the product of the axes' value counts; give fewer values")
+    cases = fea_grid(**axes)
     domain, _ = _domain_for(cases)
     ident = json.dumps({"domain": [domain.t0_um, domain.polish, domain.coverages], "tol": tol,
                         "seed": seed}, sort_keys=True)

@@ -218,7 +218,7 @@ def test_rules_checked(kw, fragment):
 
 @pytest.mark.parametrize("n", [0, -3])
 def test_campaign_size_at_least_one(n, tmp_path, capsys):
-    with pytest.raises(ValueError, match=f"n_cases={n} must be an integer >= 1"):
+    with pytest.raises(ValueError, match=f"n_cases={n} must be an integer in the valid range 1\\.\\."):
         CampaignConfig(n_cases=n)
     assert main(["diagnose", "--validate", f"--cases={n}", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()

@@ -65,10 +65,10 @@ def test_psf_nyquist_limit_is_lambda_f_over_d():
 
 
 @pytest.mark.parametrize("args,needle", [
-    (["psf", "--detector-step-um", "0"], "detector_step_um=0.0"),
-    (["psf", "--window-um", "nan"], "window_um=nan"),
-    (["psf", "--wavelength-um", "4.5"], "wavelength_um=4.5"),
-    (["lsf", "--pixel-scale-mas", "100", "--wavelength-um", "4.5"], "wavelength_um=4.5"),
+    (["psf", "--detector-step-um", "0"], "--detector-step-um 0.0 must be"),
+    (["psf", "--window-um", "nan"], "--window-um nan must be"),
+    (["psf", "--wavelength-um", "4.5"], "--wavelength-um 4.5 in order"),
+    (["lsf", "--pixel-scale-mas", "100", "--wavelength-um", "4.5"], "--wavelength-um 4.5 in order"),
 ])
 def test_optics_commands_fail_in_one_line(args, needle, tmp_path, capsys):
     base = ["--grating", "J", "--quilt-pv-um", "0", "--out", str(tmp_path / "o")]

@@ -144,8 +144,14 @@ class CampaignConfig:
     criteria: Criteria = Criteria(heldout_top=1, pair_from=2)
 
     def __post_init__(self) -> None:
-        if isinstance(self.n_cases, bool) or not isinstance(self.n_cases, int) or self.n_cases < 1:
-            raise ValueError(f"CampaignConfig: n_cases={self.n_cases!r} must be an integer >= 1")
+        from pipeline.bounds import MAX_CAMPAIGN_CASES
+
+        if (isinstance(self.n_cases, bool) or not isinstance(self.n_cases, int)
+                or not 1 <= self.n_cases <= MAX_CAMPAIGN_CASES):
+            raise ValueError(f"CampaignConfig: n_cases={self.n_cases!r} must be an integer in the valid range "
+                             f"1..{MAX_CAMPAIGN_CASES}")
+        if isinstance(self.workers, bool) or not isinstance(self.workers, int) or self.workers < 1:
+            raise ValueError(f"CampaignConfig: workers={self.workers!r} must be an integer >= 1")
         if self.truth not in TRUTHS:
             raise ValueError(f"CampaignConfig: truth={self.truth!r} is not one of {list(TRUTHS)}")
         if self.case_types is None:
@@ -497,8 +503,11 @@ def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None, progres
 
 
 def write_campaign(result: dict, out_dir) -> Path:
+    from pipeline.io_common import atomic_write
+
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     p = out / "campaign.json"
-    p.write_text(json.dumps(result, indent=1, default=float))
+    with atomic_write(p) as fh:
+        fh.write(json.dumps(result, indent=1, default=float))
     return p

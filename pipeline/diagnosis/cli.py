@@ -22,9 +22,17 @@ def _criteria(args, base=None):
 
 
 def _run(args) -> int:
+    from pipeline.io_common import ensure_writable_dir
+
     if args.validate:
-        if args.cases < 1:
-            raise ValueError(f"--cases {args.cases} must be >= 1 (campaign cases)")
+        from pipeline.bounds import MAX_CAMPAIGN_CASES, campaign_seconds, max_workers, warn_if_long
+
+        if not 1 <= args.cases <= MAX_CAMPAIGN_CASES:
+            raise ValueError(f"--cases {args.cases} is outside the valid range 1..{MAX_CAMPAIGN_CASES} "
+                             "(campaign cases)")
+        if not 1 <= args.workers <= max_workers():
+            raise ValueError(f"--workers {args.workers} is outside the valid range 1..{max_workers()} (campaign "
+                             "worker processes: twice this machine's cores)")
         from .campaign import PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, parse_types, run_campaign, write_campaign
 
         cfg = CampaignConfig(n_cases=args.cases, seed=args.seed, workers=args.workers,
@@ -33,6 +41,9 @@ def _run(args) -> int:
                              only_types=parse_types(args.types, args.truth), discrepancy=args.discrepancy,
                              truth=args.truth)
         cfg = replace(cfg, criteria=_criteria(args, cfg.criteria))
+        ensure_writable_dir(args.out, "--out")  # before the campaign, not after it
+        warn_if_long(campaign_seconds(args.cases, args.workers, args.profile_map_K is not None, args.psf_image),
+                     "diagnose", f"{args.cases} campaign cases on {args.workers} worker(s)")
         res = run_campaign(cfg, cache_dir=args.cache_dir)
         path = write_campaign(res, args.out)
         print(json.dumps(res["summary"], indent=1))
@@ -42,10 +53,13 @@ def _run(args) -> int:
         print("cryograting diagnose: MANIFEST is required unless --validate is given", file=sys.stderr)
         return 2
     from .engine import diagnose
+    from .manifest import load_manifest
     from .report import write_report
 
     effects = tuple(args.effects.split(",")) if args.effects else None
-    d = diagnose(args.manifest, effects=effects, cache_dir=args.cache_dir, heldout=not args.no_heldout,
+    manifest = load_manifest(args.manifest, allow_outside=args.allow_outside_paths)
+    ensure_writable_dir(args.out, "--out")  # before the FEA and the fits, not after them
+    d = diagnose(manifest, effects=effects, cache_dir=args.cache_dir, heldout=not args.no_heldout,
                  criteria=_criteria(args))
     j, h = write_report(d, args.out)
     best = d.best
@@ -61,6 +75,8 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                    help="cache of nominal FEA maps (default: ~/.cache/cryograting/diagnosis)")
     p.add_argument("--effects", default=None, help="comma-separated library effects to try (default: all)")
     p.add_argument("--no-heldout", action="store_true", help="skip the held-out validation")
+    p.add_argument("--allow-outside-paths", action="store_true",
+                   help="let the manifest name files outside its own directory (absolute paths elsewhere, ../)")
     p.add_argument("--n-eff-from", default="nominal", choices=("nominal", "best_fit"),
                    help="residual whose correlation sets the effective samples the score counts: nominal "
                         "(conservative, default) or best_fit (the best finding's residual: an optimistic bound on "
@@ -105,15 +121,14 @@ def register(subparsers) -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    from pipeline.errors import command_options, pop_debug, run_command
+
+    argv, debug = pop_debug(argv)
     ap = argparse.ArgumentParser(prog="cryograting")
     sub = ap.add_subparsers(dest="command", required=True)
     register(sub)
     args = ap.parse_args(argv)
-    try:
-        return args.func(args)
-    except ValueError as exc:
-        print(f"cryograting diagnose: error: {exc}", file=sys.stderr)
-        return 2
+    return run_command(args.func, args, args.command, debug, command_options(ap, args.command, args))
 
 
 if __name__ == "__main__":

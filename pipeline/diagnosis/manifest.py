@@ -52,8 +52,10 @@ pedestal, negative (background-subtracted) samples, any centring and any offset 
 they are handed to the fit with a robust floor (20th percentile) removed and scaled to
 unit line peak, so ``noise_rel`` is a fraction of the line's peak above background, and
 a line far from the origin (in detector coordinates) is moved to it (``origin_um``).
-Relative paths are relative to the manifest. Every error names the measurement and
-the field; unknown fields are refused with the valid ones.
+Relative paths are relative to the manifest, and every path must stay in the manifest's
+directory (no absolute path elsewhere, no ``..``) unless ``--allow-outside-paths``
+(``allow_outside=True``) is given. Every error names the measurement and the field;
+unknown fields are refused with the valid ones.
 """
 
 from __future__ import annotations
@@ -67,9 +69,10 @@ import numpy as np
 
 from fea.case import PARAMETERS, FEACase
 
-__all__ = ["Simulation", "MESH_SPECS", "NOMINAL_SIMULATION", "Measurement", "Manifest", "SurfaceData", "ProfileData", "PsfImageData",
-           "MEASUREMENT_KEYS", "SIMULATION_KEYS", "recentre", "unit_line_peak", "unknown_keys_error",
-           "load_manifest", "parse_manifest", "load_data"]
+__all__ = ["Simulation", "MESH_SPECS", "NOMINAL_SIMULATION", "Measurement", "Manifest", "SurfaceData", "ProfileData",
+           "PsfImageData", "MEASUREMENT_KEYS", "SIMULATION_KEYS", "NOISE_RANGES", "ALLOW_OUTSIDE_FLAG", "recentre",
+           "resolve_data_path", "unit_line_peak", "unknown_keys_error", "load_manifest", "parse_manifest",
+           "load_data"]
 
 #: Named FEA meshes of the nominal model (element size near surfaces / in the bulk, mm); see
 #: ``benchmarks/results_mesh_convergence.md``: P/V_center of "default" is 1.2-1.6 %,
@@ -95,6 +98,14 @@ MEASUREMENT_KEYS = {
 SIMULATION_KEYS = (*_SIMULATION_FEA_KEYS, "mesh", "sag_file")
 #: Fraction of a profile's or image's samples at or below its floor (background estimate).
 FLOOR_PERCENTILE = 20.0
+#: Valid noise levels: ``noise_rel`` is a fraction of the line's peak (1e-6: a 20-bit
+#: detector's quantisation; 1: the noise as large as the line), ``noise_um`` a map's RMS
+#: noise in µm (1e-6 µm = 1 pm, far below any interferometer; 10 µm, 40x the nominal
+#: map's RMS). Outside them the fit's weights (1/noise^2) overflow or the data hold no line.
+NOISE_RANGES = {"noise_rel": (1e-6, 1.0), "noise_um": (1e-6, 10.0)}
+#: The flag that lets a manifest name files outside its own directory (CLI; the API's is
+#: ``allow_outside=True``).
+ALLOW_OUTSIDE_FLAG = "--allow-outside-paths"
 
 
 @dataclass(frozen=True)
@@ -268,7 +279,22 @@ def _grid_options(entry: dict, name: str) -> tuple:
     return (sp[0] if sp is not None and len(sp) == 1 else sp), ext
 
 
-def _measurement(entry: dict, index: int, base: Path) -> Measurement:
+def resolve_data_path(raw, base: Path, contained: bool, what: str) -> Path:
+    """A manifest's file path resolved against ``base`` (the manifest's directory).
+
+    With ``contained``, a path that leaves ``base`` (absolute elsewhere, ``..``, a link
+    pointing out) is refused: a manifest from elsewhere must not make the toolkit read any
+    file on the disk. ``what`` names the field in the message."""
+    path = Path(str(raw))
+    path = path if path.is_absolute() else base / path
+    if contained and not path.resolve().is_relative_to(base.resolve()):
+        raise ValueError(f"{what}={str(raw)!r} leaves the manifest's directory {base} (resolved to "
+                         f"{path.resolve()}); move the file beside the manifest, or allow it with "
+                         f"{ALLOW_OUTSIDE_FLAG} (API: allow_outside=True)")
+    return path
+
+
+def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -> Measurement:
     if not isinstance(entry, dict):
         raise ValueError(f"[[measurement]] #{index + 1} is a {type(entry).__name__}, not a table")
     name = str(entry.get("name", Path(str(entry.get("file", f"#{index}"))).stem))
@@ -280,15 +306,16 @@ def _measurement(entry: dict, index: int, base: Path) -> Measurement:
         raise unknown_keys_error(f"measurement {name!r} (kind {kind!r})", unknown, MEASUREMENT_KEYS[kind])
     if "file" not in entry:
         raise ValueError(f"measurement {name!r}: field 'file' is required")
-    path = Path(str(entry["file"]))
-    path = path if path.is_absolute() else base / path
+    path = resolve_data_path(entry["file"], base, contained, f"measurement {name!r}: file")
     if not path.is_file():
         raise _err(name, "file", str(entry["file"]), f"does not exist (resolved to {path})")
     noise_um = _number(entry, "noise_um", name)
     noise_rel = _number(entry, "noise_rel", name)
     for k, v in (("noise_um", noise_um), ("noise_rel", noise_rel)):
-        if v is not None and not v > 0:
-            raise _err(name, k, v, "must be > 0")
+        lo, hi = NOISE_RANGES[k]
+        if v is not None and not lo <= v <= hi:
+            raise _err(name, k, v, f"is outside the valid range [{lo:g}, {hi:g}]"
+                       + (" µm" if k == "noise_um" else " (fraction of the line's peak)"))
     if kind == "surface":
         t = _number(entry, "temperature_K", name, required=True)
         if not 20 <= t < 293:
@@ -336,9 +363,15 @@ def _measurement(entry: dict, index: int, base: Path) -> Measurement:
                        noise_rel=noise_rel)
 
 
-def parse_manifest(data: dict, base_dir: str | Path = ".", source: str = "") -> Manifest:
-    """Validate a manifest given as a dict (the parsed TOML); paths relative to ``base_dir``."""
-    base = Path(base_dir)
+def parse_manifest(data: dict, base_dir: str | Path | None = None, source: str = "",
+                   allow_outside: bool = False) -> Manifest:
+    """Validate a manifest given as a dict (the parsed TOML); paths relative to ``base_dir``.
+
+    With a ``base_dir`` (the manifest's directory), file paths must stay inside it unless
+    ``allow_outside``; without one, paths are taken as given (relative to the working
+    directory), as a Python caller wrote them."""
+    contained = base_dir is not None and not allow_outside
+    base = Path("." if base_dir is None else base_dir)
     top = set(data) - {"simulation", "measurement"}
     if top:
         raise unknown_keys_error("manifest", top, ("simulation", "measurement"))
@@ -348,14 +381,19 @@ def parse_manifest(data: dict, base_dir: str | Path = ".", source: str = "") -> 
         raise unknown_keys_error("[simulation]", unknown, SIMULATION_KEYS)
     if "sag_file" in sim:
         p = Path(str(sim["sag_file"]))
-        sim["sag_file"] = p if p.is_absolute() else base / p
+        sim["sag_file"] = resolve_data_path(p, base, contained, "[simulation] sag_file")
         if not sim["sag_file"].is_file():
             raise ValueError(f"[simulation] sag_file={str(p)!r} does not exist (resolved to {sim['sag_file']})")
     simulation = Simulation.from_params(sim)
     entries = data.get("measurement", [])
     if not isinstance(entries, list) or not entries:
         raise ValueError("manifest has no [[measurement]] entries")
-    ms = tuple(_measurement(e, i, base) for i, e in enumerate(entries))
+    from pipeline.bounds import MAX_MEASUREMENTS
+
+    if len(entries) > MAX_MEASUREMENTS:  # before any file is looked at
+        raise ValueError(f"manifest has {len(entries)} [[measurement]] entries, outside the valid range "
+                         f"1..{MAX_MEASUREMENTS}")
+    ms = tuple(_measurement(e, i, base, contained) for i, e in enumerate(entries))
     names = [m.name for m in ms]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -363,12 +401,15 @@ def parse_manifest(data: dict, base_dir: str | Path = ".", source: str = "") -> 
     return Manifest(simulation, ms, base, source)
 
 
-def load_manifest(path_or_obj) -> Manifest:
-    """A :class:`Manifest` from a TOML path, a dict, or a Manifest (returned as is)."""
+def load_manifest(path_or_obj, allow_outside: bool = False) -> Manifest:
+    """A :class:`Manifest` from a TOML path, a dict, or a Manifest (returned as is).
+
+    A file's data paths are relative to its directory and must stay inside it unless
+    ``allow_outside`` (CLI: ``--allow-outside-paths``)."""
     if isinstance(path_or_obj, Manifest):
         return path_or_obj
     if isinstance(path_or_obj, dict):
-        return parse_manifest(path_or_obj)
+        return parse_manifest(path_or_obj, allow_outside=allow_outside)
     path = Path(path_or_obj)
     if not path.is_file():
         raise ValueError(f"manifest {path} does not exist")
@@ -384,14 +425,18 @@ def load_manifest(path_or_obj) -> Manifest:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"manifest {path}: invalid TOML: {exc}") from None
-    return parse_manifest(data, path.parent, str(path))
+    return parse_manifest(data, path.parent, str(path), allow_outside)
 
 
 def _read_surface(m: Measurement) -> SurfaceData:
     from pipeline.interchange import read_sag_map
+    from pipeline.io_codev import GridUnknownError
 
     try:
         sm = read_sag_map(m.file, **m.read_options)
+    except GridUnknownError as exc:
+        remedy = "give extent_mm = [x0, x1, y0, y1] or spacing_mm = 0.5 (or [dx, dy]) (mm) in its [[measurement]]"
+        raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc.with_remedy(remedy)}") from None
     except ValueError as exc:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
     X, Y = sm.grid()
