@@ -32,7 +32,7 @@ def run_calibration(out_dir=None, *, mesh_size_mm: float | None = None, mesh_bul
     from pipeline.io_common import atomic_write, ensure_writable_dir
 
     if out_dir is not None:
-        ensure_writable_dir(out_dir)
+        ensure_writable_dir(out_dir, "--out")
     sizes = {k: v for k, v in (("mesh_size_mm", mesh_size_mm), ("mesh_bulk_mm", mesh_bulk_mm)) if v is not None}
     objects = FEACase.from_params(sizes).to_objects()
     model = prepare(objects.blank, objects.mesh, objects.substrate)

@@ -55,4 +55,4 @@ def test_calibrate_checks_its_output_and_mesh_before_solving(tmp_path, monkeypat
     assert main(["calibrate", "--out", str(blocker)]) == 2
     assert str(blocker) in capsys.readouterr().err
     assert main(["calibrate", "--mesh-size-mm", "0.01", "--mesh-bulk-mm", "0.02"]) == 2
-    assert "mesh_size_mm=0.01" in capsys.readouterr().err
+    assert "--mesh-size-mm 0.01" in capsys.readouterr().err  # the option as the command spells it
