@@ -298,3 +298,14 @@ def test_many_stale_case_files_give_a_bounded_number_of_warnings(tmp_path):
         res = run_sweep(square, cases, tmp_path, namespace="t", workers=1, progress=False)
     assert res.n_computed == 14 and [r["y"] for _, r in res] == [float(i * i) for i in range(14)]
     assert len(record) == 11 and "4 more cases" in str(record[-1].message)
+
+
+def test_a_nominal_map_cache_that_cannot_be_written_warns_and_the_map_is_returned(tmp_path, fake_fea):
+    from pipeline.diagnosis.nominal import fea_sag_map
+
+    calls, sag = fake_fea
+    blocker = tmp_path / "cache"
+    blocker.write_text("a file where the cache directory should be")
+    with pytest.warns(CacheWarning, match="not cached in"):
+        m = fea_sag_map(200.0, 0.75, "all", 80.0, "coarse", cache_dir=blocker)
+    assert calls == [200.0] and np.allclose(m.sag_um, sag)

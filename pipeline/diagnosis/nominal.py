@@ -9,6 +9,7 @@ indistinguishable on a single surface map.
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 from optics.sagmap import SagMap
@@ -102,7 +103,11 @@ def case_sag_map(sim: Simulation, spacing_mm: float = 0.5, cache_dir: str | Path
     out = SagMap(sm.x_mm, sm.y_mm, sm.sag_um, label, dict(key))
     if entry is not None:
         # atomic, with a unique temporary name per writer: parallel campaign workers may race on one key
-        store.save_arrays(entry, {"x_mm": out.x_mm, "y_mm": out.y_mm, "sag_um": out.sag_um})
+        try:
+            store.save_arrays(entry, {"x_mm": out.x_mm, "y_mm": out.y_mm, "sag_um": out.sag_um})
+        except OSError as exc:  # the map is computed: a cache that cannot be written costs a re-solve, not the run
+            warnings.warn(f"nominal FEA map not cached in {entry.payload.parent}: {exc.strerror or exc}",
+                          store.CacheWarning, stacklevel=2)
     return out
 
 
