@@ -60,7 +60,7 @@ import numpy as np
 
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
-from pipeline.interchange import write_psf_image_csv
+from pipeline.interchange import write_psf_image_csv, write_sag_map
 
 from .effects import LIBRARY
 from .engine import Criteria, diagnose
@@ -239,7 +239,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
             truth = {"height_um": h, "sigma_mm": w, "x0_mm": x0, "y0_mm": y0}
             extra = lambda x, y: h * np.exp(-((x - x0) ** 2 + (y - y0) ** 2) / (2 * w * w))
         m = synthetic_surface(t, rng, noise_um=cfg.noise_um, extra_um=extra)
-        np.savez(out / "map.npz", x_mm=m.x_mm, y_mm=m.y_mm, sag_um=m.sag_um)
+        write_sag_map(m, out / "map.npz")
         meas = [{"kind": "surface", "file": "map.npz", "temperature_K": SURFACE_T_K, "aperture_diameter_mm": 137.0}]
         return {"simulation": sim, "measurement": meas}, truth
     scale, params, distortion = 1.0, {}, None
@@ -281,7 +281,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         # Drawn after the profiles: the profiles are those of the profile-only campaign.
         dT = truth.get("temperature_offset_K", 0.0)
         m = synthetic_surface(t.scaled(thermal_factor(cfg.profile_map_K + dT, _COLD_K + dT)), rng, noise_um=cfg.noise_um)
-        np.savez(out / "map.npz", x_mm=m.x_mm, y_mm=m.y_mm, sag_um=m.sag_um)
+        write_sag_map(m, out / "map.npz")
         meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K, "aperture_diameter_mm": 137.0})
     if cfg.psf_image is not None:
         # Drawn last: the profiles (and map) are those of the campaign without the image.
