@@ -275,7 +275,7 @@ def test_pair_gives_way_to_a_member_that_explains():
     """A pair on top that explains too little where it acts gives way to a member that
     explains alone (significant, half the excess where it acts, not overfit); otherwise the
     ranking stands."""
-    from pipeline.diagnosis.engine import Criteria, Finding, _explains, _member_explains
+    from pipeline.diagnosis.engine import Criteria, Finding, explains, member_explains
 
     def f(name, dbic, ex, sig=True, overfit=False):
         return Finding(name, tuple(name.split("+")), {}, {}, dbic, dbic, 1.0, 0.5, 0.5, 0.75, ex,
@@ -283,13 +283,13 @@ def test_pair_gives_way_to_a_member_that_explains():
 
     c = Criteria()
     pair, slit, coll = f("collimator_wfe+slit_width", -229.0, 0.49), f("slit_width", -198.7, 0.92), f("collimator_wfe", -28.4, 0.1)
-    assert not _explains(pair, c) and _explains(slit, c)
-    out, note = _member_explains(None, [pair, coll, slit], c, heldout=False)
+    assert not explains(pair, c) and explains(slit, c)
+    out, note = member_explains(None, [pair, coll, slit], c, heldout=False)
     assert [x.effect for x in out] == ["slit_width", "collimator_wfe+slit_width", "collimator_wfe"]
     assert "slit_width alone explains 0.92" in note and "only 0.49" in note
     for member in (f("slit_width", -198.7, 0.92, sig=False), f("slit_width", -198.7, 0.42),
                    f("slit_width", -198.7, 0.92, overfit=True), f("temperature", -198.7, 0.92)):
-        out, note = _member_explains(None, [pair, member], c, heldout=False)
+        out, note = member_explains(None, [pair, member], c, heldout=False)
         assert out[0] is pair and note == ""
 
 
@@ -309,7 +309,7 @@ def test_evidence_counts_the_residual_after_the_best_fit(tmp_path):
     a, b = nominal.finding("astigmatism"), post.finding("astigmatism")
     assert b.parameters == pytest.approx(a.parameters, rel=1e-6)
     # The fit's own error bars are the same; the model-choice term (the move to a companion
-    # not adopted, engine._mismatch_errors) is added only to the findings refitted with
+    # not adopted, ranking.mismatch_errors) is added only to the findings refitted with
     # companions, which the re-count can change: here the quilt shape's 0.0004 µm move.
     assert b.uncertainties == pytest.approx(a.uncertainties, rel=0.01)
     ratio = post.baseline["n_count"]["map"] / nominal.baseline["n_count"]["map"]
@@ -339,7 +339,7 @@ def test_a_finding_pinned_at_its_prior_bounds_is_no_explanation(tmp_path):
     """A blank deformed 4x the simulation's (amplitude_scale's prior ends at 3): the fit of
     the scale stops at the bound, so the finding is reported ``at_bound`` and the verdict is
     not ``explained`` by it; a companion's parameter at its bound does not pin the finding."""
-    from pipeline.diagnosis.engine import Criteria, Finding, _explains
+    from pipeline.diagnosis.engine import Criteria, Finding, explains
 
     d = diagnose(_map(tmp_path, scale=4.0), heldout=False)
     a = d.finding("amplitude_scale")
@@ -349,7 +349,7 @@ def test_a_finding_pinned_at_its_prior_bounds_is_no_explanation(tmp_path):
     c = Criteria()
     f = Finding("amplitude_scale", ("amplitude_scale",), {"scale_A": 1.2, "bow_defocus_um": 0.2}, {}, -50.0, -50.0,
                 1.0, 0.3, 0.7, 0.9, 0.9, significant=True, companions=("blank_bow",), at_bound=())
-    assert _explains(f, c)
+    assert explains(f, c)
     from dataclasses import replace
 
-    assert not _explains(replace(f, at_bound=("scale_A",)), c)
+    assert not explains(replace(f, at_bound=("scale_A",)), c)

@@ -12,7 +12,8 @@ import pytest
 
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.effects import LIBRARY, applicable_effects
-from pipeline.diagnosis.engine import Finding, _mismatch_errors
+from pipeline.diagnosis.engine import Finding
+from pipeline.diagnosis.ranking import mismatch_errors
 from pipeline.diagnosis.forward import blank_bow_map, bow_um
 from pipeline.diagnosis.nominal import thermal_factor
 from pipeline.diagnosis.synth import synthetic_surface
@@ -77,10 +78,10 @@ def test_mismatch_errors():
     parameters; parameters that are not its own (a companion's) keep their error."""
     a = _finding(1.0, 0.1, c=5.0)
     a = Finding(a.effect, a.effects, a.parameters, {"a": 0.1, "c": 0.2}, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0)
-    e = _mismatch_errors(a, [_finding(1.3, 0.1), _finding(0.6, 0.1)], {"a"})
+    e = mismatch_errors(a, [_finding(1.3, 0.1), _finding(0.6, 0.1)], {"a"})
     assert e["a"] == pytest.approx(math.hypot(0.1, 0.4))
     assert e["c"] == 0.2
-    assert _mismatch_errors(a, [], {"a"})["a"] == 0.1
+    assert mismatch_errors(a, [], {"a"})["a"] == 0.1
 
 
 def test_campaign_map_beside_profiles(tmp_path):

@@ -57,7 +57,7 @@ and ``quilt_shape`` says how its shape differs. ``rho`` scales ``F_y`` with ``F_
 it is only fitted where a map or a PSF image is in the data (``Parameter.kinds``).
 
 ``companion`` effects (``plating_gradient``, ``blank_bow``) are candidates on their own *and* are refitted
-jointly with the best-ranked other candidates (:class:`~pipeline.diagnosis.engine.Criteria`
+jointly with the best-ranked other candidates (:class:`~pipeline.diagnosis.criteria.Criteria`
 ``companion_top``); the joint fit replaces a finding only where the data support it
 (BIC lower by ``companion_bic``). The finding keeps its own name and lists the companion in
 ``Finding.companions``. Reason: a plating-thickness gradient is present at some level on

@@ -29,7 +29,7 @@ length of measurement i's post-fit residual in samples, a Newey-West-type estima
 :func:`_long_run_s2`). Mismatch absorbed *into* the parameters is invisible to any
 residual-based estimate; the engine adds in quadrature how far the parameters move when
 a known mismatch the data do not rule out is modelled (the ``plating_gradient`` and
-``blank_bow`` companions; :func:`pipeline.diagnosis.engine._mismatch_errors`).
+``blank_bow`` companions; :func:`pipeline.diagnosis.ranking.mismatch_errors`).
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ class Problem:
     weights: dict = field(default_factory=dict)
     n_eff: dict = field(default_factory=dict)
     noise: dict = field(default_factory=dict)
-    n_count: dict | None = None  # samples counted by the score, if not n_eff (engine.post_fit_n_eff)
+    n_count: dict | None = None  # samples counted by the score, if not n_eff (gap.post_fit_n_eff)
     #: The weights are absolute (1 / the errors' long-run sigma, :mod:`.error_model`): the
     #: score is then a chi^2, not a likelihood with a common variance factor profiled out.
     absolute: bool = False

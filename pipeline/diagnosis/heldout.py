@@ -22,8 +22,9 @@ import math
 
 import numpy as np
 
-from .engine import all_effects, parameters_of
+from .finding import all_effects
 from .fitting import Problem, fit
+from .ranking import parameters_of
 
 __all__ = ["folds", "heldout_check"]
 

@@ -1,0 +1,55 @@
+"""The thresholds of the diagnosis's decision logic (see ``docs/diagnosis.md``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .error_model import ERROR_MODELS
+
+__all__ = ["Criteria", "N_EFF_SOURCES"]
+
+
+N_EFF_SOURCES = ("nominal", "best_fit")
+
+
+@dataclass(frozen=True)
+class Criteria:
+    """Thresholds of the decision logic (``docs/diagnosis.md``), passed explicitly."""
+
+    min_delta_bic: float = 10.0
+    min_variance_explained: float = 0.5
+    heldout_ratio: float = 0.5
+    pair_extra_bic: float = 10.0
+    pair_from: int = 3
+    degenerate_bic: float = 2.0
+    degenerate_prediction: float = 0.2
+    no_gap_ratio: float = 1.3
+    no_gap_z: float = 5.0
+    heldout_top: int = 3
+    companion_top: int = 2
+    companion_bic: float = 6.0
+    absorb_test_bic: float = 25.0
+    n_eff_from: str = "nominal"
+    #: "n_eff": effective-sample counts (``n_eff_from``); "two_part": white noise plus a
+    #: smooth mismatch measured from the post-fit residual (:mod:`.error_model`; then
+    #: ``n_eff_from`` is not used).
+    error_model: str = "n_eff"
+
+    def __post_init__(self) -> None:
+        if self.n_eff_from not in N_EFF_SOURCES:
+            raise ValueError(f"Criteria: n_eff_from={self.n_eff_from!r} must be one of {N_EFF_SOURCES}")
+        if self.error_model not in ERROR_MODELS:
+            raise ValueError(f"Criteria: error_model={self.error_model!r} must be one of {ERROR_MODELS}")
+        ranges = {"min_delta_bic": (0.0, math.inf), "min_variance_explained": (0.0, 1.0),
+                  "heldout_ratio": (0.0, 1.0), "pair_extra_bic": (0.0, math.inf), "pair_from": (0, 20),
+                  "degenerate_bic": (0.0, math.inf), "degenerate_prediction": (0.0, 1.0),
+                  "no_gap_ratio": (1.0, math.inf), "no_gap_z": (0.0, math.inf), "heldout_top": (0, 20),
+                  "companion_top": (0, 20), "companion_bic": (0.0, math.inf), "absorb_test_bic": (0.0, math.inf)}
+        for name, (lo, hi) in ranges.items():
+            v = getattr(self, name)
+            integer = isinstance(lo, int)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or (integer and not float(v).is_integer()) \
+                    or not lo <= v <= hi:
+                kind = "an integer" if integer else "a number"
+                raise ValueError(f"Criteria: {name}={v!r} must be {kind} in [{lo}, {hi}]")
