@@ -18,7 +18,7 @@ from optics.pupil import (DEFAULT_COLLIMATOR_ZERNIKE_UM, centred_axis, circular_
                           collimator_opd_um, grating_opd_um, pupil_field, pupil_shift_along_slit)
 from optics.sagmap import SagMap
 
-__all__ = ["check_phase_sampling", "LsfSettings", "LineProfileResult", "line_profile", "otf_cutoff_per_um", "point_psf", "pupil_rows"]
+__all__ = ["LsfSettings", "LineProfileResult", "line_profile", "otf_cutoff_per_um", "point_psf", "pupil_rows"]
 
 
 @dataclass(frozen=True)
@@ -115,33 +115,7 @@ def pupil_rows(grating: Grating, wavelength_um: float, xi_mm: np.ndarray, eta_mm
     opd = collimator_opd_um(xi_mm, eta_mm, collimator_zernike_um, R)
     if sag is not None:
         opd = opd + grating_opd_um(sag, xi_mm, eta_mm, grating.incidence_deg, beta_deg, shift_mm, amp)
-    check_phase_sampling(opd, amp, wavelength_um)
     return pupil_field(amp, opd, wavelength_um)
-
-
-def check_phase_sampling(opd_um: np.ndarray, amp: np.ndarray, wavelength_um: float) -> None:
-    """Refuse a pupil wavefront that changes by half a wave or more between neighbouring
-    samples inside the aperture: its phase is then aliased on the pupil grid and the PSF is
-    silently wrong (a grating quilt of 1e12 µm P/V, say). The paper's quilts (0.1-1 µm P/V)
-    change by 1e-3 waves per sample.
-
-    Raises
-    ------
-    ValueError
-        Naming the largest step (waves per sample) and the valid range (< 0.5).
-    """
-    inside = np.asarray(amp) > 0
-    worst = 0.0
-    for axis in (0, 1):
-        both = np.logical_and(np.take(inside, range(1, inside.shape[axis]), axis=axis),
-                              np.take(inside, range(inside.shape[axis] - 1), axis=axis))
-        step = np.abs(np.diff(opd_um, axis=axis))[both]
-        if step.size:
-            worst = max(worst, float(np.max(step)) / wavelength_um)
-    if not worst < 0.5:
-        raise ValueError(f"pupil wavefront steps {worst:.3g} waves between neighbouring pupil samples at "
-                         f"{wavelength_um:g} µm; valid: < 0.5 (else the phase is aliased): the grating deformation "
-                         "or the collimator error is too large for this model")
 
 
 def line_profile(grating: str | Grating, wavelength_um: float, pixel_scale_mas: int | str | PixelScale,

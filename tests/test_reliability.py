@@ -115,25 +115,3 @@ def test_cold_above_warm_is_refused_unless_heating_is_asked_for():
     with pytest.raises(ConfigError, match=r"cold_K.*must be below warm_K"):
         loads_study_config("[fea]\ncold_K = 295\n")
 
-
-
-def test_an_aliased_pupil_phase_is_refused_and_the_paper_quilt_is_not():
-    """A quilt whose wavefront steps half a wave or more between pupil samples would alias
-    on the pupil grid (a silently wrong PSF): refused with the step in waves. Expected
-    steps from the quilt's slope: ~2 pi P/V / 21 mm times the pupil step (0.43 mm here),
-    doubled on reflection: 1e-3 waves for the paper's 0.2 µm, ~1e3 waves for 1e5 µm."""
-    from optics.lineprofile import check_phase_sampling, pupil_rows
-    from optics.sagmap import quilt_sag_map
-
-    g = get_grating("J")
-    xi = eta = np.linspace(-55.0, 55.0, 257)
-    beta = g.incidence_deg  # any angle near the design's: the check is about sampling
-    field = pupil_rows(g, 1.25, xi, eta, beta, quilt_sag_map(0.2), (0.0, 0.0), None)
-    assert np.isfinite(field).all()
-    with pytest.raises(ValueError, match=r"waves between neighbouring pupil samples.*valid: < 0.5"):
-        pupil_rows(g, 1.25, xi, eta, beta, quilt_sag_map(1e5), (0.0, 0.0), None)
-    amp = np.ones((3, 3))
-    check_phase_sampling(np.array([[0.0, 0.3, 0.6]] * 3), amp, 1.25)  # 0.24 waves per sample: fine
-    with pytest.raises(ValueError, match="0.56 waves"):
-        check_phase_sampling(np.array([[0.0, 0.7, 1.4]] * 3), amp, 1.25)
-    check_phase_sampling(np.array([[0.0, 0.7, 1.4]] * 3), np.zeros((3, 3)), 1.25)  # outside the aperture
