@@ -19,6 +19,13 @@ from pipeline.interchange import load_sag_map  # noqa: E402  (.npz/.nc/.int/.dat
 from pipeline.io_common import atomic_path, atomic_write, ensure_writable_dir  # noqa: E402
 
 
+#: Largest analytic quilt P/V (µm) the line-profile and PSF pupils sample without aliasing:
+#: along the dispersion the quilt's wavefront changes by 0.22 / 0.40 / 0.76 waves between
+#: neighbouring pupil samples at 1 / 2 / 4 µm P/V (J, 1.25 µm, 25 mas; measured on the
+#: pupil field), and a phase is aliased past 0.5. The paper's quilts are 0.1-1 µm.
+MAX_QUILT_PV_UM = 2.0
+
+
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--grating", required=True, help="J, H, K or HK")
     p.add_argument("--wavelength-um", type=float, required=True, help="line wavelength (µm)")
@@ -39,8 +46,9 @@ def _sag_from_args(a):
 
     if a.sag:
         return load_sag_map(a.sag)
-    if not (np.isfinite(a.quilt_pv_um) and a.quilt_pv_um >= 0):
-        raise ValueError(f"--quilt-pv-um {a.quilt_pv_um} must be a finite number >= 0 (µm)")
+    if not (np.isfinite(a.quilt_pv_um) and 0 <= a.quilt_pv_um <= MAX_QUILT_PV_UM):
+        raise ValueError(f"--quilt-pv-um {a.quilt_pv_um} must be a finite number >= 0 and <= {MAX_QUILT_PV_UM:g} (µm; "
+                         "a steeper quilt is aliased by the pupil sampling)")
     return None if a.quilt_pv_um == 0 else quilt_sag_map(a.quilt_pv_um, form=a.quilt_form)
 
 

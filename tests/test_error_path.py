@@ -284,7 +284,7 @@ def test_a_config_key_is_not_renamed_to_an_option_the_user_did_not_give(tmp_path
     assert "--mesh-size-mm" not in _one_error_line(capsys, "mesh_size_mm")
 
 
-@pytest.mark.parametrize("value", ["-1", "nan", "inf"])
+@pytest.mark.parametrize("value", ["-1", "nan", "inf", "1e12", "2.5"])
 def test_quilt_amplitude_named_as_the_option(value, tmp_path, capsys):
     assert main(["lsf", "--grating", "J", "--wavelength-um", "1.25", "--pixel-scale-mas", "25", "--quilt-pv-um",
                  value, "--out", str(tmp_path / "o")]) == 2
