@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import pipeline.config as config_module
+from cli_checks import never, one_error_line
 from pipeline.bounds import (LONG_RUN_S, MAX_CAMPAIGN_CASES, MAX_FEA_CASES, MAX_PROFILE_JOBS, SECONDS,
                              campaign_seconds, warn_if_long)
 from pipeline.cli import main
@@ -20,20 +21,9 @@ from pipeline.diagnosis.campaign import CampaignConfig
 from pipeline.diagnosis.manifest import parse_manifest
 
 
-def _never(*a, **k):
-    raise AssertionError("work started although the input should have been refused first")
-
-
-def _one_error_line(capsys, needle):
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "Traceback" not in err[0], err
-    assert needle in err[0], err[0]
-    return err[0]
-
-
 # ------------------------------------------------------------------ bounded work
 def test_study_case_cap_refused_before_any_case_is_validated(monkeypatch):
-    monkeypatch.setattr(config_module, "_check_case", _never)
+    monkeypatch.setattr(config_module, "_check_case", never)
     text = "[fea]\nt0_um = {start = 0.1, stop = 2000, num = %d}\n" % (MAX_FEA_CASES + 1)
     with pytest.raises(ConfigError, match=rf"fea: {MAX_FEA_CASES + 1} FEA cases is outside the valid range "
                                           rf"1\.\.{MAX_FEA_CASES}"):
@@ -102,10 +92,10 @@ def test_config_check_is_linear_in_the_number_of_cases(monkeypatch):
 
 
 def test_sweep_past_its_cap_is_refused_before_anything_is_written(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("pipeline.fea_cases.run_fea_sweep", _never)
+    monkeypatch.setattr("pipeline.fea_cases.run_fea_sweep", never)
     out = tmp_path / "sweep"
     assert main(["sweep", "--param", "t0_um=1:2000:0.1", "--out", str(out), "--quiet"]) == 2
-    _one_error_line(capsys, f"19991 sweep cases (the product of the value lists given) is outside the valid "
+    one_error_line(capsys, f"19991 sweep cases (the product of the value lists given) is outside the valid "
                             f"range 1..{MAX_FEA_CASES}")
     assert not out.exists()
 
@@ -120,12 +110,12 @@ def test_fea_sweep_api_cap():
 
 @pytest.mark.parametrize("n", [0, -1, MAX_CAMPAIGN_CASES + 1])
 def test_campaign_size_outside_its_range_is_refused(n, tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", _never)
+    monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", never)
     with pytest.raises(ValueError, match=rf"n_cases={n} must be an integer in the valid range "
                                          rf"1\.\.{MAX_CAMPAIGN_CASES}"):
         CampaignConfig(n_cases=n)
     assert main(["diagnose", "--validate", "--cases", str(n), "--out", str(tmp_path / "o")]) == 2
-    _one_error_line(capsys, f"--cases {n} is outside the valid range 1..{MAX_CAMPAIGN_CASES}")
+    one_error_line(capsys, f"--cases {n} is outside the valid range 1..{MAX_CAMPAIGN_CASES}")
     with pytest.raises(ValueError, match="workers=0 must be an integer >= 1"):
         CampaignConfig(workers=0)
 
@@ -183,10 +173,10 @@ def test_manifest_measurement_count_is_capped_before_any_file_is_read(tmp_path):
 def test_worker_count_outside_its_range_is_refused_before_work(command, workers, tmp_path, capsys, monkeypatch):
     from pipeline.bounds import max_workers
 
-    monkeypatch.setattr("pipeline.fea_cases.run_fea_sweep", _never)
-    monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", _never)
+    monkeypatch.setattr("pipeline.fea_cases.run_fea_sweep", never)
+    monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", never)
     assert main([*command, "--workers", str(workers), "--out", str(tmp_path / "o")]) == 2
-    _one_error_line(capsys, f"--workers {workers} is outside the valid range 1..{max_workers()}")
+    one_error_line(capsys, f"--workers {workers} is outside the valid range 1..{max_workers()}")
 
 
 def test_config_check_states_the_estimate(capsys):
@@ -197,10 +187,10 @@ def test_config_check_states_the_estimate(capsys):
 
 
 def test_surrogate_validation_solves_are_capped(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("pipeline.surrogate_sweep.run_surrogate_sweep", _never)
+    monkeypatch.setattr("pipeline.surrogate_sweep.run_surrogate_sweep", never)
     assert main(["sweep", "--surrogate", "--t0-um", "100", "200", "--validate", str(MAX_FEA_CASES + 1),
                  "--out", str(tmp_path / "o")]) == 2
-    _one_error_line(capsys, f"--validate {MAX_FEA_CASES + 1} is outside the valid range 0..{MAX_FEA_CASES}")
+    one_error_line(capsys, f"--validate {MAX_FEA_CASES + 1} is outside the valid range 0..{MAX_FEA_CASES}")
 
 
 def test_surrogate_sweep_api_caps():

@@ -17,22 +17,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cli_checks import never, one_error_line
 from pipeline.cli import main
 from pipeline.diagnosis.manifest import load_manifest, parse_manifest
 from pipeline.errors import cli_spelling, describe, run_command
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def _never(*a, **k):
-    raise AssertionError("work started although the input should have been refused first")
-
-
-def _one_error_line(capsys, needle):
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "Traceback" not in err[0], err
-    assert needle in err[0], err[0]
-    return err[0]
 
 
 # ------------------------------------------------------------------ one error path
@@ -58,7 +48,7 @@ def test_every_user_error_is_one_line_and_exit_2(exc, needle, capsys):
 
     args = SimpleNamespace(sag="in.npz", out="o", quiet=False)
     assert run_command(fail, args, "psf") == 2
-    _one_error_line(capsys, needle)
+    one_error_line(capsys, needle)
     with pytest.raises(type(exc)):  # --debug: the exception and its traceback
         run_command(fail, args, "psf", debug=True)
 
@@ -68,7 +58,7 @@ def test_interrupt_is_one_line_and_exit_130(capsys):
         raise KeyboardInterrupt
 
     assert run_command(interrupted, None, "run") == 130
-    _one_error_line(capsys, "cryograting run: interrupted")
+    one_error_line(capsys, "cryograting run: interrupted")
 
 
 def test_a_bug_keeps_its_traceback():
@@ -110,7 +100,7 @@ def test_int_without_grid_names_what_the_command_can_do(command, tmp_path, capsy
     argv = [command, "--grating", "J", "--wavelength-um", "1.25", "--sag", str(f), "--out", str(tmp_path / "o")]
     argv += ["--pixel-scale-mas", "25"] if command == "lsf" else []
     assert main(argv) == 2
-    line = _one_error_line(capsys, "add EXTENT_MM x0 x1 y0 y1")
+    line = one_error_line(capsys, "add EXTENT_MM x0 x1 y0 y1")
     assert "spacing_mm" not in line and "extent_mm" not in line  # options that lsf/psf do not have
 
 
@@ -122,7 +112,7 @@ def test_garbage_sag_files_fail_in_one_line_naming_the_file(name, content, tmp_p
     f.write_bytes(content)
     assert main(["psf", "--grating", "J", "--wavelength-um", "1.25", "--sag", str(f),
                  "--out", str(tmp_path / "o")]) == 2
-    _one_error_line(capsys, name)
+    one_error_line(capsys, name)
 
 
 def test_garbage_fe_result_fails_in_one_line(tmp_path, capsys):
@@ -139,16 +129,16 @@ def test_undecodable_config_fails_in_one_line(text, tmp_path, capsys):
     f = tmp_path / "study.toml"
     f.write_bytes(text)
     assert main(["config", "--check", str(f)]) == 2
-    _one_error_line(capsys, "study.toml")
+    one_error_line(capsys, "study.toml")
 
 
 def test_calibrate_checks_its_output_before_solving(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("fea.api.prepare", _never)
+    monkeypatch.setattr("fea.api.prepare", never)
     taken = tmp_path / "taken"
     taken.write_text("a file where the output directory should go")
     for out in (taken, taken / "sub"):
         assert main(["calibrate", "--out", str(out)]) == 2
-        _one_error_line(capsys, f"--out '{out}'")
+        one_error_line(capsys, f"--out '{out}'")
 
 
 def _profile_manifest(dirpath, file_field="p.csv", extra=""):
@@ -163,15 +153,15 @@ def _profile_manifest(dirpath, file_field="p.csv", extra=""):
 
 
 def test_diagnose_checks_its_output_before_any_work(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("pipeline.diagnosis.engine.diagnose", _never)
-    monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", _never)
+    monkeypatch.setattr("pipeline.diagnosis.engine.diagnose", never)
+    monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", never)
     m = _profile_manifest(tmp_path / "data")
     taken = tmp_path / "taken"
     taken.write_text("x")
     assert main(["diagnose", str(m), "--out", str(taken)]) == 2
-    _one_error_line(capsys, "--out")
+    one_error_line(capsys, "--out")
     assert main(["diagnose", "--validate", "--cases", "2", "--out", str(taken)]) == 2
-    _one_error_line(capsys, "--out")
+    one_error_line(capsys, "--out")
 
 
 @pytest.mark.parametrize("field, value, valid", [("noise_rel", "1e-300", "[1e-06, 1]"),
@@ -182,7 +172,7 @@ def test_noise_outside_its_range_is_refused_with_the_range(field, value, valid, 
     with pytest.raises(ValueError, match=rf"{field}={float(value)!r} is outside the valid range {re.escape(valid)}"):
         load_manifest(m)
     assert main(["diagnose", str(m), "--out", str(tmp_path / "o")]) == 2
-    _one_error_line(capsys, f"{field}={float(value)!r} is outside the valid range")
+    one_error_line(capsys, f"{field}={float(value)!r} is outside the valid range")
 
 
 def test_noise_um_range(tmp_path):
@@ -220,7 +210,7 @@ def test_manifest_paths_leaving_its_directory_need_the_flag(where, tmp_path, cap
         load_manifest(m)
     assert load_manifest(m, allow_outside=True).measurements[0].file.resolve() == outside.resolve()
     assert main(["diagnose", str(m), "--out", str(tmp_path / "o")]) == 2
-    _one_error_line(capsys, "--allow-outside-paths")
+    one_error_line(capsys, "--allow-outside-paths")
 
 
 def test_manifest_paths_inside_its_directory_resolve_against_it(tmp_path, monkeypatch):
@@ -265,30 +255,30 @@ def test_render_child_works_in_the_callers_directory(tmp_path, monkeypatch):
 
 
 def test_element_sizes_are_checked_before_any_case(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("pipeline.fea_cases.run_tables", _never)
-    monkeypatch.setattr("pipeline.study.run_study", _never)
+    monkeypatch.setattr("pipeline.fea_cases.run_tables", never)
+    monkeypatch.setattr("pipeline.study.run_study", never)
     for argv, needle in ((["tables", "--mesh-size-mm", "0"], "--mesh-size-mm 0.0 must be a finite number > 0"),
                          (["run", "--mesh-size-mm", "nan"], "--mesh-size-mm nan must be"),
                          (["tables", "--mesh-size-mm", "3", "--mesh-bulk-mm", "2"], "--mesh-bulk-mm 2.0 must be >=")):
         assert main([*argv, "--out", str(tmp_path / "o")]) == 2
-        _one_error_line(capsys, needle)
+        one_error_line(capsys, needle)
 
 
 def test_a_config_key_is_not_renamed_to_an_option_the_user_did_not_give(tmp_path, capsys):
     cfg = tmp_path / "s.toml"
     cfg.write_text("[fea]\nmesh_size_mm = -1\n")
     assert main(["config", "--check", str(cfg)]) == 2
-    line = _one_error_line(capsys, "fea.mesh_size_mm")
+    line = one_error_line(capsys, "fea.mesh_size_mm")
     assert "--mesh-size-mm" not in line  # it came from the file, not from an option
     assert main(["run", str(cfg), "--out", str(tmp_path / "o")]) == 2
-    assert "--mesh-size-mm" not in _one_error_line(capsys, "mesh_size_mm")
+    assert "--mesh-size-mm" not in one_error_line(capsys, "mesh_size_mm")
 
 
 @pytest.mark.parametrize("value", ["-1", "nan", "inf", "1e12", "2.5"])
 def test_quilt_amplitude_named_as_the_option(value, tmp_path, capsys):
     assert main(["lsf", "--grating", "J", "--wavelength-um", "1.25", "--pixel-scale-mas", "25", "--quilt-pv-um",
                  value, "--out", str(tmp_path / "o")]) == 2
-    _one_error_line(capsys, f"--quilt-pv-um {float(value)} must be a finite number >= 0")
+    one_error_line(capsys, f"--quilt-pv-um {float(value)} must be a finite number >= 0")
 
 
 def test_dense_scattered_points_name_no_option_psf_lacks(tmp_path, capsys):
@@ -302,7 +292,7 @@ def test_dense_scattered_points_name_no_option_psf_lacks(tmp_path, capsys):
     np.savetxt(f, np.column_stack([xy, np.zeros(len(xy))]), delimiter=",", header="x_mm,y_mm,sag_um", comments="")
     assert main(["psf", "--grating", "J", "--wavelength-um", "1.25", "--sag", str(f),
                  "--out", str(tmp_path / "o")]) == 2
-    line = _one_error_line(capsys, "median nearest-neighbour distance")
+    line = one_error_line(capsys, "median nearest-neighbour distance")
     assert "spacing_mm" not in line and "--spacing" not in line
 
 
@@ -312,4 +302,4 @@ def test_dense_scattered_points_name_no_option_psf_lacks(tmp_path, capsys):
 ])
 def test_sweep_option_mistakes_take_the_error_path(argv, needle, tmp_path, capsys):
     assert main(["sweep", "--t0-um", "200", *argv, "--out", str(tmp_path / "o")]) == 2
-    _one_error_line(capsys, f"cryograting sweep: error: {needle}")
+    one_error_line(capsys, f"cryograting sweep: error: {needle}")
