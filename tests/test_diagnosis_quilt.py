@@ -73,9 +73,9 @@ def test_decomposition_of_an_analytic_quilt():
     assert rms["harmonics"] == pytest.approx(np.sqrt((H20_UM**2 + H02_UM**2) / 2), rel=0.05)
 
 
-def test_null_parameters_reproduce_the_nominal_exactly(tmp_path):
-    nominal = _map()
-    assert np.array_equal(quilt_shape_map(nominal, 1.0, 1.0).sag_um, nominal.sag_um, equal_nan=True)
+def _map_and_profile_data(nominal: SagMap, tmp_path):
+    """Loaded data of a manifest whose nominal is ``nominal``: a noisy map of it and one
+    Gaussian J line profile (the forward models are built on them)."""
     write_sag_map(nominal, tmp_path / "nominal.npz")
     write_sag_map(synthetic_surface(nominal, np.random.default_rng(0)), tmp_path / "map.npz")
     u = np.arange(-100.0, 100.1, 2.0)
@@ -85,6 +85,13 @@ def test_null_parameters_reproduce_the_nominal_exactly(tmp_path):
         'temperature_K = 80\naperture_diameter_mm = 137\n\n[[measurement]]\nkind = "line_profile"\nfile = "p.csv"\n'
         'grating = "J"\norder = -2\nwavelength_um = 1.25\npixel_scale_mas = 250\n')
     data = load_data(load_manifest(tmp_path / "m.toml"))
+    return data
+
+
+def test_null_parameters_reproduce_the_nominal_exactly(tmp_path):
+    nominal = _map()
+    assert np.array_equal(quilt_shape_map(nominal, 1.0, 1.0).sag_um, nominal.sag_um, equal_nan=True)
+    data = _map_and_profile_data(nominal, tmp_path)
     null = {"quilt_fund_xy_ratio": 1.0, "quilt_harmonics_ratio": 1.0}
     s = SurfaceForward(data[0], nominal, 80.0)
     assert np.array_equal(s.predict(null), s.predict({}))
@@ -225,15 +232,7 @@ def test_same_quilt_change_on_maps_and_spectrograph_images(tmp_path):
     """One transform for every kind: the map model at its points and the sag the profile
     and PSF-image models (their shared memo) build from are the reshaped nominal map."""
     nominal = _map()
-    write_sag_map(nominal, tmp_path / "nominal.npz")
-    write_sag_map(synthetic_surface(nominal, np.random.default_rng(0)), tmp_path / "map.npz")
-    u = np.arange(-100.0, 100.1, 2.0)
-    write_profile_csv(tmp_path / "p.csv", u, np.exp(-0.5 * (u / 20.0) ** 2))
-    (tmp_path / "m.toml").write_text(
-        '[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\nkind = "surface"\nfile = "map.npz"\n'
-        'temperature_K = 80\naperture_diameter_mm = 137\n\n[[measurement]]\nkind = "line_profile"\nfile = "p.csv"\n'
-        'grating = "J"\norder = -2\nwavelength_um = 1.25\npixel_scale_mas = 250\n')
-    data = load_data(load_manifest(tmp_path / "m.toml"))
+    data = _map_and_profile_data(nominal, tmp_path)
     p = {"quilt_fund_xy_ratio": 1.3, "quilt_harmonics_ratio": 0.4}
     expect = quilt_shape_map(nominal, 1.3, 0.4)
     s = SurfaceForward(data[0], nominal, 80.0)
