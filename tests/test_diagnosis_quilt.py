@@ -84,8 +84,7 @@ def _map_and_profile_data(nominal: SagMap, tmp_path):
         '[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\nkind = "surface"\nfile = "map.npz"\n'
         'temperature_K = 80\naperture_diameter_mm = 137\n\n[[measurement]]\nkind = "line_profile"\nfile = "p.csv"\n'
         'grating = "J"\norder = -2\nwavelength_um = 1.25\npixel_scale_mas = 250\n')
-    data = load_data(load_manifest(tmp_path / "m.toml"))
-    return data
+    return load_data(load_manifest(tmp_path / "m.toml"))
 
 
 def test_null_parameters_reproduce_the_nominal_exactly(tmp_path):
