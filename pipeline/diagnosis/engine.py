@@ -17,7 +17,8 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from .criteria import N_EFF_SOURCES, Criteria
-from .effects import LIBRARY, SummaryContext, applicable_effects, library_rows, parameter_units, physical_summary
+from .effects import (LIBRARY, SummaryContext, applicable_effects, library_rows, parameter_spec, parameter_units,
+                      physical_summary)
 from .error_model import errors_summary, measure_errors, two_part_problem, weights_settled
 from .finding import Finding, all_effects
 from .fitting import FitOutcome, Problem, fit
@@ -125,15 +126,16 @@ def explains(f: Finding, c: Criteria) -> bool:
     """The verdict's test of a finding (``docs/diagnosis.md``, step 9). Also: not every one of
     its own parameters at a prior bound (then the prior, not the data, stopped the fit: a
     map of zeros "explained" by an amplitude scale of 0.3)."""
-    own = set(f.parameters) - _companion_parameters(f)
+    own = own_parameters(f)
     pinned = bool(own) and own <= set(f.at_bound)
     return f.significant and f.excess_explained >= c.min_variance_explained and not f.overfit and not pinned
 
 
-def _companion_parameters(f: Finding) -> set:
-    """Names of ``f``'s parameters that belong to its companions, not to its own effects."""
-    own = {q.name for e in f.effects for q in LIBRARY[e].parameters}
-    return {q for q in f.parameters if q not in own and not any(q.startswith(o + "_") for o in own)}
+def own_parameters(f: Finding) -> set:
+    """Names of ``f``'s parameters that belong to its own effects, not to its companions
+    (per-blank copies resolved by :func:`.effects.parameter_spec`)."""
+    templates = {q for e in f.effects for q in LIBRARY[e].parameters}
+    return {q for q in f.parameters if parameter_spec(q) in templates}
 
 
 def member_explains(prob: Problem, findings: list, c: Criteria, heldout: bool) -> tuple[list, str]:
@@ -242,11 +244,15 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
             nom = recount(prob, nom)
             findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo)
     t["fit_s"] = time.perf_counter() - t["start"] - t["load_s"]
-    half = {q.name: 0.5 * q.width for q in parameters_of(tuple(e.name for e in cands), prob.forwards)}
-    bounds = {q.name: (q.lo, q.hi) for q in parameters_of(tuple(e.name for e in cands), prob.forwards)}
-    findings = [replace(f, unconstrained=unconstrained(f, half),
-                        at_bound=at_prior_bound({q: v for q, v in f.parameters.items()
-                                                 if q not in _companion_parameters(f)}, bounds),
+    priors = parameters_of(tuple(e.name for e in cands), prob.forwards)
+    half = {q.name: 0.5 * q.width for q in priors}
+    bounds = {q.name: (q.lo, q.hi) for q in priors}
+
+    def at_bound(f):
+        own = own_parameters(f)
+        return at_prior_bound({q: v for q, v in f.parameters.items() if q in own}, bounds)
+
+    findings = [replace(f, unconstrained=unconstrained(f, half), at_bound=at_bound(f),
                         remaining_gap=tuple(g["measurement"] for g in gaps(prob, fits[f.effect], criteria)))
                 for f in findings]
     findings = degeneracies(findings, fits, prob, criteria)
