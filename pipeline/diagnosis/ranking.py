@@ -104,8 +104,8 @@ def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict,
         for sub in [(n,) for n in comp]:
             start = {**f.parameters, **(fits[sub[0]].parameters if sub[0] in fits else {})}
             tried.append((*fit_effects(prob, nom, tuple(f.effects) + sub, c, start=start, memo=memo), sub))
-        better = [t for t in tried if t[0].score < f.score]
-        helping = tuple(n for n in comp if any(t[2] == (n,) for t in better))
+        better = [t for t in tried if t[0].score < f.score]  # single companions, in library order
+        helping = tuple(sub[0] for _, _, sub in better)
         for size in range(2, len(helping) + 1):
             for sub in itertools.combinations(helping, size):
                 start = {k: v for t in better if set(t[2]) <= set(sub) for k, v in t[0].parameters.items()}
