@@ -61,12 +61,13 @@ def bow_um(x_mm: np.ndarray, y_mm: np.ndarray, defocus_um: float, spherical_um: 
 
 
 def quilt_parts(quilt: QuiltComponents | None, x_mm: np.ndarray, y_mm: np.ndarray) -> tuple | None:
-    """``(F_x, F_y, H, C)`` of the nominal's quilt (µm) at blank coordinates (:mod:`.quilt`):
-    the parts ``quilt_shape`` holds (``F_x``) or changes; None without a quilt fit."""
+    """``(F_y, H, C, F)`` of the nominal's quilt (µm) at blank coordinates (:mod:`.quilt`):
+    the parts ``quilt_shape`` rescales and the whole fitted quilt ``F = F_x + F_y + H + C``
+    (what separates the smooth figure from the map); None without a quilt fit."""
     if quilt is None:
         return None
-    return (quilt.fundamental_x_um(x_mm, y_mm), quilt.fundamental_y_um(x_mm, y_mm), quilt.harmonics_um(x_mm, y_mm),
-            quilt.cross_um(x_mm, y_mm))
+    fy, hh, cc = quilt.fundamental_y_um(x_mm, y_mm), quilt.harmonics_um(x_mm, y_mm), quilt.cross_um(x_mm, y_mm)
+    return fy, hh, cc, quilt.fundamental_x_um(x_mm, y_mm) + fy + hh + cc
 
 
 def blank_shape_um(base_um: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, p: dict,
@@ -81,8 +82,8 @@ def blank_shape_um(base_um: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, p: d
     rho, h = p.get("quilt_fund_xy_ratio", 1.0), p.get("quilt_harmonics_ratio", 1.0)
     c, g = p.get("quilt_cross_ratio", 1.0), p.get("quilt_figure_ratio", 1.0)
     if quilt is not None and (rho != 1.0 or h != 1.0 or c != 1.0 or g != 1.0):
-        fx, fy, hh, cc = quilt
-        figure = base_um - (fx + fy + hh + cc)
+        fy, hh, cc, whole = quilt
+        figure = base_um - whole
         base_um = base_um + (rho - 1.0) * fy + (h - 1.0) * hh + (c - 1.0) * cc + (g - 1.0) * figure
     gx, gy = p.get("plating_grad_x", 0.0), p.get("plating_grad_y", 0.0)
     if gx or gy:
