@@ -22,11 +22,13 @@ from .abbe import GRATINGS, RELATIVE_NA, AbbeSettings, abbe_line_profile, zernik
 from .detector import measure_profile
 from .families import PROFILE_OOL, SURFACE_OOL, draw_profile_ool, draw_surface_ool
 from .gratings import GratingTruth, mixed_grating, sag_function
+from .lattice import pocket_jitter, sharp_ribs
 
 #: cold temperature of the nominal map (K): the FEA case's default
 _COLD_K = NOMINAL_SIMULATION["cold_K"]
 
-__all__ = ["CASE_TYPES", "FAMILIES", "SURFACE_T_K", "truth_grating", "measured_map", "make_case"]
+__all__ = ["CASE_TYPES", "FAMILIES", "GRATING_FAMILIES", "SURFACE_T_K", "check_families", "truth_grating",
+           "measured_map", "write_profile", "make_case"]
 
 CASE_TYPES = (
     ("surface", "astigmatism"), ("surface", "amplitude_scale"), ("surface", "temperature"),
@@ -34,7 +36,12 @@ CASE_TYPES = (
     ("line_profile", "amplitude_scale"), ("line_profile", "temperature"), ("line_profile", "pupil_shift"),
     ("line_profile", "collimator_wfe"), ("line_profile", "slit_width"), *(("line_profile", e) for e in PROFILE_OOL),
 )
+#: The default grating families (the campaign's truths unless ``CampaignConfig.truth_families``
+#: says otherwise).
 FAMILIES = ("sum_mix", "product_mix")
+#: Every grating family (``benchmarks/truth_families.md``): the mixtures, and the lattice
+#: families of :mod:`.lattice`, which lie outside the span of the library's quilt shape.
+GRATING_FAMILIES = FAMILIES + ("pocket_jitter", "sharp_ribs")
 SURFACE_T_K = 128.0
 APERTURE_MM = 137.0
 #: The instrument's collimator wavefront (shared data: the model's default collimator).
@@ -45,11 +52,27 @@ def _signed(rng, lo, hi):
     return float(rng.choice([-1.0, 1.0]) * rng.uniform(lo, hi))
 
 
-def truth_grating(nominal, fea, rng: np.random.Generator) -> GratingTruth:
-    """A truth deformation (µm at the nominal's cold temperature): ``fea`` (another mesh)
-    mixed with a quilt of a random family at a harmonic distance drawn in 5-30 %."""
-    fam = FAMILIES[int(rng.integers(0, len(FAMILIES)))]
+def check_families(families) -> tuple:
+    """``families`` as a tuple of :data:`GRATING_FAMILIES` names; ValueError otherwise."""
+    fams = (families,) if isinstance(families, str) else tuple(families)
+    bad = [f for f in fams if f not in GRATING_FAMILIES]
+    if not fams or bad or len(set(fams)) != len(fams):
+        raise ValueError(f"truth_families={fams!r} must be distinct names from {list(GRATING_FAMILIES)} (at least one)")
+    return fams
+
+
+def truth_grating(nominal, fea, rng: np.random.Generator, families: tuple = FAMILIES) -> GratingTruth:
+    """A truth deformation (µm at the nominal's cold temperature) of a family drawn from
+    ``families`` with equal probability: ``fea`` (another mesh) mixed with a quilt at a
+    harmonic distance drawn in 5-30 % (``sum_mix``, ``product_mix``, ``sharp_ribs``), or
+    its quilt jittered per lattice cell (``pocket_jitter``)."""
+    families = check_families(families)
+    fam = families[int(rng.integers(0, len(families)))]
     n = np.where(np.isfinite(nominal.sag_um), nominal.sag_um, 0.0)
+    if fam == "pocket_jitter":
+        return pocket_jitter(fea.x_mm, fea.y_mm, fea.sag_um, n, rng)
+    if fam == "sharp_ribs":
+        return sharp_ribs(fea.x_mm, fea.y_mm, fea.sag_um, n, float(rng.uniform(0.05, 0.30)), rng)
     return mixed_grating(fea.x_mm, fea.y_mm, fea.sag_um, n, fam, float(rng.uniform(0.05, 0.30)), rng)
 
 
@@ -78,11 +101,17 @@ def measured_map(g: GratingTruth, factor: float, rng: np.random.Generator, extra
     return ax, ax, z
 
 
-def _write_profile(path: Path, x, y) -> None:
+def write_profile(path: Path, offset_um, counts) -> None:
+    """Line-profile CSV (``offset_um,intensity``). Offsets are written in Python's
+    shortest round-trip form, so distinct samples stay distinct however close their
+    sub-pixel phases; ValueError if two offsets are equal."""
+    x = np.asarray(offset_um, float)
+    if np.unique(x).size != x.size:
+        raise ValueError("write_profile: offset_um has duplicate samples")
     with open(path, "w") as fh:
         fh.write("offset_um,intensity\n")
-        for a, b in zip(x, y):
-            fh.write(f"{a:.4f},{b:.3f}\n")
+        for a, b in zip(x, counts):
+            fh.write(f"{float(a)!r},{b:.3f}\n")
 
 
 def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, out: Path, cfg,
@@ -97,9 +126,9 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
     ``"_truth"`` how it was made."""
     if getattr(cfg, "psf_image", None) is not None:
         raise ValueError("the independent truth makes no point-source images; use truth='model' with psf_image")
-    g = truth_grating(nominal, fea, rng)
+    g = truth_grating(nominal, fea, rng, getattr(cfg, "truth_families", FAMILIES))
     sim = {**NOMINAL_SIMULATION, "mesh": cfg.nominal_mesh}
-    meta = {"family": g.family, "mix": g.mix, "harmonic_distance": g.distance}
+    meta = {"family": g.family, "mix": g.mix, "harmonic_distance": g.distance, **g.params}
     truth: dict = {}
     if kind == "surface":
         scale, T, extra, reg = 1.0, SURFACE_T_K, None, None
@@ -162,7 +191,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
         x, counts, _ = measure_profile(u, det, rng, distortion=distortion)
         if artefact is not None:
             counts = artefact(x, counts, rng)
-        _write_profile(out / f"p{i}.csv", x, counts)
+        write_profile(out / f"p{i}.csv", x, counts)
         meas.append({"kind": "line_profile", "file": f"p{i}.csv", "name": f"{gr}_{wl}_{ps}mas", "grating": gr,
                      "order": order, "wavelength_um": wl, "pixel_scale_mas": ps})
     if cfg.profile_map_K is not None:

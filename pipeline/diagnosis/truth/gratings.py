@@ -11,13 +11,13 @@ and the result is scaled so that the nominal's least-squares scale in it is 1.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
 __all__ = ["PERIOD_X_MM", "PERIOD_Y_MM", "CENTRAL_HALF_MM", "GratingTruth", "central", "harmonic_distance",
-           "fitted_quilts", "mixed_grating", "sag_function"]
+           "fitted_quilts", "mix_to_distance", "mixed_grating", "sag_function"]
 
 PERIOD_X_MM, PERIOD_Y_MM = 21.0, 18.0
 #: Half-widths (mm) of the paper's central 82 x 72 mm region.
@@ -26,7 +26,9 @@ CENTRAL_HALF_MM = (41.0, 36.0)
 
 @dataclass(frozen=True)
 class GratingTruth:
-    """A truth deformation on a grid (µm at 80 K; x, y in mm, blank frame) and how it was made."""
+    """A truth deformation on a grid (µm at 80 K; x, y in mm, blank frame) and how it was made:
+    its ``family``, the weight ``mix`` of the family's shape against the FEA map, the
+    harmonic ``distance`` to the nominal and the family's drawn ``params``."""
 
     x_mm: np.ndarray
     y_mm: np.ndarray
@@ -34,9 +36,11 @@ class GratingTruth:
     family: str
     mix: float
     distance: float
+    params: dict = field(default_factory=dict)
 
     def scaled(self, factor: float) -> "GratingTruth":
-        return GratingTruth(self.x_mm, self.y_mm, self.sag_um * factor, self.family, self.mix, self.distance)
+        return GratingTruth(self.x_mm, self.y_mm, self.sag_um * factor, self.family, self.mix, self.distance,
+                            self.params)
 
 
 def central(x_mm: np.ndarray, y_mm: np.ndarray) -> np.ndarray:
@@ -87,11 +91,19 @@ def mixed_grating(x_mm, y_mm, fea_um, nominal_um, family: str, distance: float, 
         quilt = q["product"]
     else:
         raise ValueError(f"mixed_grating: family={family!r} is not one of ['product_mix', 'sum_mix']")
+    return mix_to_distance(x_mm, y_mm, fea_um, quilt, nominal_um, family, distance)
+
+
+def mix_to_distance(x_mm, y_mm, fea_um, quilt_um, nominal_um, family: str, distance: float,
+                    params: dict | None = None) -> GratingTruth:
+    """``(1 - m) fea + m quilt`` with ``m`` in [0, 1] solved (bisection) so that the harmonic
+    distance to ``nominal_um`` is ``distance``, scaled so that the nominal's least-squares
+    scale in it is 1. Raises ValueError when no ``m`` reaches ``distance``."""
     mask = central(x_mm, y_mm)
     fea0 = np.where(np.isfinite(fea_um), fea_um, 0.0)
 
     def dist(m):
-        return harmonic_distance((1 - m) * fea0 + m * quilt, nominal_um, mask)[0]
+        return harmonic_distance((1 - m) * fea0 + m * quilt_um, nominal_um, mask)[0]
 
     lo, hi = 0.0, 1.0
     if dist(hi) < distance:
@@ -102,9 +114,9 @@ def mixed_grating(x_mm, y_mm, fea_um, nominal_um, family: str, distance: float, 
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if dist(mid) < distance else (lo, mid)
     m = 0.5 * (lo + hi)
-    t = (1 - m) * fea_um + m * quilt
+    t = (1 - m) * fea_um + m * quilt_um
     d, k = harmonic_distance(np.where(np.isfinite(t), t, 0.0), nominal_um, mask)
-    return GratingTruth(np.asarray(x_mm), np.asarray(y_mm), t / k, family, m, d)
+    return GratingTruth(np.asarray(x_mm), np.asarray(y_mm), t / k, family, m, d, dict(params or {}))
 
 
 def sag_function(g: GratingTruth, extra=None):
