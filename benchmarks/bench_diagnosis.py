@@ -5,12 +5,14 @@ injection-recovery campaign. Writes the per-case rows and the summary as JSON (`
     .venv/bin/python benchmarks/bench_diagnosis.py [--cases 208] [--workers 2] [--seed 1] [--cache-dir DIR]
         [--profiles extended|minimal] [--no-scenarios] [--out FILE] [--progress FILE.jsonl] [--profile-map-K K]
         [--psf-image] [--types KIND:EFFECT,...] [--discrepancy unmodelled|companions]
-        [--n-eff-from nominal|best_fit] [--truth independent|model]
+        [--n-eff-from nominal|best_fit] [--truth independent|model] [--truth-families FAM,...]
 
 ``--progress``: every finished case is appended there as a JSON line (partial results
 survive an interrupted run). ``--profiles``: the campaign's line-profile measurement set
 (:data:`pipeline.diagnosis.campaign.PROFILE_SETS`). ``--profile-map-K 128``: the line-profile
 cases also get a 128 K map of the same blank (``CampaignConfig.profile_map_K``).
+``--truth-families pocket_jitter,sharp_ribs``: the independent truth's grating families
+(``CampaignConfig.truth_families``; default ``sum_mix,product_mix``).
 """
 
 from __future__ import annotations
@@ -50,6 +52,8 @@ def main(argv=None):
                     help="residual the effective sample counts come from (Criteria.n_eff_from)")
     ap.add_argument("--truth", default="independent", choices=TRUTHS,
                     help="campaign truth generator (CampaignConfig.truth; benchmarks/truth_families.md)")
+    ap.add_argument("--truth-families", default="sum_mix,product_mix",
+                    help="independent truth's grating families, comma-separated (benchmarks/truth_families.md)")
     a = ap.parse_args(argv)
     criteria = dataclasses.replace(CampaignConfig.criteria, n_eff_from=a.n_eff_from)
     out = {"scenarios": {}}
@@ -67,7 +71,7 @@ def main(argv=None):
     cfg = CampaignConfig(n_cases=a.cases, seed=a.seed, workers=a.workers, profile_specs=PROFILE_SETS[a.profiles],
                          profile_map_K=a.profile_map_K, psf_image=PSF_IMAGE_SPEC if a.psf_image else None,
                          only_types=parse_types(a.types, a.truth), discrepancy=a.discrepancy, criteria=criteria,
-                         truth=a.truth)
+                         truth=a.truth, truth_families=tuple(f.strip() for f in a.truth_families.split(",")))
     res = run_campaign(cfg, cache_dir=a.cache_dir, progress=a.progress)
     res["profile_set"] = a.profiles
     out["campaign"] = res

@@ -141,6 +141,9 @@ class CampaignConfig:
     discrepancy: str = "unmodelled"
     #: The truth generator, one of :data:`TRUTHS`.
     truth: str = "independent"
+    #: The independent truth's grating families (``benchmarks/truth_families.md``), one
+    #: drawn per case; the default is ``pipeline.diagnosis.truth.generate.FAMILIES``.
+    truth_families: tuple = ("sum_mix", "product_mix")
     criteria: Criteria = Criteria(heldout_top=1, pair_from=2)
 
     def __post_init__(self) -> None:
@@ -154,6 +157,9 @@ class CampaignConfig:
             raise ValueError(f"CampaignConfig: workers={self.workers!r} must be an integer >= 1")
         if self.truth not in TRUTHS:
             raise ValueError(f"CampaignConfig: truth={self.truth!r} is not one of {list(TRUTHS)}")
+        from .truth.generate import check_families
+
+        object.__setattr__(self, "truth_families", check_families(self.truth_families))
         if self.case_types is None:
             from .truth import CASE_TYPES as INDEPENDENT_TYPES
 
