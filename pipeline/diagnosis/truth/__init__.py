@@ -14,8 +14,10 @@ forward model (:mod:`pipeline.diagnosis.forward`, :mod:`.synth`, :mod:`.psf_imag
   resampling are not used;
 * grating maps: :mod:`.gratings` mixes the FEA map with analytic sum- and product-form
   quilts fitted to it (own least squares), at a drawn harmonic distance from the nominal,
-  and interpolates with scipy; the model's ``blank_shape_um``, bow and plating terms are
-  not used;
+  and interpolates with scipy; :mod:`.lattice` jitters the FEA map's quilt per cell of the
+  hole lattice (its own period-average figure) or mixes it with sharp rib profiles; the
+  model's ``blank_shape_um``, bow and plating terms and the library's quilt decomposition
+  (:mod:`pipeline.diagnosis.quilt`) are not used;
 * detector and interferometer: :mod:`.detector` and :func:`.generate.measured_map`
   (super-sampled pixels at random sub-pixel phases, inter-pixel coupling, counts with
   Poisson and read noise, correlated noise, pedestal or background subtraction; map
