@@ -163,3 +163,27 @@ def test_profile_csv_keeps_subpixel_samples_1e5_um_apart_distinct(tmp_path):
     assert np.array_equal(xr, x) and np.array_equal(yr, y)
     with pytest.raises(ValueError, match="duplicate"):
         write_profile(tmp_path / "q.csv", [1.0, 1.0, 2.0], [1.0, 2.0, 3.0])
+
+
+def test_make_case_draws_a_selected_family_and_records_it(tmp_path):
+    """A surface case of the independent truth with only the lattice families selected
+    (the generator alone: nothing is diagnosed): the map is written and the case's
+    record names the family and its drawn parameters."""
+    import json
+
+    from pipeline.diagnosis.campaign import CampaignConfig
+    from pipeline.diagnosis.truth.generate import make_case
+
+    cfg = CampaignConfig(truth_families=("pocket_jitter", "sharp_ribs"))
+    nom, fea = _Map(MAP), _Map(MAP + 0.002 * np.cos(2 * np.pi * X / 7.0))
+    seen = set()
+    for seed in range(4):
+        out = tmp_path / str(seed)
+        out.mkdir()
+        man, truth = make_case("surface", "astigmatism", np.random.default_rng(seed), nom, fea, out, cfg)
+        info = truth["_truth"]
+        seen.add(info["family"])
+        assert truth["_present"] == ["quilt_shape"] and (out / "map.npz").exists()
+        assert ("sigma" in info) if info["family"] == "pocket_jitter" else ("p_x" in info)
+        json.dumps(info)
+    assert seen == {"pocket_jitter", "sharp_ribs"}
