@@ -244,7 +244,7 @@ FIGURE_KEYS = {
 def write_figure_summary(path, labels, outputs: dict) -> Path:
     """SigFit-style summary CSV: one row per case, rigid-body motion then P/V and RMS with
     piston/tilt (PT) and piston/tilt/power (PTP) removed; a units row under the header."""
-    from pipeline.io_common import atomic_write
+    from pipeline.io.common import atomic_write
 
     keys = [k for k in FIGURE_KEYS if all(k in outputs[lb] for lb in labels)]
     with atomic_write(Path(path)) as fh:
@@ -359,7 +359,7 @@ _TABLE_FIGURE_KEYS = [k for k in FIGURE_KEYS if k not in ("pv_center_um", "rms_c
 
 
 def _write_rows(rows, path: Path) -> None:
-    from pipeline.io_common import atomic_write
+    from pipeline.io.common import atomic_write
 
     extra = [k for k in _TABLE_FIGURE_KEYS if rows and all(k in r.figure for r in rows)]
     buf = [["table", "coverage", "t0_um", "polish", "paper_pv_center_um", "model_pv_center_um",

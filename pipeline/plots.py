@@ -19,7 +19,7 @@ __all__ = ["plot_sag_maps", "plot_line_profiles", "plot_psfs", "plot_multigratin
 
 def save(fig, path: Path) -> Path:
     """Write ``fig`` to ``path`` atomically (temp file + rename) and close it."""
-    from pipeline.io_common import atomic_path
+    from pipeline.io.common import atomic_path
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -349,7 +349,7 @@ def _view(plotter, pv, s: BlankSurface, exaggeration: float, clim, title: str, *
 
 
 def _screenshot(plotter, path: Path) -> Path:
-    from pipeline.io_common import atomic_path
+    from pipeline.io.common import atomic_path
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

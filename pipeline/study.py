@@ -86,7 +86,7 @@ def default_study() -> StudyConfig:
 
 def _prepare_out(out: Path) -> None:
     """Create ``out`` and prove it writable before anything is computed or written."""
-    from pipeline.io_common import ensure_writable_dir
+    from pipeline.io.common import ensure_writable_dir
 
     ensure_writable_dir(out)
 
@@ -141,7 +141,7 @@ def _run_fea(config: StudyConfig, out: Path, progress: bool):
 
 def _write_cases(cases, outputs, path: Path) -> None:
     """One row per FEA case: label, group, P/V and RMS (µm), then every parameter's value."""
-    from pipeline.io_common import atomic_write
+    from pipeline.io.common import atomic_write
 
     keys = ["pv_center_um", "rms_center_um", "pv_full_um", "rms_full_um", "quilt_direction_um"]
     with atomic_write(path) as fh:
@@ -187,7 +187,7 @@ def _write_profiles(results, out: Path):
     """Write ``profiles.csv`` and ``profiles.nc``; return the profiles' Dataset (None without profiles)."""
     import xarray as xr
 
-    from pipeline.io_common import atomic_path, atomic_write
+    from pipeline.io.common import atomic_path, atomic_write
 
     if not results:
         return None
@@ -402,7 +402,7 @@ def _report(out: Path, config: StudyConfig, table: str, cases_table: str, result
     import base64
 
     from optics.grating import get_grating
-    from pipeline.io_common import atomic_write
+    from pipeline.io.common import atomic_write
 
     def img(p):
         return f'<img src="data:image/png;base64,{base64.b64encode(Path(p).read_bytes()).decode()}" style="max-width:100%">'

@@ -251,7 +251,7 @@ def study_dataset(cases, outputs: dict, maps: dict, zfits: list, ffits: list, pr
 
 def write_study_netcdf(ds, path: Path) -> Path:
     """Write ``ds`` atomically (temporary file + rename)."""
-    from pipeline.io_common import atomic_path
+    from pipeline.io.common import atomic_path
 
     with atomic_path(path) as tmp:
         ds.to_netcdf(tmp)
@@ -282,10 +282,10 @@ def write_exports(out: Path, cases, maps: dict, zfits: list, wavefronts: list) -
     Files written by an earlier run and not rewritten (listed in the old index) are removed.
     """
     from optics.sagmap import SagMap
-    from pipeline.interchange import write_sag_map, write_zernike_list
-    from pipeline.io_codev_zfr import write_codev_zernike
-    from pipeline.io_common import atomic_write
-    from pipeline.io_zemax import write_zemax_zernike
+    from pipeline.io.registry import write_sag_map, write_zernike_list
+    from pipeline.io.codev_zfr import write_codev_zernike
+    from pipeline.io.common import atomic_write
+    from pipeline.io.zemax import write_zemax_zernike
 
     out.mkdir(parents=True, exist_ok=True)
     index = []

@@ -216,7 +216,7 @@ def run_surrogate_sweep(axes: dict, out_dir, *, validate: int = 3, tol: float = 
 
 
 def _write_validation(rows: list[dict], path: Path) -> None:
-    from .io_common import atomic_write
+    from pipeline.io.common import atomic_write
 
     keys = list(rows[0])
     with atomic_write(path) as fh:

@@ -39,7 +39,7 @@ from pipeline.cache import (
     save_case,
 )
 from pipeline.executors import check_scheduler, iter_dask, iter_inline, iter_processes
-from pipeline.io_common import atomic_path, atomic_write
+from pipeline.io.common import atomic_path, atomic_write
 from pipeline.store import CacheWarning
 
 __all__ = ["Case", "grid", "parse_range", "run_sweep", "SweepResult", "SweepError", "CacheWarning"]
@@ -226,7 +226,7 @@ def parse_range(text: str) -> list[float]:
 
 def _prepare_out_dir(out_dir) -> Path:
     """Create ``out_dir/cases`` and prove it writable, before any case runs."""
-    from pipeline.io_common import ensure_writable_dir
+    from pipeline.io.common import ensure_writable_dir
 
     path = Path(out_dir)
     if path.exists() and not path.is_dir():

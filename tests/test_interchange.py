@@ -10,8 +10,8 @@ import pytest
 
 from optics.sagmap import SagMap
 from optics.zernike import norm_factor, wavefront_from_coefficients
-from pipeline import interchange as ic
-from pipeline.io_codev import CODEV_NDA, MAX_COUNT
+from pipeline.io import registry as ic
+from pipeline.io.codev import CODEV_NDA, MAX_COUNT
 
 # Quantisation of each format for the test map (|sag| <= 3.5 um):
 #   .int  16-bit counts, SSZ puts max|sag| at 32766 counts: error <= 0.5 * 3.5 / 32766 um

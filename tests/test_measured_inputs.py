@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from optics.sagmap import quilt_sag_map
-from pipeline import interchange as ic
+from pipeline.io import registry as ic
 from pipeline.diagnosis.forward import ProfileForward
 from pipeline.diagnosis.manifest import ProfileData, load_data, load_manifest, parse_manifest, recentre
 

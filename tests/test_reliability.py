@@ -10,7 +10,7 @@ import pytest
 
 from optics.grating import MAX_GRATING_TURN_DEG, get_grating
 from optics.lineprofile import line_profile, point_psf
-from pipeline.io_common import ensure_writable_dir
+from pipeline.io.common import ensure_writable_dir
 from pipeline.optics_cli import main as optics_main
 
 

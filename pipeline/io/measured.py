@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.io_common import atomic_write, parse_error, read_csv_columns
+from pipeline.io.common import atomic_write, parse_error, read_csv_columns
 
 __all__ = ["read_line_profile", "read_psf_image", "write_psf_image_csv"]
 

@@ -6,8 +6,8 @@ One reader/writer pair per sag-map format, registered in :data:`SAG_FORMATS`;
 ======== ================================ ======================================
 suffix   format                           module / quantisation
 ======== ================================ ======================================
-``.int`` CODE V grid interferogram (GRD)  :mod:`pipeline.io_codev`; 16 bit, max|v|/65532
-``.dat`` Zemax Grid Sag                   :mod:`pipeline.io_zemax`; 12 digits
+``.int`` CODE V grid interferogram (GRD)  :mod:`pipeline.io.codev`; 16 bit, max|v|/65532
+``.dat`` Zemax Grid Sag                   :mod:`pipeline.io.zemax`; 12 digits
 ``.csv`` ``x_mm,y_mm,sag_um`` table        here; 12 significant digits
 ``.nc``  NetCDF4 (xarray, default engine)  here; float64, exact
 ``.npz`` NumPy arrays                     here; float64, exact
@@ -27,10 +27,10 @@ the surface's *local* +Z, which for a mirror met by light travelling along +Z po
 needs ``-sag`` (and, to stay right-handed, one of x/y mirrored). That depends on the
 lens file, so no flip is applied here; the orientation tests pin our own layout.
 
-Also here (re-exported): Zernike coefficient lists (:mod:`pipeline.io_zernike`),
-measured line profiles and PSF images (:mod:`pipeline.io_measured`), and
+Also here (re-exported): Zernike coefficient lists (:mod:`pipeline.io.zernike`),
+measured line profiles and PSF images (:mod:`pipeline.io.measured`), and
 :func:`load_sag_map` used by the ``--sag`` option of the CLI. Point lists and units:
-:mod:`pipeline.io_gridding`.
+:mod:`pipeline.io.gridding`.
 """
 
 from __future__ import annotations
@@ -43,12 +43,12 @@ from typing import Callable
 import numpy as np
 
 from optics.sagmap import SagMap
-from pipeline.io_codev import read_codev_int, write_codev_int
-from pipeline.io_common import atomic_path, atomic_write, parse_error, read_csv_columns
-from pipeline.io_gridding import grid_points, length_unit_factor, sag_unit_factor
-from pipeline.io_measured import read_line_profile, read_psf_image, write_psf_image_csv
-from pipeline.io_zemax import read_zemax_grid_sag, write_zemax_grid_sag
-from pipeline.io_zernike import (ZERNIKE_CONVENTIONS, convert_normalisation, read_zernike_list,
+from pipeline.io.codev import read_codev_int, write_codev_int
+from pipeline.io.common import atomic_path, atomic_write, parse_error, read_csv_columns
+from pipeline.io.gridding import grid_points, length_unit_factor, sag_unit_factor
+from pipeline.io.measured import read_line_profile, read_psf_image, write_psf_image_csv
+from pipeline.io.zemax import read_zemax_grid_sag, write_zemax_grid_sag
+from pipeline.io.zernike import (ZERNIKE_CONVENTIONS, convert_normalisation, read_zernike_list,
                                  write_zernike_list)
 
 __all__ = [
@@ -99,7 +99,7 @@ def read_sag_csv(path: str | Path, spacing_mm: float | None = None) -> SagMap:
     inside its aperture), are put back on that grid with NaN at the absent nodes and at
     ``nan`` sag values; truly scattered points are interpolated linearly onto a grid of
     ``spacing_mm`` (default: their median nearest-neighbour distance), NaN outside their
-    convex hull (:func:`pipeline.io_gridding.grid_points`). ``meta["gridding"]`` says which.
+    convex hull (:func:`pipeline.io.gridding.grid_points`). ``meta["gridding"]`` says which.
 
     Parameters
     ----------
@@ -343,7 +343,7 @@ def read_sag_map(path: str | Path, **options) -> SagMap:
 def load_sag_map(path: str | Path) -> SagMap:
     """Sag map for the CLI ``--sag FILE`` option (any :data:`SAG_FORMATS` suffix);
     errors are prefixed with ``--sag``."""
-    from pipeline.io_codev import GridUnknownError
+    from pipeline.io.codev import GridUnknownError
 
     try:
         return read_sag_map(path)
