@@ -282,7 +282,8 @@ def write_exports(out: Path, cases, maps: dict, zfits: list, wavefronts: list) -
     Files written by an earlier run and not rewritten (listed in the old index) are removed.
     """
     from optics.sagmap import SagMap
-    from pipeline.io.registry import write_sag_map, write_zernike_list
+    from pipeline.io.registry import write_sag_map
+    from pipeline.io.zernike import write_zernike_list
     from pipeline.io.codev_zfr import write_codev_zernike
     from pipeline.io.common import atomic_write
     from pipeline.io.zemax import write_zemax_zernike

@@ -89,7 +89,8 @@ def test_study_nc_holds_cases_fits_maps_and_profiles(study):
 def test_exports_round_trip_through_interchange(study):
     import xarray as xr
 
-    from pipeline.io.registry import read_sag_map, read_zernike_list
+    from pipeline.io.registry import read_sag_map
+    from pipeline.io.zernike import read_zernike_list
     from pipeline.study_data import _slug
 
     out, res = study

@@ -60,7 +60,8 @@ import numpy as np
 
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
-from pipeline.io.registry import write_psf_image_csv, write_sag_map
+from pipeline.io.measured import write_psf_image_csv
+from pipeline.io.registry import write_sag_map
 
 from .effects import LIBRARY
 from .engine import Criteria, diagnose

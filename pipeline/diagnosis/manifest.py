@@ -478,7 +478,7 @@ def recentre(coords: np.ndarray, unit_peak: np.ndarray, beyond_um: float) -> flo
 
 
 def _read_profile(m: Measurement) -> ProfileData:
-    from pipeline.io.registry import read_line_profile
+    from pipeline.io.measured import read_line_profile
 
     try:
         u, y = read_line_profile(m.file, normalise=False)
@@ -493,7 +493,7 @@ def _read_profile(m: Measurement) -> ProfileData:
 
 
 def _read_psf_image(m: Measurement) -> PsfImageData:
-    from pipeline.io.registry import read_psf_image
+    from pipeline.io.measured import read_psf_image
 
     try:
         x, y, v = read_psf_image(m.file)

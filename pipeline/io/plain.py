@@ -1,0 +1,224 @@
+"""Sag maps in plain files no design code owns: a CSV point table, NetCDF and NumPy ``.npz``.
+
+======== ================================== ==============================
+suffix   layout                             precision
+======== ================================== ==============================
+``.csv`` ``x_mm,y_mm,sag_um`` table, a row    12 significant digits
+         per point (masked or scattered ok)
+``.nc``  NetCDF4 (xarray): ``sag_um[y_mm,     float64, exact
+         x_mm]`` with units attributes
+``.npz`` arrays ``x_mm``, ``y_mm``,           float64, exact
+         ``sag_um[y, x]``, ``label``
+======== ================================== ==============================
+
+Readers take files other tools wrote (other units, descending or meshgrid axes,
+masked or scattered points); every writer is atomic (:mod:`pipeline.io.common`).
+The registry of every format is :mod:`pipeline.io.registry`.
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from optics.sagmap import SagMap
+from pipeline.io.common import atomic_path, atomic_write, parse_error, read_csv_columns
+from pipeline.io.gridding import grid_points, length_unit_factor, sag_unit_factor
+
+__all__ = ["write_sag_csv", "read_sag_csv", "write_sag_netcdf", "read_sag_netcdf", "write_sag_npz", "read_sag_npz"]
+
+_CSV_COLUMNS = ("x_mm", "y_mm", "sag_um")
+
+
+# ------------------------------------------------------------------ CSV
+def write_sag_csv(sagmap: SagMap, path: str | Path) -> Path:
+    """Write every grid point as ``x_mm,y_mm,sag_um`` (NaN written as ``nan``, so the
+    reader recovers the full grid and its holes). Rows: y increasing, x fastest."""
+    X, Y = sagmap.grid()
+    path = Path(path)
+    with atomic_write(path) as fh:
+        fh.write(",".join(_CSV_COLUMNS) + "\n")
+        np.savetxt(fh, np.column_stack([X.ravel(), Y.ravel(), sagmap.sag_um.ravel()]),
+                   fmt="%.12g", delimiter=",")
+    return path
+
+
+def read_sag_csv(path: str | Path, spacing_mm: float | None = None) -> SagMap:
+    """Read a table of points ``x_mm,y_mm,sag_um`` (header names case-insensitive, any
+    column order, extra columns ignored, rows in any order).
+
+    Points on a uniform grid, complete or not (a masked export lists only the points
+    inside its aperture), are put back on that grid with NaN at the absent nodes and at
+    ``nan`` sag values; truly scattered points are interpolated linearly onto a grid of
+    ``spacing_mm`` (default: their median nearest-neighbour distance), NaN outside their
+    convex hull (:func:`pipeline.io.gridding.grid_points`). ``meta["gridding"]`` says which.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file.
+    spacing_mm : float, optional
+        Grid spacing (mm) for scattered points; unused when the points form a grid.
+    """
+    path = Path(path)
+    v, lines = read_csv_columns(path, "sag CSV", _CSV_COLUMNS)
+    if v.shape[0] < 3:
+        raise parse_error(path, None, f"needs >= 3 data rows, found {v.shape[0]}")
+    bad = ~np.isfinite(v[:, :2]).all(axis=1)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise parse_error(path, int(lines[k]), f"x_mm={v[k, 0]:g}, y_mm={v[k, 1]:g}: coordinates must be finite")
+    inf = np.isinf(v[:, 2])
+    if inf.any():
+        raise parse_error(path, int(lines[inf][0]), "sag_um is infinite; write nan (or leave the point out) for no data")
+    gx, gy, sag, meta = grid_points(v[:, 0], v[:, 1], v[:, 2], spacing_mm=spacing_mm, lines=lines, source=str(path))
+    return _sagmap(path, gx, gy, sag, path.stem, {"format": "csv", **meta})
+
+
+def _sagmap(path: Path, x_mm, y_mm, sag_um, label: str, meta: dict) -> SagMap:
+    """SagMap whose construction errors name the file."""
+    try:
+        return SagMap(x_mm, y_mm, sag_um, label, meta)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+
+
+def _axes_map(path: Path, field: str, x, y, sag, label: str, meta: dict) -> SagMap:
+    """A map from axis arrays (1-D, or 2-D meshgrids) and ``sag[y, x]`` as stored in
+    NetCDF/NPZ: refuses complex or non-finite coordinates, flips descending axes."""
+    x, y, sag = np.asarray(x), np.asarray(y), np.asarray(sag)
+    for name, a in ((field, sag), ("x_mm", x), ("y_mm", y)):
+        if np.iscomplexobj(a):
+            raise ValueError(f"{path}: {name!r} is complex ({a.dtype}); a sag map must be real "
+                             "(write the real part, or the modulus, explicitly)")
+        if not (np.issubdtype(a.dtype, np.number) or a.dtype == bool):
+            raise ValueError(f"{path}: {name!r} has non-numeric dtype {a.dtype}")
+    if sag.ndim != 2:
+        raise ValueError(f"{path}: {field!r} has shape {sag.shape}; expected 2-D [y, x]")
+    if x.ndim == 2 and x.shape == sag.shape:
+        x = x[0]  # meshgrid layout
+    if y.ndim == 2 and y.shape == sag.shape:
+        y = y[:, 0]
+    x, y, sag = x.astype(float), y.astype(float), sag.astype(float)
+    for name, a in (("x_mm", x), ("y_mm", y)):
+        if not np.isfinite(a).all():
+            k = int(np.flatnonzero(~np.isfinite(a))[0])
+            raise ValueError(f"{path}: {name}[{k}]={a[k]!r}; coordinates must be finite")
+    if np.isinf(sag).any():
+        raise ValueError(f"{path}: {field!r} has {int(np.isinf(sag).sum())} infinite values; use NaN for no data")
+    if x.ndim == 1 and x.size > 1 and x[0] > x[-1]:
+        x, sag = x[::-1], sag[:, ::-1]
+    if y.ndim == 1 and y.size > 1 and y[0] > y[-1]:
+        y, sag = y[::-1], sag[::-1]
+    return _sagmap(path, x, y, sag, label, meta)
+
+
+def write_sag_netcdf(sagmap: SagMap, path: str | Path) -> Path:
+    """NetCDF via xarray: variable ``sag_um`` on dims ``(y_mm, x_mm)`` with units attrs."""
+    import xarray as xr
+
+    ds = xr.Dataset(
+        {"sag_um": (("y_mm", "x_mm"), sagmap.sag_um,
+                    {"units": "um", "long_name": "surface sag along +z (NaN = no data)"})},
+        coords={"x_mm": ("x_mm", sagmap.x_mm, {"units": "mm", "long_name": "x, dispersion direction"}),
+                "y_mm": ("y_mm", sagmap.y_mm, {"units": "mm", "long_name": "y, ruling direction"})},
+        attrs={"label": sagmap.label, "conventions": "cryograting optics.sagmap frame",
+               "meta_json": json.dumps(sagmap.meta, default=str)},
+    )
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp)  # engine left to xarray: h5netcdf needs h5py, absent here; netCDF4 is used
+    return path
+
+
+def read_sag_netcdf(path: str | Path, wavelength_um: float | None = None) -> SagMap:
+    """Read a NetCDF sag map: variable ``sag_um`` (or ``sag``) on dims ``(y_mm, x_mm)``
+    (or ``(y, x)``), NaN or ``_FillValue`` = no data.
+
+    The sag's ``units`` attribute is honoured (nm, um/µm, mm, m, or waves with
+    ``wavelength_um``) and converted to µm; without one, ``sag_um`` is taken as µm and
+    ``sag`` is refused. Coordinate ``units`` (nm, µm, mm, m; default mm) are honoured
+    too. Descending coordinates are flipped.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.nc`` file.
+    wavelength_um : float, optional
+        Wavelength (µm) of one wave, for ``units = "waves"``.
+    """
+    import xarray as xr
+
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"{path}: file does not exist")
+    try:
+        ds = xr.open_dataset(path)
+    except Exception as exc:  # netCDF4/h5 raise OSError, ValueError, KeyError... on a garbage file
+        raise ValueError(f"{path}: not a readable NetCDF file ({type(exc).__name__}: {exc})") from None
+    with ds:
+        field = next((n for n in ("sag_um", "sag") if n in ds.data_vars), None)
+        if field is None:
+            raise ValueError(f"{path}: no variable 'sag_um' (or 'sag'); found {sorted(map(str, ds.data_vars))}")
+        da = ds[field]
+        dims = next((d for d in (("y_mm", "x_mm"), ("y", "x")) if set(da.dims) == set(d)), None)
+        if dims is None:
+            raise ValueError(f"{path}: {field!r} has dims {da.dims}; expected ('y_mm', 'x_mm') or ('y', 'x')")
+        da = da.transpose(*dims)
+        units = da.attrs.get("units")
+        if units is None and field == "sag":
+            raise ValueError(f"{path}: variable 'sag' has no 'units' attribute; give units (nm, um, mm, m, waves) "
+                             "or name the variable 'sag_um'")
+        try:
+            factor = 1.0 if units is None else sag_unit_factor(units, wavelength_um)
+            axes = []
+            for d in dims[::-1]:
+                cu = da[d].attrs.get("units") if d in da.coords else None
+                axes.append(da[d].values * (1.0 if cu is None else length_unit_factor(cu)) if d in da.coords
+                            else None)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {field!r}: {exc}") from None
+        if axes[0] is None or axes[1] is None:
+            raise ValueError(f"{path}: {field!r} lacks coordinate values for {dims}")
+        try:
+            meta = json.loads(ds.attrs.get("meta_json", "{}"))
+        except json.JSONDecodeError:
+            meta = {}
+        if units is not None:
+            meta = {**meta, "source_units": str(units)}
+        return _axes_map(path, field, axes[0], axes[1], np.asarray(da.values) * factor,
+                         str(ds.attrs.get("label", path.stem)), meta)
+
+
+def write_sag_npz(sagmap: SagMap, path: str | Path) -> Path:
+    """NumPy ``.npz`` with arrays ``x_mm``, ``y_mm``, ``sag_um[y, x]`` and ``label``."""
+    path = Path(path)
+    with atomic_write(path, "wb") as fh:  # a file object: np.savez would append .npz to a tmp name
+        np.savez(fh, x_mm=sagmap.x_mm, y_mm=sagmap.y_mm, sag_um=sagmap.sag_um, label=np.str_(sagmap.label))
+    return path
+
+
+def read_sag_npz(path: str | Path) -> SagMap:
+    """Read a ``.npz`` sag map: arrays ``x_mm``, ``y_mm`` (1-D, or 2-D meshgrids),
+    ``sag_um[y, x]`` (µm, NaN = no data) and optional ``label``. Complex arrays are
+    refused; descending axes are flipped."""
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"{path}: file does not exist")
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            missing = {"x_mm", "y_mm", "sag_um"} - set(d.files)
+            if missing:
+                raise ValueError(f"{path}: missing arrays {sorted(missing)}; found {sorted(d.files)}")
+            label = str(d["label"]) if "label" in d.files else path.stem
+            x, y, sag = d["x_mm"], d["y_mm"], d["sag_um"]
+    except (OSError, EOFError, zipfile.BadZipFile) as exc:
+        raise ValueError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
+    except ValueError as exc:
+        if str(path) in str(exc):
+            raise
+        raise ValueError(f"{path}: not a readable .npz file ({exc})") from None
+    return _axes_map(path, "sag_um", x, y, sag, label, {})
