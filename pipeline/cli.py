@@ -14,7 +14,7 @@ __all__ = ["main"]
 
 def _values(text: str) -> list:
     """'100,150,200' or '100:200:50' or '0.5:1:3n' → floats; anything else stays a string."""
-    from pipeline.sweep import parse_range
+    from pipeline.sweeps.sweep import parse_range
 
     try:
         return parse_range(text)
@@ -34,7 +34,7 @@ def _check_mesh_options(a) -> None:
 
 
 def _cmd_tables(a) -> int:
-    from pipeline.fea_cases import format_table, run_tables
+    from pipeline.sweeps.fea_cases import format_table, run_tables
 
     _check_mesh_options(a)
     rows = run_tables(a.out, progress=not a.quiet, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm)
@@ -52,7 +52,7 @@ def _cmd_paper(a) -> int:
 
 
 def _cmd_sweep(a) -> int:
-    from pipeline.fea_cases import run_fea_sweep
+    from pipeline.sweeps.fea_cases import run_fea_sweep
 
     axes: dict = {}
     for flag, name in (("t0_um", "t0_um"), ("polish", "polish"), ("coverage", "coverage"),
@@ -72,7 +72,7 @@ def _cmd_sweep(a) -> int:
         raise ValueError(f"--workers {a.workers} is outside the valid range 1..{max_workers()} (twice this "
                          "machine's cores: each worker holds a whole FEA model)")
     if a.surrogate:
-        from pipeline.surrogate_sweep import run_surrogate_sweep
+        from pipeline.sweeps.surrogate import run_surrogate_sweep
 
         if a.scheduler is not None or a.workers != 1:
             raise ValueError("--surrogate runs in this process (milliseconds per case); "

@@ -76,7 +76,7 @@ _CAP_HINT = "check the ranges (a step too small, a list repeated?)"
 
 
 def _token(v) -> str:
-    from pipeline.cache import canonical_token
+    from pipeline.sweeps.cache import canonical_token
 
     return canonical_token(v)
 
@@ -617,7 +617,7 @@ class StudyConfig:
     # ---------------------------------------------------------------- checks
     def _check_profile(self, i: int, spec: ProfileSpec) -> None:
         from optics.grating import SPIFFI, get_grating
-        from pipeline.fea_cases import SAG_GRID_X_MM, SAG_GRID_Y_MM
+        from pipeline.sweeps.fea_cases import SAG_GRID_X_MM, SAG_GRID_Y_MM
 
         R = 0.5 * SPIFFI.pupil_diameter_mm
         for j, d in enumerate(spec.deformation):

@@ -165,7 +165,7 @@ def _scalar(path: str, value: object, name: str, p: Param):
 
 
 def _range(path: str, table: dict, name: str, p: Param) -> list:
-    from pipeline.sweep import parse_range
+    from pipeline.sweeps.sweep import parse_range
 
     if p.kind == "str":
         raise ConfigError(path, table, f"a range needs a numeric parameter; give a list ({p.allowed})")
@@ -213,7 +213,7 @@ def parse_axis(path: str, raw: object, name: str, p: Param) -> tuple:
             if isinstance(v, (list, dict)):
                 raise ConfigError(f"{path}[{i}]", v, f"list items must be scalars ({p.allowed})")
     elif isinstance(raw, str) and p.kind != "str" and raw.lower() not in _WORDS.get(name, ()):
-        from pipeline.sweep import parse_range
+        from pipeline.sweeps.sweep import parse_range
 
         try:
             values = parse_range(raw)

@@ -107,7 +107,7 @@ def run_command(func, args, command: str, debug: bool = False, options: dict[str
     """Run ``func(args)``; a user error becomes one stderr line and exit code 2.
 
     Under ``debug`` the exception propagates (Python prints the traceback)."""
-    from pipeline.sweep import SweepError
+    from pipeline.sweeps.sweep import SweepError
 
     try:
         return int(func(args) or 0)

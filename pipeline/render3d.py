@@ -557,7 +557,7 @@ def _render_child(out: Path, renders: dict) -> dict:
     from types import SimpleNamespace
 
     from fea.case import FEACase
-    from pipeline.fea_cases import field_path, load_field
+    from pipeline.sweeps.fea_cases import field_path, load_field
 
     from pipeline import store
 

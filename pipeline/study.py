@@ -95,7 +95,7 @@ def _run_fea(config: StudyConfig, out: Path, progress: bool):
     """Solve (or reuse) every FEA case; write the case and paper tables; return maps by label."""
     from fea.calibration import paper_cases
     from optics.sagmap import SagMap
-    from pipeline.fea_cases import (
+    from pipeline.sweeps.fea_cases import (
         SAG_GRID_X_MM,
         SAG_GRID_Y_MM,
         FEACaseRunner,
@@ -105,7 +105,7 @@ def _run_fea(config: StudyConfig, out: Path, progress: bool):
         figure_of,
         write_figure_summary,
     )
-    from pipeline.sweep import Case, run_sweep
+    from pipeline.sweeps.sweep import Case, run_sweep
 
     from pipeline.render3d import study_renders
 
@@ -314,7 +314,7 @@ def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progre
     NotADirectoryError, PermissionError
         ``out_dir`` is a file or cannot be written.
     """
-    from pipeline.fea_cases import format_table
+    from pipeline.sweeps.fea_cases import format_table
 
     if config is None:
         config = default_study()

@@ -174,7 +174,7 @@ def study_dataset(cases, outputs: dict, maps: dict, zfits: list, ffits: list, pr
     data = {}
     numeric = [k for k, v in outputs[labels[0]].items()
                if not k.startswith("coord:") and isinstance(v, (int, float, np.integer, np.floating))]
-    from pipeline.fea_cases import FIGURE_KEYS
+    from pipeline.sweeps.fea_cases import FIGURE_KEYS
 
     for k in numeric:
         units, long = _OUTPUT_UNITS.get(k) or FIGURE_KEYS.get(k, ("", "", k))[1:]

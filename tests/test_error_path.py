@@ -185,7 +185,7 @@ def test_noise_um_range(tmp_path):
 
 def test_unreachable_dask_scheduler_is_one_line(tmp_path):
     pytest.importorskip("distributed")
-    from pipeline.sweep import run_sweep
+    from pipeline.sweeps.sweep import run_sweep
 
     with pytest.raises(ConnectionError) as e:
         run_sweep(abs, [{"x": 1.0}], tmp_path / "s", namespace="t", scheduler="tcp://127.0.0.1:9",
@@ -255,7 +255,7 @@ def test_render_child_works_in_the_callers_directory(tmp_path, monkeypatch):
 
 
 def test_element_sizes_are_checked_before_any_case(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("pipeline.fea_cases.run_tables", never)
+    monkeypatch.setattr("pipeline.sweeps.fea_cases.run_tables", never)
     monkeypatch.setattr("pipeline.study.run_study", never)
     for argv, needle in ((["tables", "--mesh-size-mm", "0"], "--mesh-size-mm 0.0 must be a finite number > 0"),
                          (["run", "--mesh-size-mm", "nan"], "--mesh-size-mm nan must be"),

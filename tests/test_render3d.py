@@ -119,7 +119,7 @@ def test_study_figures_render_and_are_reused(tmp_path):
 def test_study_render_reuses_the_saved_field(coarse_case, tmp_path, monkeypatch):
     """A field kept by the study's FEA run is rendered without preparing or solving again."""
     import fea.model
-    from pipeline.fea_cases import field_path, load_field, save_field
+    from pipeline.sweeps.fea_cases import field_path, load_field, save_field
 
     model, res = coarse_case
     params = {"coverage": "all", "t0_um": 200.0, "polish": 0.75, "mesh_size_mm": COARSE.size_mm,

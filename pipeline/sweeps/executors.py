@@ -15,7 +15,7 @@ import time
 import traceback
 from collections.abc import Iterator
 
-from pipeline.cache import normalise_result
+from pipeline.sweeps.cache import normalise_result
 
 __all__ = ["run_case", "iter_inline", "iter_processes", "iter_dask", "check_scheduler"]
 

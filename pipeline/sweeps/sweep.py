@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.cache import (
+from pipeline.sweeps.cache import (
     COORD_PREFIX,
     CacheMiss,
     canonical_token,
@@ -38,7 +38,7 @@ from pipeline.cache import (
     load_case,
     save_case,
 )
-from pipeline.executors import check_scheduler, iter_dask, iter_inline, iter_processes
+from pipeline.sweeps.executors import check_scheduler, iter_dask, iter_inline, iter_processes
 from pipeline.io.common import atomic_path, atomic_write
 from pipeline.store import CacheWarning
 

@@ -92,7 +92,7 @@ def load_field(entry):
 
 
 class FEACaseRunner:
-    """Callable case function for :func:`pipeline.sweep.run_sweep`.
+    """Callable case function for :func:`pipeline.sweeps.sweep.run_sweep`.
 
     Keeps prepared models (mesh + bulk stiffness) per (blank, mesh, substrate) in the
     instance; pickling sends an empty cache, so each worker process builds its own.
@@ -205,7 +205,7 @@ class FEACaseRunner:
 
 def fea_grid(**axes) -> list:
     """Cartesian product of FEA parameter values, validated before any meshing."""
-    from pipeline.sweep import grid
+    from pipeline.sweeps.sweep import grid
 
     cases = grid(**axes)
     for c in cases:
@@ -265,7 +265,7 @@ def run_fea_sweep(axes: dict, out_dir, *, scheduler: str | None = None, workers:
     cached under ``out_dir/cases`` and reused on re-run, so a killed sweep resumes.
     ``workers=1`` (default) solves in this process: PARDISO already uses both cores.
     """
-    from pipeline.sweep import run_sweep
+    from pipeline.sweeps.sweep import run_sweep
 
     # the table always names the case: unswept core parameters appear as one-value axes
     core = {k: [PARAMETERS[k].default] for k in ("coverage", "t0_um", "polish")}
@@ -320,7 +320,7 @@ def run_tables(out_dir, *, progress: bool = True, mesh_size_mm: float | None = N
     with ``maps[(coverage, t0_um, polish)]`` a :class:`optics.sagmap.SagMap` when
     ``return_maps``.
     """
-    from pipeline.sweep import Case, run_sweep
+    from pipeline.sweeps.sweep import Case, run_sweep
 
     extra = {k: v for k, v in (("mesh_size_mm", mesh_size_mm), ("mesh_bulk_mm", mesh_bulk_mm),
                                ("stress_scale", stress_scale)) if v is not None}

@@ -28,7 +28,7 @@ import numpy as np
 from fea.case import PARAMETERS, FEACase, model_namespace
 from fea.surrogate import FEASurrogate, SurrogateDomain, build_surrogate
 
-from .fea_cases import (
+from pipeline.sweeps.fea_cases import (
     SAG_GRID_X_MM,
     SAG_GRID_Y_MM,
     SAG_SPACING_MM,
@@ -83,7 +83,7 @@ class SurrogateCaseRunner:
         return self.surrogate
 
     def plan(self, cases) -> None:
-        """Announce the cases about to run (the ``planner`` of :func:`pipeline.sweep.run_sweep`:
+        """Announce the cases about to run (the ``planner`` of :func:`pipeline.sweeps.sweep.run_sweep`:
         the uncached ones): the first call that needs the surrogate then evaluates them all
         in one batch (a fully cached re-run builds nothing)."""
         self._planned = list(cases)
@@ -173,7 +173,7 @@ def run_surrogate_sweep(axes: dict, out_dir, *, validate: int = 3, tol: float = 
     (SweepResult, list of dict, dict)
         The results, the validation rows and the build information.
     """
-    from .sweep import run_sweep
+    from pipeline.sweeps.sweep import run_sweep
 
     if not (isinstance(validate, int) and validate >= 0):
         raise ValueError(f"validate={validate!r} must be an int >= 0")
