@@ -141,7 +141,7 @@ def _cmd_calibrate(a) -> int:
 def _study_config(config: str | None, preset: str | None, overrides=None):
     """The config of ``run``/``config --check``: a file, a shipped preset, or None (default),
     with ``--set KEY=VALUE`` overrides applied."""
-    from pipeline.config import (apply_overrides, load_study_config, preset_path, read_study_data,
+    from pipeline.study.config import (apply_overrides, load_study_config, preset_path, read_study_data,
                                  study_config_from_dict)
 
     if config and preset:
@@ -155,7 +155,7 @@ def _study_config(config: str | None, preset: str | None, overrides=None):
 
 
 def _cmd_run(a) -> int:
-    from pipeline.study import run_study
+    from pipeline.study.run import run_study
 
     _check_mesh_options(a)
     config = _study_config(a.config, a.preset, a.set)  # validated before anything is written
@@ -164,8 +164,8 @@ def _cmd_run(a) -> int:
 
 
 def _cmd_config(a) -> int:
-    from pipeline.config import example_config_text, list_presets, preset_path
-    from pipeline.study import default_study
+    from pipeline.study.config import example_config_text, list_presets, preset_path
+    from pipeline.study.run import default_study
 
     if a.example:
         print(example_config_text(), end="")
@@ -176,7 +176,7 @@ def _cmd_config(a) -> int:
         print(preset_path(a.show).read_text(encoding="utf-8"), end="")
     else:
         from pipeline.bounds import format_duration
-        from pipeline.study import estimate_seconds
+        from pipeline.study.run import estimate_seconds
 
         config = _study_config(a.check, a.preset, a.set) or default_study()
         print(f"valid: {config.summary()}")

@@ -11,12 +11,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import pipeline.config as config_module
+import pipeline.study.config as config_module
 from cli_checks import never, one_error_line
 from pipeline.bounds import (LONG_RUN_S, MAX_CAMPAIGN_CASES, MAX_FEA_CASES, MAX_PROFILE_JOBS, SECONDS,
                              campaign_seconds, warn_if_long)
 from pipeline.cli import main
-from pipeline.config import ConfigError, FEAGroup, StudyConfig, loads_study_config
+from pipeline.study.config import ConfigError, FEAGroup, StudyConfig, loads_study_config
 from pipeline.diagnosis.campaign import CampaignConfig
 from pipeline.diagnosis.manifest import parse_manifest
 
@@ -145,7 +145,7 @@ def test_sweep_run_and_campaign_warn_up_front(tmp_path, capsys, monkeypatch):
     assert main(["sweep", "--t0-um", "100", "200", "--out", str(tmp_path / "s"), "--quiet"]) == 2
     assert "warning" not in capsys.readouterr().err  # two cases: seconds
 
-    monkeypatch.setattr("pipeline.study._run_fea", _stop)
+    monkeypatch.setattr("pipeline.study.run._run_fea", _stop)
     cfg = tmp_path / "big.toml"
     cfg.write_text(f"[fea]\nt0_um = {{start = 1, stop = 2000, num = {n}}}\n")
     assert main(["run", str(cfg), "--out", str(tmp_path / "r"), "--quiet"]) == 2

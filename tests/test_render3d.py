@@ -1,4 +1,4 @@
-"""3-D render of the deformed blank (pipeline/render3d.py): surface, off-screen PNG, guard.
+"""3-D render of the deformed blank (pipeline/study/render3d.py): surface, off-screen PNG, guard.
 
 No skip when pyvista/VTK or OpenGL is missing: CI installs both (scripts/bootstrap →
 scripts/offscreen-gl) and must actually render.
@@ -15,7 +15,7 @@ import pytest
 from fea.api import prepare, solve
 from fea.geometry import Blank
 from fea.mesh import MeshSpec
-from pipeline import render3d
+from pipeline.study import render3d
 
 COARSE = MeshSpec(5.0, 10.0)
 

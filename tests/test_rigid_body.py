@@ -138,7 +138,7 @@ def test_study_nc_carries_rigid_body_with_units(tmp_path):
 
     from optics.sagmap import quilt_sag_map
     from pipeline.sweeps.fea_cases import FIGURE_KEYS
-    from pipeline.study_data import study_dataset, write_study_netcdf
+    from pipeline.study.dataset import study_dataset, write_study_netcdf
 
     case = SimpleNamespace(label="a", group="g", full={"t0_um": 200.0, "pitch_x_mm": 21.0, "pitch_y_mm": 18.0})
     out = {k: 1.0 for k in FIGURE_KEYS}

@@ -253,7 +253,7 @@ def test_a_damaged_nominal_map_is_rebuilt_with_a_warning(tmp_path, fake_fea, fau
 
 # ----------------------------------------------------------------- renders and fields
 def test_a_render_png_that_is_not_the_committed_one_is_redone(tmp_path):
-    from pipeline import render3d
+    from pipeline.study import render3d
 
     params = [{"coverage": "all", "t0_um": 200.0, "polish": 0.75}]
     e = render3d._entry(tmp_path, "blank_3d.png", params)

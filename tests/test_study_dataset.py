@@ -3,7 +3,7 @@ profiles) and exports/ that re-import through pipeline.io.registry (coarse mesh)
 import numpy as np
 import pytest
 
-from pipeline.config import loads_study_config
+from pipeline.study.config import loads_study_config
 
 CONFIG = """
 [study]
@@ -37,7 +37,7 @@ figures = false
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
-    from pipeline.study import run_study
+    from pipeline.study.run import run_study
 
     out = tmp_path_factory.mktemp("study")
     res = run_study(out, loads_study_config(CONFIG), progress=False)
@@ -91,7 +91,7 @@ def test_exports_round_trip_through_interchange(study):
 
     from pipeline.io.registry import read_sag_map
     from pipeline.io.zernike import read_zernike_list
-    from pipeline.study_data import _slug
+    from pipeline.study.dataset import _slug
 
     out, res = study
     ex = out / "exports"
@@ -143,8 +143,8 @@ def test_exports_round_trip_through_interchange(study):
 def test_exports_switched_off(tmp_path, study):
     from dataclasses import replace
 
-    from pipeline.config import OutputOptions
-    from pipeline.study import run_study
+    from pipeline.study.config import OutputOptions
+    from pipeline.study.run import run_study
 
     out, _ = study
     cfg = loads_study_config(CONFIG)

@@ -48,7 +48,7 @@ def _figures(fea, book: ProfileBook, factor: float, out: Path) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from pipeline.plots import save
+    from pipeline.study.plots import save
 
     names = []
     fig, ax = plt.subplots(figsize=(8, 4))

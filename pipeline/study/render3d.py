@@ -475,7 +475,7 @@ def render_comparison(mesh, results: list, labels: list[str], path, *,
 def probe(path=None, size: int = 64) -> bool:
     """Render a small shaded cube off-screen; True when the image is not blank.
 
-    Run it in a child process (``python -m pipeline.render3d --probe``): without an
+    Run it in a child process (``python -m pipeline.study.render3d --probe``): without an
     OpenGL back-end VTK may crash the interpreter instead of raising.
     """
     pv = _pyvista()
@@ -640,7 +640,7 @@ class StudyRender:
         out.mkdir(parents=True, exist_ok=True)
         env = dict(os.environ)
         configure_offscreen_env(env)
-        root = str(Path(__file__).resolve().parents[1])
+        root = str(Path(__file__).resolve().parents[2])  # the directory holding the pipeline package
         env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         self._err = tempfile.TemporaryFile()
         spec = {f: [h, params, labels] for f, (h, params, labels) in renders.items()}
@@ -652,7 +652,7 @@ class StudyRender:
             # means there what it means here; the output goes as an absolute path anyway.
             # -P keeps a 'pipeline' package in that directory from shadowing this one.
             self.proc = subprocess.Popen(
-                [sys.executable, "-P", "-m", "pipeline.render3d", "--study", str(out.resolve()),
+                [sys.executable, "-P", "-m", "pipeline.study.render3d", "--study", str(out.resolve()),
                  "--spec", self._spec.name],
                 stdout=subprocess.PIPE, stderr=self._err, env=env, cwd=os.getcwd())
         except OSError as exc:
@@ -719,7 +719,7 @@ class StudyRender:
         msg = f"3-D render of the deformed blank unavailable: {why}. The rest of the run is unaffected."
         if opengl:
             msg += (" Off-screen rendering needs Mesa's EGL or OSMesa (Debian: apt-get install "
-                    "libegl1 libgl1-mesa-dri; scripts/offscreen-gl), see pipeline/render3d.py.")
+                    "libegl1 libgl1-mesa-dri; scripts/offscreen-gl), see pipeline/study/render3d.py.")
         if log.hasHandlers():
             log.warning(msg)
         else:
@@ -748,7 +748,7 @@ def _notice_png(path: Path, message: str):
     import textwrap
 
     try:
-        from pipeline.plots import plt, save
+        from pipeline.study.plots import plt, save
 
         fig, ax = plt.subplots(figsize=(9.0, 1.8))
         ax.axis("off")
@@ -769,7 +769,7 @@ def configure_offscreen_env(env) -> None:
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
-    ap = argparse.ArgumentParser(prog="python -m pipeline.render3d",
+    ap = argparse.ArgumentParser(prog="python -m pipeline.study.render3d",
                                  description="off-screen renders of the deformed blank")
     ap.add_argument("--probe", action="store_true", help="render a test cube; exit 0 when it works")
     ap.add_argument("--study", metavar="DIR", help="render figures into DIR (with --spec)")

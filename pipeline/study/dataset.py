@@ -1,6 +1,6 @@
 """The study's fits, its one labelled dataset (``study.nc``) and the exports for design codes.
 
-Used by :func:`pipeline.study.run_study` after the FEA cases and line profiles:
+Used by :func:`pipeline.study.run.run_study` after the FEA cases and line profiles:
 
 * :func:`fit_cases` — every FEA sag map over the central 82 × 72 mm region
   (``optics.sagmap`` region ``center``) with
@@ -162,7 +162,7 @@ def study_dataset(cases, outputs: dict, maps: dict, zfits: list, ffits: list, pr
         "x_mm": ("x_mm", first.x_mm, {"units": "mm", "long_name": "x on the grating face, dispersion direction"}),
         "y_mm": ("y_mm", first.y_mm, {"units": "mm", "long_name": "y on the grating face, ruling direction"}),
     }
-    from pipeline.config_schema import FEA_KEYS
+    from pipeline.study.schema import FEA_KEYS
 
     for k in cases[0].full:
         p = FEA_KEYS.get(k)

@@ -1,6 +1,6 @@
 """The keys of a study config, their types and units, and how a value becomes a sweep axis.
 
-A study config (:mod:`pipeline.config`) is TOML; every parameter value in it may be
+A study config (:mod:`pipeline.study.config`) is TOML; every parameter value in it may be
 
 * a scalar: ``t0_um = 200``;
 * a list: ``t0_um = [200, 150, 100]``;

@@ -1,7 +1,7 @@
 """End-to-end studies: FEA cases → sag maps → line profiles → tables, figures, report.
 
 ``run_study(out_dir, config=None)`` (CLI: ``cryograting run [CONFIG.toml]``) runs a
-:class:`pipeline.config.StudyConfig`; without one it runs :func:`default_study`, the
+:class:`pipeline.study.config.StudyConfig`; without one it runs :func:`default_study`, the
 paper's study: the 15 FEA cases of Tables 1 and 2; detected line profiles of J, H, K at
 band centre and edges in 250/100/25 mas for a perfect grating and the 200 µm / 75 %
 deformation (J also 200 µm / 50 %); the 1.25 µm line on the J, H and K gratings in
@@ -16,7 +16,7 @@ orders −2/−3/−4 (J with 200/50, H and K with 200/75, as the paper). It wri
 * ``study.nc`` — the one labelled dataset: every case's parameters, P/V and RMS, sag
   map, Zernike (Fringe 1–37 over the 82 × 72 mm box) and Fourier quilt fits with their
   residuals, the grating wavefronts of the profiles, and the line profiles
-  (:mod:`pipeline.study_data`);
+  (:mod:`pipeline.study.dataset`);
 * ``exports/`` (``[output] exports``) — sag maps as 16-bit CODE V INT and Zemax Grid Sag
   DAT, the Zernike fit as a CODE V ZFR deck, OpticStudio Zernike Standard/Fringe Sag
   extra data and project lists (Fringe and Noll), grating wavefronts as CODE V INT WFR;
@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.config import (
+from pipeline.study.config import (
     CaseSelector,
     CompareFigure,
     FEAGroup,
@@ -107,7 +107,7 @@ def _run_fea(config: StudyConfig, out: Path, progress: bool):
     )
     from pipeline.sweeps.sweep import Case, run_sweep
 
-    from pipeline.render3d import study_renders
+    from pipeline.study.render3d import study_renders
 
     cases = config.cases()
     # the 3-D renders reuse these solutions instead of solving their cases again
@@ -230,7 +230,7 @@ def _figures(config: StudyConfig, maps: dict, results: list, out: Path) -> dict:
     """Draw the config's figures; returns {file: (heading, path)} in config order."""
     from optics.grating import get_grating
     from optics.lineprofile import point_psf
-    from pipeline.plots import (
+    from pipeline.study.plots import (
         plot_line_profiles,
         plot_multigrating,
         plot_psfs,
@@ -331,7 +331,7 @@ def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progre
     text = "\n\n".join(t for t in (table, format_cases(others, outputs) if others else "") if t)
     print(text, flush=True)
     t_fea = time.perf_counter() - t0
-    from pipeline.render3d import start_study_render  # 3-D render: guarded child process, beside the profiles
+    from pipeline.study.render3d import start_study_render  # 3-D render: guarded child process, beside the profiles
 
     render = start_study_render(cases, out, progress=progress) if config.output.figures else None
     results = _profiles(config, maps, progress)
@@ -355,7 +355,7 @@ def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progre
 
 def _fits_dataset_exports(config, cases, outputs, maps, results, profiles_ds, out: Path, progress: bool):
     """Zernike + Fourier fits of every case, ``study.nc``, and (if configured) ``exports/``."""
-    from pipeline.study_data import (
+    from pipeline.study.dataset import (
         fit_cases,
         study_dataset,
         wavefront_jobs,
@@ -379,7 +379,7 @@ def _fits_dataset_exports(config, cases, outputs, maps, results, profiles_ds, ou
 
 def format_fits_html(cases, zfits, ffits) -> str:
     """HTML table: the main Zernike terms (nm, RMS-normalised) and quilt amplitudes (nm) per case."""
-    from pipeline.study_data import REPORT_QUILT, REPORT_ZERNIKES
+    from pipeline.study.dataset import REPORT_QUILT, REPORT_ZERNIKES
 
     def cell(v):
         return f"<td>{v * 1e3:.1f}</td>" if v is not None and np.isfinite(v) else "<td>–</td>"

@@ -12,13 +12,13 @@ key with its meaning, unit and range)::
                      this key one sag-map figure and one profile figure per set and grating
     [output]         figures, report, exports (booleans)
 
-Values are scalars, lists or ranges (:mod:`pipeline.config_schema`). FEA cases are
+Values are scalars, lists or ranges (:mod:`pipeline.study.schema`). FEA cases are
 selected for profiles and figures by *selectors*, inline tables of parameter values
 (``{t0_um = 200, polish = 0.75}``) that match every case with those values; the key
 ``group`` matches a ``[[fea.cases]]`` table's ``name``.
 
 :func:`load_study_config` reads and validates a file; :class:`StudyConfig` can also be
-built in Python (``pipeline.study.default_study()`` does). Validation happens on
+built in Python (``pipeline.study.run.default_study()`` does). Validation happens on
 construction: every FEA case goes through :meth:`fea.case.FEACase.from_params` (the
 blank, coating, mesh, thermal load, the materials' temperature range, the caps and the
 mesh's memory estimate), every line through the grating equation of
@@ -36,7 +36,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from pipeline.bounds import MAX_FEA_CASES, MAX_PROFILE_JOBS, product_count
-from pipeline.config_schema import (
+from pipeline.study.schema import (
     FEA_KEYS,
     PROFILE_KEYS,
     ConfigError,
@@ -121,7 +121,7 @@ class FEAGroup:
         Label of the group (shown in case labels when the study varies more than
         coverage, t0 and polish; matched by the selector key ``group``).
     axes : mapping or tuple of (key, values) pairs
-        FEA parameter (:data:`pipeline.config_schema.FEA_KEYS`) → value, list or range.
+        FEA parameter (:data:`pipeline.study.schema.FEA_KEYS`) → value, list or range.
         ``polish_front`` is stored as ``polish``. Unset parameters take the paper's
         values (Al 6061 blank 160 x 140 x 20 mm, 7 x 7 holes of 15 mm at 21 x 18 mm,
         NiP 200 µm / 75 %, 293 K → 80 K, default mesh).
@@ -270,7 +270,7 @@ class ProfileSpec:
         Name of the profile set (figures and tables group by it; several tables may
         share a set).
     grating, order, wavelength_um, pixel_scale_mas, pupil_shift_x_mm, pupil_shift_y_mm
-        Scalars, lists or ranges (see :data:`pipeline.config_schema.PROFILE_KEYS`);
+        Scalars, lists or ranges (see :data:`pipeline.study.schema.PROFILE_KEYS`);
         ``order = "blaze"`` (stored as None) is the grating's own order,
         ``wavelength_um = "band"`` its (short, centre, long) wavelengths.
     deformation : list of "perfect" or CaseSelector/mapping
