@@ -79,7 +79,7 @@ def test_pttp_stats_remove_power_that_pt_leaves():
 
 
 def test_figure_summary_and_table_columns(tmp_path):
-    from pipeline.sweeps.fea_cases import FIGURE_KEYS, TableRow, _write_rows, write_figure_summary
+    from pipeline.sweeps.fea_cases import FIGURE_KEYS, TableRow, write_table_rows, write_figure_summary
 
     fig = {k: float(i) for i, k in enumerate(FIGURE_KEYS)}
     write_figure_summary(tmp_path / "s.csv", ["a", "b"], {"a": fig, "b": fig})
@@ -87,7 +87,7 @@ def test_figure_summary_and_table_columns(tmp_path):
     assert lines[0].startswith("case,T1 dx,T2 dy,T3 dz,R1 rx,R2 ry,R3 rz,PV center PT")
     assert lines[1].startswith("units,um,um,um,urad,urad,urad,um")
     assert len(lines) == 4
-    _write_rows([TableRow("1", "all", 200.0, 0.75, 0.6, 0.61, "up", 0.1, True, fig)], tmp_path / "t.csv")
+    write_table_rows([TableRow("1", "all", 200.0, 0.75, 0.6, 0.61, "up", 0.1, True, fig)], tmp_path / "t.csv")
     head, row = (tmp_path / "t.csv").read_text().splitlines()
     assert head.split(",")[:11][-1] == "used_in_calibration" and "rb_rz_urad" in head and "pv_center_pttp_um" in head
     assert row.split(",")[5] == "0.6100"  # the paper's metric, unchanged

@@ -68,11 +68,11 @@ from pipeline.sweeps.fea_cases import (
     SAG_GRID_Y_MM,
     FEACaseRunner,
     TableRow,
-    _write_rows,
     case_namespace,
     figure_of,
     format_table,
     write_figure_summary,
+    write_table_rows,
 )
 from pipeline.sweeps.sweep import Case, run_sweep
 
@@ -148,7 +148,7 @@ def _run_fea(config: StudyConfig, out: Path, progress: bool):
                                  float(o["pv_center_um"]), pc.direction, float(o["quilt_direction_um"]),
                                  pc.calibrate, figure_of(o)))
     if rows:
-        _write_rows(rows, out / "tables.csv")
+        write_table_rows(rows, out / "tables.csv")
     return cases, outputs, maps, rows, in_paper
 
 

@@ -32,7 +32,7 @@ from pipeline.sweeps.sweep import Case, grid, run_sweep
 
 __all__ = ["FEACaseRunner", "fea_grid", "run_fea_sweep", "run_tables",
            "TableRow", "format_table", "SAG_GRID_X_MM", "SAG_GRID_Y_MM", "FIGURE_KEYS", "case_namespace",
-           "write_figure_summary", "quilt_direction_um", "field_path", "save_field", "load_field"]
+           "write_figure_summary", "write_table_rows", "quilt_direction_um", "field_path", "save_field", "load_field"]
 
 #: Fixed output grid of the sag maps (covers the default 160 x 140 mm face).
 SAG_SPACING_MM = 0.5
@@ -317,7 +317,7 @@ def run_tables(out_dir, *, progress: bool = True, mesh_size_mm: float | None = N
             for c, (_, out) in zip(paper, res)]
     out = Path(out_dir)
     res.write_netcdf(out / "sweep.nc")
-    _write_rows(rows, out / "tables.csv")
+    write_table_rows(rows, out / "tables.csv")
     labels = [f"{r.table} {r.coverage} {r.t0_um:g}/{100 * r.polish:g}" for r in rows]
     write_figure_summary(out / "figure_summary.csv", labels, {lb: r.figure for lb, r in zip(labels, rows)})
     if not return_maps:
@@ -339,7 +339,8 @@ _TABLE_FIGURE_KEYS = [k for k in FIGURE_KEYS if k not in ("pv_center_um", "rms_c
                                                           "rms_full_um")]
 
 
-def _write_rows(rows, path: Path) -> None:
+def write_table_rows(rows, path: Path) -> None:
+    """Write the paper-table rows (:class:`TableRow`) as ``tables.csv``, atomically."""
     extra = [k for k in _TABLE_FIGURE_KEYS if rows and all(k in r.figure for r in rows)]
     buf = [["table", "coverage", "t0_um", "polish", "paper_pv_center_um", "model_pv_center_um",
              "error_percent", "paper_direction", "model_quilt_direction_um", "direction_ok",
