@@ -40,7 +40,7 @@ def main() -> None:
     rng = np.random.default_rng(2026)
     cases = dom.sample(a.points, rng)
     t = time.perf_counter()
-    s.statistics_many(cases)  # what a surrogate sweep does (pipeline.surrogate_sweep)
+    s.statistics_many(cases)  # what a surrogate sweep does (pipeline.sweeps.surrogate)
     t_eval = time.perf_counter() - t
     wall_sweep = time.perf_counter() - t0
     t = time.perf_counter()

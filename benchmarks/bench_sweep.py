@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.sweep import grid, run_sweep
+from pipeline.sweeps.sweep import grid, run_sweep
 
 
 def trivial(params: dict) -> dict:

@@ -1,6 +1,6 @@
 """gmsh -> scikit-fem conversion and the on-disk mesh cache.
 
-Shared by :mod:`fea.mesh` (the blank) and :mod:`fea.cell` (the verification
+Shared by :mod:`fea.mesh` (the blank) and :mod:`fea.verification.cell` (the verification
 slice).  Two questions live here because both are about *getting a
 ``MeshTet2`` into memory*: from a live gmsh model, or from a verified file.
 

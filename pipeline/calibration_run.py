@@ -29,7 +29,7 @@ def run_calibration(out_dir=None, *, mesh_size_mm: float | None = None, mesh_bul
     """
     from fea.api import prepare
     from fea.case import FEACase
-    from pipeline.io_common import atomic_write, ensure_writable_dir
+    from pipeline.io.common import atomic_write, ensure_writable_dir
 
     if out_dir is not None:
         ensure_writable_dir(out_dir, "--out")

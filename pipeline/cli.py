@@ -14,7 +14,7 @@ __all__ = ["main"]
 
 def _values(text: str) -> list:
     """'100,150,200' or '100:200:50' or '0.5:1:3n' → floats; anything else stays a string."""
-    from pipeline.sweep import parse_range
+    from pipeline.sweeps.sweep import parse_range
 
     try:
         return parse_range(text)
@@ -34,7 +34,7 @@ def _check_mesh_options(a) -> None:
 
 
 def _cmd_tables(a) -> int:
-    from pipeline.fea_cases import format_table, run_tables
+    from pipeline.sweeps.fea_cases import format_table, run_tables
 
     _check_mesh_options(a)
     rows = run_tables(a.out, progress=not a.quiet, mesh_size_mm=a.mesh_size_mm, mesh_bulk_mm=a.mesh_bulk_mm)
@@ -52,7 +52,7 @@ def _cmd_paper(a) -> int:
 
 
 def _cmd_sweep(a) -> int:
-    from pipeline.fea_cases import run_fea_sweep
+    from pipeline.sweeps.fea_cases import run_fea_sweep
 
     axes: dict = {}
     for flag, name in (("t0_um", "t0_um"), ("polish", "polish"), ("coverage", "coverage"),
@@ -72,7 +72,7 @@ def _cmd_sweep(a) -> int:
         raise ValueError(f"--workers {a.workers} is outside the valid range 1..{max_workers()} (twice this "
                          "machine's cores: each worker holds a whole FEA model)")
     if a.surrogate:
-        from pipeline.surrogate_sweep import run_surrogate_sweep
+        from pipeline.sweeps.surrogate import run_surrogate_sweep
 
         if a.scheduler is not None or a.workers != 1:
             raise ValueError("--surrogate runs in this process (milliseconds per case); "
@@ -141,7 +141,7 @@ def _cmd_calibrate(a) -> int:
 def _study_config(config: str | None, preset: str | None, overrides=None):
     """The config of ``run``/``config --check``: a file, a shipped preset, or None (default),
     with ``--set KEY=VALUE`` overrides applied."""
-    from pipeline.config import (apply_overrides, load_study_config, preset_path, read_study_data,
+    from pipeline.study.config import (apply_overrides, load_study_config, preset_path, read_study_data,
                                  study_config_from_dict)
 
     if config and preset:
@@ -155,7 +155,7 @@ def _study_config(config: str | None, preset: str | None, overrides=None):
 
 
 def _cmd_run(a) -> int:
-    from pipeline.study import run_study
+    from pipeline.study.run import run_study
 
     _check_mesh_options(a)
     config = _study_config(a.config, a.preset, a.set)  # validated before anything is written
@@ -164,8 +164,8 @@ def _cmd_run(a) -> int:
 
 
 def _cmd_config(a) -> int:
-    from pipeline.config import example_config_text, list_presets, preset_path
-    from pipeline.study import default_study
+    from pipeline.study.config import example_config_text, list_presets, preset_path
+    from pipeline.study.run import default_study
 
     if a.example:
         print(example_config_text(), end="")
@@ -176,7 +176,7 @@ def _cmd_config(a) -> int:
         print(preset_path(a.show).read_text(encoding="utf-8"), end="")
     else:
         from pipeline.bounds import format_duration
-        from pipeline.study import estimate_seconds
+        from pipeline.study.run import estimate_seconds
 
         config = _study_config(a.check, a.preset, a.set) or default_study()
         print(f"valid: {config.summary()}")

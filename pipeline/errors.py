@@ -19,6 +19,8 @@ import re
 import sys
 import zipfile
 
+from pipeline.sweeps.sweep import SweepError
+
 __all__ = ["USER_ERRORS", "cli_spelling", "command_options", "describe", "pop_debug", "run_command"]
 
 #: What bad input raises: missing or unwritable files (OSError), wrong values and
@@ -107,8 +109,6 @@ def run_command(func, args, command: str, debug: bool = False, options: dict[str
     """Run ``func(args)``; a user error becomes one stderr line and exit code 2.
 
     Under ``debug`` the exception propagates (Python prints the traceback)."""
-    from pipeline.sweep import SweepError
-
     try:
         return int(func(args) or 0)
     except KeyboardInterrupt:

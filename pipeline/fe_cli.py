@@ -34,8 +34,8 @@ def _origin(text):
 
 
 def _cmd_import_fe(a) -> int:
-    from pipeline.interchange import write_sag_map
-    from pipeline.io_fe import import_fe
+    from pipeline.io.registry import write_sag_map
+    from pipeline.io.fe import import_fe
 
     res = import_fe(a.result, a.surface, displacement_csv=a.displacement_csv, field=a.field, length_unit=a.unit,
                     tol=a.tol, angle_tol_deg=a.angle_tol_deg, sag_along=a.sag_along, axes=a.axes,

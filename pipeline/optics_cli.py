@@ -15,8 +15,8 @@ import numpy as np
 __all__ = ["register", "main", "load_sag_map"]
 
 
-from pipeline.interchange import load_sag_map  # noqa: E402  (.npz/.nc/.int/.dat/.csv)
-from pipeline.io_common import atomic_path, atomic_write, ensure_writable_dir  # noqa: E402
+from pipeline.io.registry import load_sag_map  # noqa: E402  (.npz/.nc/.int/.dat/.csv)
+from pipeline.io.common import atomic_path, atomic_write, ensure_writable_dir  # noqa: E402
 
 
 #: Largest analytic quilt P/V (µm) the line-profile and PSF pupils sample without aliasing:

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.io_common import atomic_write
+from pipeline.io.common import atomic_write
 
 __all__ = [
     "STORE_FORMAT", "CacheMiss", "CacheWarning", "Entry", "entry", "entry_key", "canonical_token",

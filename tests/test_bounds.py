@@ -11,12 +11,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import pipeline.config as config_module
+import pipeline.study.config as config_module
 from cli_checks import never, one_error_line
 from pipeline.bounds import (LONG_RUN_S, MAX_CAMPAIGN_CASES, MAX_FEA_CASES, MAX_PROFILE_JOBS, SECONDS,
                              campaign_seconds, warn_if_long)
 from pipeline.cli import main
-from pipeline.config import ConfigError, FEAGroup, StudyConfig, loads_study_config
+from pipeline.study.config import ConfigError, FEAGroup, StudyConfig, loads_study_config
 from pipeline.diagnosis.campaign import CampaignConfig
 from pipeline.diagnosis.manifest import parse_manifest
 
@@ -92,7 +92,7 @@ def test_config_check_is_linear_in_the_number_of_cases(monkeypatch):
 
 
 def test_sweep_past_its_cap_is_refused_before_anything_is_written(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("pipeline.fea_cases.run_fea_sweep", never)
+    monkeypatch.setattr("pipeline.sweeps.fea_cases.run_fea_sweep", never)
     out = tmp_path / "sweep"
     assert main(["sweep", "--param", "t0_um=1:2000:0.1", "--out", str(out), "--quiet"]) == 2
     one_error_line(capsys, f"19991 sweep cases (the product of the value lists given) is outside the valid "
@@ -101,7 +101,7 @@ def test_sweep_past_its_cap_is_refused_before_anything_is_written(tmp_path, caps
 
 
 def test_fea_sweep_api_cap():
-    from pipeline.fea_cases import run_fea_sweep
+    from pipeline.sweeps.fea_cases import run_fea_sweep
 
     with pytest.raises(ValueError, match=rf"cases=20000 is outside the valid range 1\.\.{MAX_FEA_CASES}"):
         run_fea_sweep({"t0_um": list(np.linspace(1, 2000, 200)), "polish": list(np.linspace(0.01, 1, 100))},
@@ -136,7 +136,7 @@ def _stop(*a, **k):
 
 
 def test_sweep_run_and_campaign_warn_up_front(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("pipeline.fea_cases.run_fea_sweep", _stop)
+    monkeypatch.setattr("pipeline.sweeps.fea_cases.run_fea_sweep", _stop)
     n = int(LONG_RUN_S / SECONDS["fea_case"]) + 50  # just past an hour of default-mesh cases
     assert main(["sweep", "--param", f"t0_um=1:2000:{n}n", "--out", str(tmp_path / "s"), "--quiet"]) == 2
     err = capsys.readouterr().err.splitlines()
@@ -145,7 +145,7 @@ def test_sweep_run_and_campaign_warn_up_front(tmp_path, capsys, monkeypatch):
     assert main(["sweep", "--t0-um", "100", "200", "--out", str(tmp_path / "s"), "--quiet"]) == 2
     assert "warning" not in capsys.readouterr().err  # two cases: seconds
 
-    monkeypatch.setattr("pipeline.study._run_fea", _stop)
+    monkeypatch.setattr("pipeline.study.run._run_fea", _stop)
     cfg = tmp_path / "big.toml"
     cfg.write_text(f"[fea]\nt0_um = {{start = 1, stop = 2000, num = {n}}}\n")
     assert main(["run", str(cfg), "--out", str(tmp_path / "r"), "--quiet"]) == 2
@@ -173,7 +173,7 @@ def test_manifest_measurement_count_is_capped_before_any_file_is_read(tmp_path):
 def test_worker_count_outside_its_range_is_refused_before_work(command, workers, tmp_path, capsys, monkeypatch):
     from pipeline.bounds import max_workers
 
-    monkeypatch.setattr("pipeline.fea_cases.run_fea_sweep", never)
+    monkeypatch.setattr("pipeline.sweeps.fea_cases.run_fea_sweep", never)
     monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", never)
     assert main([*command, "--workers", str(workers), "--out", str(tmp_path / "o")]) == 2
     one_error_line(capsys, f"--workers {workers} is outside the valid range 1..{max_workers()}")
@@ -187,7 +187,7 @@ def test_config_check_states_the_estimate(capsys):
 
 
 def test_surrogate_validation_solves_are_capped(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("pipeline.surrogate_sweep.run_surrogate_sweep", never)
+    monkeypatch.setattr("pipeline.sweeps.surrogate.run_surrogate_sweep", never)
     assert main(["sweep", "--surrogate", "--t0-um", "100", "200", "--validate", str(MAX_FEA_CASES + 1),
                  "--out", str(tmp_path / "o")]) == 2
     one_error_line(capsys, f"--validate {MAX_FEA_CASES + 1} is outside the valid range 0..{MAX_FEA_CASES}")
@@ -195,7 +195,7 @@ def test_surrogate_validation_solves_are_capped(tmp_path, capsys, monkeypatch):
 
 def test_surrogate_sweep_api_caps():
     from pipeline.bounds import MAX_SURROGATE_CASES
-    from pipeline.surrogate_sweep import run_surrogate_sweep
+    from pipeline.sweeps.surrogate import run_surrogate_sweep
 
     with pytest.raises(ValueError, match=rf"validate={MAX_FEA_CASES + 1} is outside the valid range 0\.\."):
         run_surrogate_sweep({"t0_um": [100.0, 200.0]}, "unused", validate=MAX_FEA_CASES + 1)

@@ -11,10 +11,10 @@ import pytest
 
 from optics.sagmap import SagMap
 from optics.zernike import wavefront_from_coefficients
-from pipeline.io_codev import CODEV_NDA, MAX_COUNT, grating_wfr_to_sag_factor, read_codev_int, write_codev_int
-from pipeline.io_codev_zfr import read_codev_zernike, write_codev_zernike
-from pipeline.io_zemax import read_zemax_grid_sag, read_zemax_zernike, write_zemax_zernike
-from pipeline.io_zernike import write_zernike_list
+from pipeline.io.codev import CODEV_NDA, MAX_COUNT, grating_wfr_to_sag_factor, read_codev_int, write_codev_int
+from pipeline.io.codev_zfr import read_codev_zernike, write_codev_zernike
+from pipeline.io.zemax import read_zemax_grid_sag, read_zemax_zernike, write_zemax_zernike
+from pipeline.io.zernike import write_zernike_list
 
 DATA = Path(__file__).parent / "data"
 
@@ -199,7 +199,7 @@ def test_zernike_list_refuses_nan(tmp_path):
     f = write_zernike_list({(2, 0): 1.0}, tmp_path / "l.txt", "noll", 10.0, coeffs_normalised=True)
     f.write_text(f.read_text().replace("4,2,0,1", "4,2,0,nan"))
     with pytest.raises(ValueError, match=r"l\.txt, line 7: noll term 4: coefficient 'nan'"):
-        from pipeline.io_zernike import read_zernike_list
+        from pipeline.io.zernike import read_zernike_list
         read_zernike_list(f, normalised=True)
 
 
@@ -256,7 +256,7 @@ def test_zemax_zernike_refusals(tmp_path):
 
 def test_cli_sag_option_refuses_wavefront_file():
     """``--sag`` (and manifests, which use the same loader) never take a WFR file as sag."""
-    from pipeline.interchange import load_sag_map
+    from pipeline.io.registry import load_sag_map
 
     with pytest.raises(ValueError, match=r"^--sag .*codev_grid_wfr_no_nda\.int.*data type WFR is a wavefront"):
         load_sag_map(DATA / "codev_grid_wfr_no_nda.int")

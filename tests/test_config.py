@@ -8,7 +8,7 @@ import tomllib
 
 import pytest
 
-from pipeline.config import (
+from pipeline.study.config import (
     ConfigError,
     FEAGroup,
     ProfileSpec,
@@ -19,8 +19,8 @@ from pipeline.config import (
     loads_study_config,
     preset_path,
 )
-from pipeline.config_schema import FEA_KEYS, PROFILE_KEYS
-from pipeline.study import default_study
+from pipeline.study.schema import FEA_KEYS, PROFILE_KEYS
+from pipeline.study.run import default_study
 
 
 def test_builtin_default_equals_the_shipped_paper_config():
@@ -217,7 +217,7 @@ def test_any_wrong_value_anywhere_gives_a_one_line_config_error():
     valid config, never another exception."""
     import copy
 
-    from pipeline.config import study_config_from_dict
+    from pipeline.study.config import study_config_from_dict
 
     base = tomllib.loads(example_config_text())
     for path in _leaf_paths(base):
@@ -238,7 +238,7 @@ def test_any_wrong_value_anywhere_gives_a_one_line_config_error():
 
 def test_set_overrides_sweep_any_key_from_the_command_line():
     """`--set` takes lists, ranges and names for FEA and profile keys, validated like a file."""
-    from pipeline.config import apply_overrides, parse_override, read_study_data, study_config_from_dict
+    from pipeline.study.config import apply_overrides, parse_override, read_study_data, study_config_from_dict
 
     assert parse_override("fea.t0_um=[100, 150]") == ("fea.t0_um", [100, 150])
     assert parse_override("profiles.grating=J,K") == ("profiles.grating", ["J", "K"])
@@ -260,14 +260,14 @@ def test_set_overrides_sweep_any_key_from_the_command_line():
     ("colour.t0_um=1", "unknown override key"),
 ])
 def test_bad_set_override_names_key_and_range(override, match):
-    from pipeline.config import apply_overrides, read_study_data, study_config_from_dict
+    from pipeline.study.config import apply_overrides, read_study_data, study_config_from_dict
 
     with pytest.raises(ValueError, match=re.escape(match)):
         study_config_from_dict(apply_overrides(read_study_data(None), [override]))
 
 
 def test_set_fea_key_reaches_tables_that_set_it_themselves():
-    from pipeline.config import apply_overrides, study_config_from_dict
+    from pipeline.study.config import apply_overrides, study_config_from_dict
 
     data = {"fea": {"t0_um": 200, "cases": [{"name": "a", "t0_um": 150, "polish": 0.5},
                                             {"name": "b", "polish": 1.0}]}}

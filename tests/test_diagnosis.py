@@ -17,7 +17,7 @@ from pipeline.diagnosis.cli import main
 from pipeline.diagnosis.noise import effective_samples, estimate_noise
 from pipeline.diagnosis.nominal import thermal_factor
 from pipeline.diagnosis.synth import synthetic_surface, write_profile_csv
-from pipeline.interchange import write_sag_map
+from pipeline.io.registry import write_sag_map
 
 
 def _nominal(tmp_path):

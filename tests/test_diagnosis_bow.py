@@ -17,7 +17,7 @@ from pipeline.diagnosis.ranking import mismatch_errors
 from pipeline.diagnosis.forward import blank_bow_map, bow_um
 from pipeline.diagnosis.nominal import thermal_factor
 from pipeline.diagnosis.synth import synthetic_surface
-from pipeline.interchange import write_sag_map
+from pipeline.io.registry import write_sag_map
 
 from test_diagnosis import _manifest, _nominal
 

@@ -13,7 +13,7 @@ from pipeline.diagnosis.fitting import Problem, _long_run_s2
 from pipeline.diagnosis.forward import plating_gradient_map
 from pipeline.diagnosis.nominal import thermal_factor
 from pipeline.diagnosis.synth import synthetic_surface
-from pipeline.interchange import write_sag_map
+from pipeline.io.registry import write_sag_map
 
 from test_diagnosis import _manifest, _nominal
 

@@ -11,7 +11,7 @@ from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.psf_image import psf_image_model
 from pipeline.diagnosis.synth import synthetic_profile, synthetic_psf_image, write_profile_csv
 from pipeline.diagnosis.where import psf_image_parts
-from pipeline.interchange import write_psf_image_csv
+from pipeline.io.measured import write_psf_image_csv
 
 from test_diagnosis import _nominal
 

@@ -22,7 +22,7 @@ from pipeline.diagnosis.manifest import load_data, load_manifest
 from pipeline.diagnosis.nominal import thermal_factor
 from pipeline.diagnosis.quilt import quilt_components
 from pipeline.diagnosis.synth import quilt_shape_map, synthetic_surface, write_profile_csv
-from pipeline.interchange import write_sag_map
+from pipeline.io.registry import write_sag_map
 
 DX, DY = 21.0, 18.0
 FUND_X_UM, FUND_Y_UM = 0.117, 0.105

@@ -14,7 +14,7 @@ import pytest
 
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.campaign import PROFILE_SETS, CampaignConfig, run_campaign
-from pipeline.interchange import read_sag_map
+from pipeline.io.registry import read_sag_map
 from optics.zernike import zernike_xy
 
 SCEN = Path(__file__).resolve().parents[1] / "pipeline" / "scenarios"

@@ -185,7 +185,7 @@ def test_noise_um_range(tmp_path):
 
 def test_unreachable_dask_scheduler_is_one_line(tmp_path):
     pytest.importorskip("distributed")
-    from pipeline.sweep import run_sweep
+    from pipeline.sweeps.sweep import run_sweep
 
     with pytest.raises(ConnectionError) as e:
         run_sweep(abs, [{"x": 1.0}], tmp_path / "s", namespace="t", scheduler="tcp://127.0.0.1:9",
@@ -231,7 +231,7 @@ def test_manifest_paths_inside_its_directory_resolve_against_it(tmp_path, monkey
 def test_render_child_works_in_the_callers_directory(tmp_path, monkeypatch):
     """The child starts in the caller's directory with the output as an absolute path; a
     'pipeline' package there does not shadow the toolkit's."""
-    from pipeline.render3d import StudyRender
+    from pipeline.study.render3d import StudyRender
 
     decoy = tmp_path / "pipeline"
     decoy.mkdir()
@@ -255,8 +255,8 @@ def test_render_child_works_in_the_callers_directory(tmp_path, monkeypatch):
 
 
 def test_element_sizes_are_checked_before_any_case(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr("pipeline.fea_cases.run_tables", never)
-    monkeypatch.setattr("pipeline.study.run_study", never)
+    monkeypatch.setattr("pipeline.sweeps.fea_cases.run_tables", never)
+    monkeypatch.setattr("pipeline.study.run.run_study", never)
     for argv, needle in ((["tables", "--mesh-size-mm", "0"], "--mesh-size-mm 0.0 must be a finite number > 0"),
                          (["run", "--mesh-size-mm", "nan"], "--mesh-size-mm nan must be"),
                          (["tables", "--mesh-size-mm", "3", "--mesh-bulk-mm", "2"], "--mesh-bulk-mm 2.0 must be >=")):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from skfem import MeshTet
 
-from fea.analytic import bilayer_curvature, stoney_curvature
+from fea.verification.analytic import bilayer_curvature, stoney_curvature
 from fea.assembly import bulk_stiffness, film_operators, scalar_basis
 from fea.coating import Coating
 from fea.materials import Material
@@ -106,3 +106,22 @@ def test_equal_expansion_gives_zero_deformation(prepared):
 def test_temperature_outside_data_range_is_refused(prepared):
     with pytest.raises(ValueError, match=r"cold_K=2\.0 K is outside"):
         prepared.solve(Coating(200, 1, 1, "faces"), FILM, ThermalLoad(293, 2.0))
+
+
+def test_production_code_never_imports_verification_code():
+    """fea.verification is a reference for tests and benchmarks, not part of the model."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    offenders = []
+    for package in ("fea", "optics", "pipeline"):
+        for path in (root / package).rglob("*.py"):
+            if "verification" in path.relative_to(root).parts:
+                continue
+            for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                         else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+                if any(n.startswith("fea.verification") or n == "verification" for n in names):
+                    offenders.append(str(path.relative_to(root)))
+    assert offenders == []

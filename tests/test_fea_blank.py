@@ -29,7 +29,7 @@ def test_no_film_gives_zero_sag(eighth):
 
 
 def test_table2_cases_deform_in_opposite_directions(eighth):
-    from pipeline.fea_cases import quilt_direction_um as _quilt_direction_um
+    from pipeline.sweeps.fea_cases import quilt_direction_um as _quilt_direction_um
 
     holes = solve(200, 1.0, "holes", prepared=eighth)
     surf = solve(200, 1.0, "surfaces", prepared=eighth)
@@ -101,7 +101,7 @@ def test_eighth_model_refuses_asymmetric_coating(eighth):
     (dict(substrate=["steel"]), r"substrate='steel' is unknown"),
 ])
 def test_bad_sweep_input_is_refused_before_meshing(axes, match):
-    from pipeline.fea_cases import fea_grid
+    from pipeline.sweeps.fea_cases import fea_grid
 
     if match is None:  # temperature range is checked against the material data at solve time
         with pytest.raises(ValueError, match=r"cold_K=500"):

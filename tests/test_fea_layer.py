@@ -8,7 +8,7 @@ laterally constrained slice gives exactly zero quilt in both models.
 """
 import pytest
 
-from fea.verification import compare_thin_vs_explicit
+from fea.verification.layer import compare_thin_vs_explicit
 
 pytestmark = pytest.mark.slow
 

@@ -164,8 +164,8 @@ def test_sweep_runner_solves_planned_cases_in_blocks(tmp_path):
     """An inline sweep plans its cases: the FEA runner solves them as one lockstep block,
     with the answers of one-by-one solves."""
     from fea.case import FEACase
-    from pipeline.fea_cases import FEACaseRunner, fea_grid
-    from pipeline.sweep import run_sweep
+    from pipeline.sweeps.fea_cases import FEACaseRunner, fea_grid
+    from pipeline.sweeps.sweep import run_sweep
 
     cases = fea_grid(coverage=["all", "holes"], t0_um=[200, 100], polish=[0.75],
                      mesh_size_mm=[COARSE.size_mm], mesh_bulk_mm=[COARSE.size_bulk_mm])

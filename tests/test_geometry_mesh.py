@@ -24,7 +24,7 @@ import pytest
 from skfem import (Basis, ElementTetP2, ElementVector, FacetBasis,
                    Functional)
 
-from fea.cell import cell_mesh, cell_volumes_mm3
+from fea.verification.cell import cell_mesh, cell_volumes_mm3
 from fea.geometry import Blank
 from fea.mesh import MeshSpec, blank_mesh, blank_recipe, write_vtu
 from fea.mesh_cache import recipe_key

@@ -17,7 +17,7 @@ import pytest
 
 meshio = pytest.importorskip("meshio")
 
-from pipeline.io_fe import import_fe  # noqa: E402
+from pipeline.io.fe import import_fe  # noqa: E402
 
 A_UM = 0.1  # quilt amplitude (µm)
 DX, DY = 21.0, 18.0  # quilt periods (mm)
@@ -263,7 +263,7 @@ def test_bad_inputs_name_parameter_value_and_options(tmp_path):
 
 def test_cli_import_fe_writes_a_readable_map(tmp_path, capsys):
     from pipeline.cli import main
-    from pipeline.interchange import read_sag_map
+    from pipeline.io.registry import read_sag_map
 
     pts, ct, cells = plate(6.0, nz=1)
     good = write_vtu(tmp_path / "good.vtu", pts, ct, cells, 1e-3 * field_um(pts))
@@ -308,7 +308,7 @@ def test_own_fea_written_to_vtu_reads_back_to_its_own_sag(tmp_path):
     from fea.face_interp import evaluate_face
     from fea.fe_face import parse_surface, select_face
     from fea.mesh import MeshSpec
-    from pipeline.io_fe import read_fe_result
+    from pipeline.io.fe import read_fe_result
 
     model = prepare(mesh=MeshSpec(size_mm=5.0, size_bulk_mm=10.0))
     r = solve(200, 0.5, prepared=model)

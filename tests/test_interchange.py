@@ -10,8 +10,10 @@ import pytest
 
 from optics.sagmap import SagMap
 from optics.zernike import norm_factor, wavefront_from_coefficients
-from pipeline import interchange as ic
-from pipeline.io_codev import CODEV_NDA, MAX_COUNT
+from pipeline.io import registry as ic
+from pipeline.io.codev import CODEV_NDA, MAX_COUNT, read_codev_int, write_codev_int
+from pipeline.io.measured import read_line_profile
+from pipeline.io.zernike import read_zernike_list, write_zernike_list
 
 # Quantisation of each format for the test map (|sag| <= 3.5 um):
 #   .int  16-bit counts, SSZ puts max|sag| at 32766 counts: error <= 0.5 * 3.5 / 32766 um
@@ -90,7 +92,7 @@ def test_codev_int_reader_fixture(tmp_path):
     assert m.meta["codev_type"] == "WFR" and m.meta["xsc"] == 1.0
     np.testing.assert_allclose(m.y_mm, [-2.0, 2.0])
     # spacing_mm instead of an extent: grid centred on the origin
-    m2 = ic.read_codev_int(f, spacing_mm=(0.5, 3.0), quantity="wavefront")
+    m2 = read_codev_int(f, spacing_mm=(0.5, 3.0), quantity="wavefront")
     np.testing.assert_allclose(m2.x_mm, [-0.5, 0.0, 0.5])
     np.testing.assert_allclose(m2.y_mm, [-1.5, 1.5])
     # a wavefront is never surface sag without an explicit factor
@@ -104,7 +106,7 @@ def test_codev_int_reader_fixture(tmp_path):
 def test_codev_int_large_sag_stays_16bit(tmp_path, quadrant_map):
     """A 7 mm map still fits 16-bit counts; the step grows with the map (max|sag| / 32766)."""
     big = quadrant_map.scaled(2000.0)  # up to 7 mm of sag
-    path = ic.write_codev_int(big, tmp_path / "big.int", wavelength_um=0.6328)
+    path = write_codev_int(big, tmp_path / "big.int", wavelength_um=0.6328)
     ssz = float(path.read_text().splitlines()[1].split()[7])
     values = np.array(" ".join(path.read_text().splitlines()[2:]).split(), dtype=np.int64)
     assert np.abs(values[values != CODEV_NDA]).max() <= 32766
@@ -259,45 +261,45 @@ COEFFS_NORMALISED = {(0, 0): 0.1, (1, 1): -0.2, (2, 0): 0.35, (2, -2): 0.05, (3,
 
 
 def test_zernike_fringe_noll_round_trip(tmp_path):
-    f = ic.write_zernike_list(COEFFS_NORMALISED, tmp_path / "z_fringe.txt", "fringe",
+    f = write_zernike_list(COEFFS_NORMALISED, tmp_path / "z_fringe.txt", "fringe",
                               radius_mm=62.5, coeffs_normalised=True)
     text = f.read_text()
     assert "# convention: fringe" in text and "# normalisation_radius_mm: 62.5" in text and "# units: um" in text
     # file holds unnormalised Fringe coefficients: c_u = c_n * N, in Fringe order (Z4 = defocus)
     rows = {int(r.split(",")[0]): float(r.split(",")[3]) for r in text.splitlines()[6:]}
     assert rows[4] == pytest.approx(0.35 * np.sqrt(3)) and rows[37] == pytest.approx(0.001 * np.sqrt(13))
-    unnorm, info = ic.read_zernike_list(f, normalised=False)
+    unnorm, info = read_zernike_list(f, normalised=False)
     assert info == {"convention": "fringe", "radius_mm": 62.5, "normalised": False}
     # same surface: sum c_n Z_normalised == sum c_u Z_unnormalised
     x, y = np.meshgrid(np.linspace(-60, 60, 31), np.linspace(-60, 60, 31))
     np.testing.assert_allclose(wavefront_from_coefficients(unnorm, x, y, 62.5, norm=False),
                                wavefront_from_coefficients(COEFFS_NORMALISED, x, y, 62.5, norm=True), atol=1e-12)
     # Fringe file -> normalised dict -> Noll file -> back: identity
-    norm, _ = ic.read_zernike_list(f, normalised=True)
-    g = ic.write_zernike_list(norm, tmp_path / "z_noll.txt", "noll", 62.5, coeffs_normalised=True)
+    norm, _ = read_zernike_list(f, normalised=True)
+    g = write_zernike_list(norm, tmp_path / "z_noll.txt", "noll", 62.5, coeffs_normalised=True)
     assert "1,0,0," in g.read_text() and "4,2,0," in g.read_text()  # Noll j = 4 is defocus
-    back, info = ic.read_zernike_list(g, normalised=True)
+    back, info = read_zernike_list(g, normalised=True)
     assert info["convention"] == "noll"
     assert back.keys() == COEFFS_NORMALISED.keys()
     for k, v in COEFFS_NORMALISED.items():
         assert back[k] == pytest.approx(v, rel=1e-14)
     # unnormalised in -> Noll (normalised) file: divided by N
-    h = ic.write_zernike_list({(2, 2): 1.0}, tmp_path / "z3.txt", "noll", 10.0, coeffs_normalised=False)
-    assert ic.read_zernike_list(h, normalised=True)[0][(2, 2)] == pytest.approx(1 / norm_factor(2, 2))
+    h = write_zernike_list({(2, 2): 1.0}, tmp_path / "z3.txt", "noll", 10.0, coeffs_normalised=False)
+    assert read_zernike_list(h, normalised=True)[0][(2, 2)] == pytest.approx(1 / norm_factor(2, 2))
 
 
 def test_zernike_list_errors(tmp_path):
     with pytest.raises(ValueError, match=r"\(8, 8\).*not one of the 37 Fringe terms"):
-        ic.write_zernike_list({(8, 8): 1.0}, tmp_path / "a.txt", "fringe", 10.0, coeffs_normalised=True)
+        write_zernike_list({(8, 8): 1.0}, tmp_path / "a.txt", "fringe", 10.0, coeffs_normalised=True)
     with pytest.raises(ValueError, match=r"convention='ansi'.*\['fringe', 'noll'\]"):
-        ic.write_zernike_list({(0, 0): 1.0}, tmp_path / "a.txt", "ansi", 10.0, coeffs_normalised=True)
-    f = ic.write_zernike_list({(2, 0): 1.0}, tmp_path / "b.txt", "noll", 10.0, coeffs_normalised=True)
+        write_zernike_list({(0, 0): 1.0}, tmp_path / "a.txt", "ansi", 10.0, coeffs_normalised=True)
+    f = write_zernike_list({(2, 0): 1.0}, tmp_path / "b.txt", "noll", 10.0, coeffs_normalised=True)
     f.write_text(f.read_text().replace("4,2,0,", "5,2,0,"))
     with pytest.raises(ValueError, match=r"b\.txt, line 7: noll index 5 is \(n, m\)=\(2, -2\)"):
-        ic.read_zernike_list(f, normalised=True)
+        read_zernike_list(f, normalised=True)
     f.write_text(f.read_text().replace("# normalisation_radius_mm: 10\n", ""))
     with pytest.raises(ValueError, match=r"b\.txt, line 5: missing '# normalisation_radius_mm"):
-        ic.read_zernike_list(f, normalised=True)
+        read_zernike_list(f, normalised=True)
 
 
 # ------------------------------------------------------------------ line profiles
@@ -310,7 +312,7 @@ def _profile(tmp_path: Path, text: str) -> Path:
 def test_read_line_profile(tmp_path):
     x = np.linspace(-20, 20, 41)
     rows = "\n".join(f"{v},{100 * np.exp(-v * v / 50)},junk" for v in x[::-1])  # reversed, extra column
-    off, inten = ic.read_line_profile(_profile(tmp_path, "offset_um,intensity,note\n" + rows + "\n"))
+    off, inten = read_line_profile(_profile(tmp_path, "offset_um,intensity,note\n" + rows + "\n"))
     np.testing.assert_allclose(off, x)
     assert np.trapezoid(inten, off) == pytest.approx(1.0)
     assert off[np.argmax(inten)] == 0.0
@@ -326,7 +328,7 @@ def test_read_line_profile(tmp_path):
 ])
 def test_read_line_profile_errors(tmp_path, text, pattern):
     with pytest.raises(ValueError, match=r"lsf\.csv.*" + pattern):
-        ic.read_line_profile(_profile(tmp_path, text))
+        read_line_profile(_profile(tmp_path, text))
 
 
 def test_unknown_option_is_named(tmp_path, quadrant_map):
@@ -341,3 +343,34 @@ def test_csv_ragged_row_named(tmp_path):
     f.write_text("x_mm,y_mm,sag_um\n0,0,1\n1,0,2,9\n0,1,3\n1,1,4\n")
     with pytest.raises(ValueError, match=r"rag\.csv, line 3: expected 3 values"):
         ic.read_sag_map(f)
+
+
+def test_registry_lists_every_reader_and_writer_of_the_io_package():
+    """One registry: every public read_*/write_* of a pipeline.io module is a row of FORMATS."""
+    import importlib
+    import pkgutil
+
+    import pipeline.io
+
+    registered = {f for fmt in ic.FORMATS for f in (fmt.reader, fmt.writer) if f is not None}
+    missing = []
+    for m in pkgutil.iter_modules(pipeline.io.__path__):
+        if m.name in ("common", "registry"):  # shared helpers; the dispatchers themselves
+            continue
+        mod = importlib.import_module(f"pipeline.io.{m.name}")
+        missing += [f"{m.name}.{n}" for n in mod.__all__
+                    if n.startswith(("read_", "write_")) and getattr(mod, n) not in registered]
+    assert missing == []
+    assert all(f.module.startswith("pipeline.io.") for f in ic.FORMATS)
+
+
+def test_registry_sag_dispatch_is_the_sag_map_rows():
+    rows = ic.formats("sag map")
+    suffixes = [s for f in rows for s in f.suffixes]
+    assert len(suffixes) == len(set(suffixes))  # dispatch on the suffix must be unambiguous
+    assert ic.SAG_FORMATS == {s: (f.reader, f.writer) for f in rows for s in f.suffixes}
+    assert {f.kind for f in ic.FORMATS} == set(ic.KINDS)
+    with pytest.raises(ValueError, match="kind='profile'"):
+        ic.formats("profile")
+    table = ic.format_table()
+    assert all(f.reader.__name__ in table and f.module in table for f in ic.FORMATS)

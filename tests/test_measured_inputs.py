@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from optics.sagmap import quilt_sag_map
-from pipeline import interchange as ic
+from pipeline.io import registry as ic
+from pipeline.io.measured import read_line_profile
 from pipeline.diagnosis.forward import ProfileForward
 from pipeline.diagnosis.manifest import ProfileData, load_data, load_manifest, parse_manifest, recentre
 
@@ -184,7 +185,7 @@ def test_background_subtracted_profile_with_negative_noise(tmp_path):
     u = np.linspace(-60, 60, 121)
     y = np.exp(-0.5 * (u / 8.0) ** 2) + rng.normal(0, 0.02, u.size)
     assert (y < 0).sum() > 20  # the wings are noise about zero
-    off, inten = ic.read_line_profile(_profile_file(tmp_path / "p.csv", u, y), normalise=False)
+    off, inten = read_line_profile(_profile_file(tmp_path / "p.csv", u, y), normalise=False)
     np.testing.assert_allclose(off, u)
     np.testing.assert_allclose(inten, y, rtol=1e-8, atol=1e-10)
 
@@ -199,10 +200,10 @@ def test_counts_pedestal_nonuniform_shifted_unsorted(tmp_path):
     y = 500.0 + line + rng.normal(0, 15.0, u.size)
     o = rng.permutation(u.size)
     f = _profile_file(tmp_path / "adu.csv", u[o], y[o])
-    off, inten = ic.read_line_profile(f, normalise=False)
+    off, inten = read_line_profile(f, normalise=False)
     np.testing.assert_allclose(off, u, atol=1e-6)
     np.testing.assert_allclose(inten, y, rtol=1e-8)
-    _, unit_area = ic.read_line_profile(f)
+    _, unit_area = read_line_profile(f)
     assert np.trapezoid(unit_area, off) == pytest.approx(1.0)
     man = parse_manifest({"measurement": [{"kind": "line_profile", "file": str(f), "grating": "J",
                                            "wavelength_um": 1.25, "pixel_scale_mas": 250}]})

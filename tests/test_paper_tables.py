@@ -33,7 +33,7 @@ def rows(paper_fea_dir):
     import io
 
     from pipeline.cli import main
-    from pipeline.fea_cases import run_tables
+    from pipeline.sweeps.fea_cases import run_tables
 
     out = paper_fea_dir / "fea" / "tables"
     buf = io.StringIO()

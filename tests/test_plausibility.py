@@ -23,7 +23,7 @@ from pipeline.diagnosis.cli import main
 from pipeline.diagnosis.manifest import load_data, load_manifest
 from pipeline.diagnosis.plausibility import (Plausibility, at_prior_bound, check_measurements, image_problems,
                                              line_fwhm, measurement_problems, profile_problems, unit_hint)
-from pipeline.interchange import write_sag_map
+from pipeline.io.registry import write_sag_map
 
 SCEN = Path(__file__).resolve().parents[1] / "pipeline" / "scenarios"
 OFFSETS_UM = np.arange(-120.0, 120.01, 1.5)

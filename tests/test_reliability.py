@@ -10,7 +10,7 @@ import pytest
 
 from optics.grating import MAX_GRATING_TURN_DEG, get_grating
 from optics.lineprofile import line_profile, point_psf
-from pipeline.io_common import ensure_writable_dir
+from pipeline.io.common import ensure_writable_dir
 from pipeline.optics_cli import main as optics_main
 
 
@@ -107,7 +107,7 @@ def test_psf_npz_is_not_left_half_written(tmp_path, monkeypatch, capsys):
 
 def test_cold_above_warm_is_refused_unless_heating_is_asked_for():
     from fea.model import ThermalLoad
-    from pipeline.config import ConfigError, loads_study_config
+    from pipeline.study.config import ConfigError, loads_study_config
 
     with pytest.raises(ValueError, match=r"cold_K=300 K must be below warm_K=293 K"):
         ThermalLoad(warm_K=293.0, cold_K=300.0)

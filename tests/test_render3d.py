@@ -1,4 +1,5 @@
-"""3-D render of the deformed blank (pipeline/render3d.py): surface, off-screen PNG, guard.
+"""3-D render of the deformed blank (pipeline/study/render_geometry.py, render_scene.py, render3d.py):
+surface, off-screen PNG, guard.
 
 No skip when pyvista/VTK or OpenGL is missing: CI installs both (scripts/bootstrap →
 scripts/offscreen-gl) and must actually render.
@@ -15,7 +16,7 @@ import pytest
 from fea.api import prepare, solve
 from fea.geometry import Blank
 from fea.mesh import MeshSpec
-from pipeline import render3d
+from pipeline.study import render3d, render_geometry, render_scene
 
 COARSE = MeshSpec(5.0, 10.0)
 
@@ -49,7 +50,7 @@ def _volume(mesh) -> float:
 def test_mirrored_surface_is_the_closed_whole_blank(coarse_case):
     model, r = coarse_case
     mesh = model.mesh
-    s = render3d.blank_surface(mesh, r.coords_mm, r.displacement_mm, r.info["symmetry_planes"])
+    s = render_geometry.blank_surface(mesh, r.coords_mm, r.displacement_mm, r.info["symmetry_planes"])
     b = Blank()
     assert np.allclose(s.points_mm.min(axis=0), [-b.size_x_mm / 2, -b.size_y_mm / 2, -b.thickness_mm / 2])
     assert np.allclose(s.points_mm.max(axis=0), [b.size_x_mm / 2, b.size_y_mm / 2, b.thickness_mm / 2])
@@ -63,7 +64,7 @@ def test_mirrored_surface_is_the_closed_whole_blank(coarse_case):
     assert s.displacement_mm[j, 0] == pytest.approx(-s.displacement_mm[i, 0])
     assert s.displacement_mm[j, 2] == pytest.approx(s.displacement_mm[i, 2])
     # cut-away: still closed, three quarters of the volume
-    c = render3d.blank_surface(mesh, r.coords_mm, r.displacement_mm, r.info["symmetry_planes"], cutaway=True)
+    c = render_geometry.blank_surface(mesh, r.coords_mm, r.displacement_mm, r.info["symmetry_planes"], cutaway=True)
     assert _edges_twice(c.triangles) and c.cut.any()
     assert _enclosed_volume(c.points_mm, c.triangles) == pytest.approx(0.75 * whole, rel=1e-2)
 
@@ -71,7 +72,7 @@ def test_mirrored_surface_is_the_closed_whole_blank(coarse_case):
 def test_render_png_offscreen(coarse_case, tmp_path):
     model, r = coarse_case
     size = (900, 420)
-    info = render3d.render_deformed_blank(model.mesh, r, tmp_path / "blank.png", window_size=size)
+    info = render_scene.render_deformed_blank(model.mesh, r, tmp_path / "blank.png", window_size=size)
     assert info["exaggeration"] >= 100  # sub-µm quilting needs a large factor to be visible
     img = mpimg.imread(info["path"])[..., :3]
     assert img.shape[:2] == (size[1], size[0])
@@ -118,8 +119,7 @@ def test_study_figures_render_and_are_reused(tmp_path):
 
 def test_study_render_reuses_the_saved_field(coarse_case, tmp_path, monkeypatch):
     """A field kept by the study's FEA run is rendered without preparing or solving again."""
-    import fea.model
-    from pipeline.fea_cases import field_path, load_field, save_field
+    from pipeline.sweeps.fea_cases import field_path, load_field, save_field
 
     model, res = coarse_case
     params = {"coverage": "all", "t0_um": 200.0, "polish": 0.75, "mesh_size_mm": COARSE.size_mm,
@@ -133,6 +133,6 @@ def test_study_render_reuses_the_saved_field(coarse_case, tmp_path, monkeypatch)
     def no_solve(*a, **k):
         raise AssertionError("the render solved a case whose field was saved")
 
-    monkeypatch.setattr(fea.model, "PreparedBlank", no_solve)
+    monkeypatch.setattr(render3d, "PreparedBlank", no_solve)
     done = render3d._render_child(tmp_path, {"blank_3d.png": ("heading", [params], ["200/75"])})
     assert (tmp_path / "blank_3d.png").stat().st_size > 20_000 and "blank_3d.png" in done

@@ -79,7 +79,7 @@ def test_pttp_stats_remove_power_that_pt_leaves():
 
 
 def test_figure_summary_and_table_columns(tmp_path):
-    from pipeline.fea_cases import FIGURE_KEYS, TableRow, _write_rows, write_figure_summary
+    from pipeline.sweeps.fea_cases import FIGURE_KEYS, TableRow, write_table_rows, write_figure_summary
 
     fig = {k: float(i) for i, k in enumerate(FIGURE_KEYS)}
     write_figure_summary(tmp_path / "s.csv", ["a", "b"], {"a": fig, "b": fig})
@@ -87,7 +87,7 @@ def test_figure_summary_and_table_columns(tmp_path):
     assert lines[0].startswith("case,T1 dx,T2 dy,T3 dz,R1 rx,R2 ry,R3 rz,PV center PT")
     assert lines[1].startswith("units,um,um,um,urad,urad,urad,um")
     assert len(lines) == 4
-    _write_rows([TableRow("1", "all", 200.0, 0.75, 0.6, 0.61, "up", 0.1, True, fig)], tmp_path / "t.csv")
+    write_table_rows([TableRow("1", "all", 200.0, 0.75, 0.6, 0.61, "up", 0.1, True, fig)], tmp_path / "t.csv")
     head, row = (tmp_path / "t.csv").read_text().splitlines()
     assert head.split(",")[:11][-1] == "used_in_calibration" and "rb_rz_urad" in head and "pv_center_pttp_um" in head
     assert row.split(",")[5] == "0.6100"  # the paper's metric, unchanged
@@ -113,7 +113,7 @@ def test_front_rigid_body_is_independent_of_how_the_body_is_pinned():
 def test_own_fea_case_outputs_rigid_body_and_power(tmp_path):
     """Eighth model: symmetry forces dx, dy, rx, ry, rz to zero; dz is the face's mean sag
     (the blank's mean z motion is zero by the mid-plane mirror); P/V_center is unchanged."""
-    from pipeline.fea_cases import FEACaseRunner, field_path, load_field
+    from pipeline.sweeps.fea_cases import FEACaseRunner, field_path, load_field
 
     params = {"t0_um": 200.0, "polish": 0.5, "mesh_size_mm": 5.0, "mesh_bulk_mm": 10.0}
     runner = FEACaseRunner(with_maps=False, fields_dir=tmp_path, fields_for=[params])
@@ -137,8 +137,8 @@ def test_study_nc_carries_rigid_body_with_units(tmp_path):
     import xarray as xr
 
     from optics.sagmap import quilt_sag_map
-    from pipeline.fea_cases import FIGURE_KEYS
-    from pipeline.study_data import study_dataset, write_study_netcdf
+    from pipeline.sweeps.fea_cases import FIGURE_KEYS
+    from pipeline.study.dataset import study_dataset, write_study_netcdf
 
     case = SimpleNamespace(label="a", group="g", full={"t0_um": 200.0, "pitch_x_mm": 21.0, "pitch_y_mm": 18.0})
     out = {k: 1.0 for k in FIGURE_KEYS}

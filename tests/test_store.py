@@ -19,7 +19,7 @@ import pytest
 
 from pipeline import store
 from pipeline.store import CacheMiss, CacheWarning
-from pipeline.sweep import grid, run_sweep
+from pipeline.sweeps.sweep import grid, run_sweep
 
 
 # ----------------------------------------------------------------- keys
@@ -146,7 +146,7 @@ def _calls(log):
 
 
 def _files(out, case):
-    """The store entry of one sweep case (payload format 2 of :mod:`pipeline.cache`)."""
+    """The store entry of one sweep case (payload format 2 of :mod:`pipeline.sweeps.cache`)."""
     return store.entry(out / "cases", "t", case.as_dict(), format_version=2)
 
 
@@ -253,7 +253,7 @@ def test_a_damaged_nominal_map_is_rebuilt_with_a_warning(tmp_path, fake_fea, fau
 
 # ----------------------------------------------------------------- renders and fields
 def test_a_render_png_that_is_not_the_committed_one_is_redone(tmp_path):
-    from pipeline import render3d
+    from pipeline.study import render3d
 
     params = [{"coverage": "all", "t0_um": 200.0, "polish": 0.75}]
     e = render3d._entry(tmp_path, "blank_3d.png", params)
@@ -270,7 +270,7 @@ def test_a_render_png_that_is_not_the_committed_one_is_redone(tmp_path):
 
 
 def test_swapped_field_files_are_not_used(tmp_path):
-    from pipeline.fea_cases import field_path, load_field, save_field
+    from pipeline.sweeps.fea_cases import field_path, load_field, save_field
 
     def result(scale):
         return SimpleNamespace(coords_mm=np.eye(3), displacement_mm=scale * np.ones((3, 3)), uniform_strain=1e-3,

@@ -1,9 +1,9 @@
 """`run_study` writes study.nc (parameters, P/V, sag maps, Zernike + Fourier fits, line
-profiles) and exports/ that re-import through pipeline.interchange (coarse mesh)."""
+profiles) and exports/ that re-import through pipeline.io.registry (coarse mesh)."""
 import numpy as np
 import pytest
 
-from pipeline.config import loads_study_config
+from pipeline.study.config import loads_study_config
 
 CONFIG = """
 [study]
@@ -37,7 +37,7 @@ figures = false
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
-    from pipeline.study import run_study
+    from pipeline.study.run import run_study
 
     out = tmp_path_factory.mktemp("study")
     res = run_study(out, loads_study_config(CONFIG), progress=False)
@@ -89,8 +89,9 @@ def test_study_nc_holds_cases_fits_maps_and_profiles(study):
 def test_exports_round_trip_through_interchange(study):
     import xarray as xr
 
-    from pipeline.interchange import read_sag_map, read_zernike_list
-    from pipeline.study_data import _slug
+    from pipeline.io.registry import read_sag_map
+    from pipeline.io.zernike import read_zernike_list
+    from pipeline.study.dataset import _slug
 
     out, res = study
     ex = out / "exports"
@@ -122,8 +123,8 @@ def test_exports_round_trip_through_interchange(study):
     assert w.meta["codev_type"] == "WFR" and w.meta["wavelength_um"] == 1.25
     np.testing.assert_allclose(w.sag_um, factor * sag, atol=0.5 * 1.25 / w.meta["ssz"] * (1 + 1e-9), equal_nan=True)
     # the CODE V ZFR deck and the OpticStudio Zernike Sag lists hold the same fit
-    from pipeline.io_codev_zfr import read_codev_zernike
-    from pipeline.io_zemax import read_zemax_zernike
+    from pipeline.io.codev_zfr import read_codev_zernike
+    from pipeline.io.zemax import read_zemax_zernike
 
     decks = [read_codev_zernike(ex / f"{stem}_zernike_zfr.int", normalised=True)]
     decks += [read_zemax_zernike(ex / f"{stem}_zernike_{c}_zemax.dat", c, normalised=True) for c in ("standard", "fringe")]
@@ -142,8 +143,8 @@ def test_exports_round_trip_through_interchange(study):
 def test_exports_switched_off(tmp_path, study):
     from dataclasses import replace
 
-    from pipeline.config import OutputOptions
-    from pipeline.study import run_study
+    from pipeline.study.config import OutputOptions
+    from pipeline.study.run import run_study
 
     out, _ = study
     cfg = loads_study_config(CONFIG)

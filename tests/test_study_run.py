@@ -10,7 +10,7 @@ from dataclasses import replace
 import pytest
 
 from pipeline.cli import main
-from pipeline.config import load_study_config, preset_path
+from pipeline.study.config import load_study_config, preset_path
 
 COARSE = ["--mesh-size-mm", "5", "--mesh-bulk-mm", "10"]
 
@@ -83,7 +83,7 @@ def test_config_check_reports_bad_files(tmp_path, capsys):
 
 def test_small_whatif_end_to_end_on_a_coarse_mesh(tmp_path):
     """The AlSi40 what-if cut to one FEA case and two pixel scales (the full presets: slow tier)."""
-    from pipeline.study import run_study
+    from pipeline.study.run import run_study
 
     cfg = load_study_config(preset_path("whatif_alsi40"))
     cfg = replace(cfg, fea=(replace(cfg.fea[1], axes={**dict(cfg.fea[1].axes), "polish": 0.5}),),

@@ -5,7 +5,7 @@ import pytest
 
 from fea.api import solve
 from pipeline.cli import main
-from pipeline.surrogate_sweep import run_surrogate_sweep
+from pipeline.sweeps.surrogate import run_surrogate_sweep
 
 COARSE = ["--param", "mesh_size_mm=5", "--param", "mesh_bulk_mm=10"]
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from pipeline.sweep import Case, CacheWarning, SweepError, grid, parse_range, run_sweep
+from pipeline.sweeps.sweep import Case, CacheWarning, SweepError, grid, parse_range, run_sweep
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -197,7 +197,7 @@ def test_kill_and_resume_loses_nothing(tmp_path):
     script.write_text(textwrap.dedent(f"""
         import json, sys, time
         sys.path.insert(0, {str(REPO)!r})
-        from pipeline.sweep import grid, run_sweep
+        from pipeline.sweeps.sweep import grid, run_sweep
 
         def slow(params):
             with open(params["log"], "a") as f:

@@ -60,7 +60,8 @@ import numpy as np
 
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
-from pipeline.interchange import write_psf_image_csv, write_sag_map
+from pipeline.io.measured import write_psf_image_csv
+from pipeline.io.registry import write_sag_map
 
 from .effects import LIBRARY
 from .engine import Criteria, diagnose
@@ -509,7 +510,7 @@ def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None, progres
 
 
 def write_campaign(result: dict, out_dir) -> Path:
-    from pipeline.io_common import atomic_write
+    from pipeline.io.common import atomic_write
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

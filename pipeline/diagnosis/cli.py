@@ -22,7 +22,7 @@ def _criteria(args, base=None):
 
 
 def _run(args) -> int:
-    from pipeline.io_common import ensure_writable_dir
+    from pipeline.io.common import ensure_writable_dir
 
     if args.validate:
         from pipeline.bounds import MAX_CAMPAIGN_CASES, campaign_seconds, max_workers, warn_if_long

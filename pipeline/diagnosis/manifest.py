@@ -176,7 +176,7 @@ class Measurement:
 
     @property
     def read_options(self) -> dict:
-        """Keyword options for :func:`pipeline.interchange.read_sag_map` (surfaces)."""
+        """Keyword options for :func:`pipeline.io.registry.read_sag_map` (surfaces)."""
         if self.kind != "surface":
             return {}
         opts = {"spacing_mm": self.spacing_mm, "extent_mm": self.extent_mm, "wavelength_um": self.wavelength_um}
@@ -429,8 +429,8 @@ def load_manifest(path_or_obj, allow_outside: bool = False) -> Manifest:
 
 
 def _read_surface(m: Measurement) -> SurfaceData:
-    from pipeline.interchange import read_sag_map
-    from pipeline.io_codev import GridUnknownError
+    from pipeline.io.registry import read_sag_map
+    from pipeline.io.codev import GridUnknownError
 
     try:
         sm = read_sag_map(m.file, **m.read_options)
@@ -478,7 +478,7 @@ def recentre(coords: np.ndarray, unit_peak: np.ndarray, beyond_um: float) -> flo
 
 
 def _read_profile(m: Measurement) -> ProfileData:
-    from pipeline.interchange import read_line_profile
+    from pipeline.io.measured import read_line_profile
 
     try:
         u, y = read_line_profile(m.file, normalise=False)
@@ -493,7 +493,7 @@ def _read_profile(m: Measurement) -> ProfileData:
 
 
 def _read_psf_image(m: Measurement) -> PsfImageData:
-    from pipeline.interchange import read_psf_image
+    from pipeline.io.measured import read_psf_image
 
     try:
         x, y, v = read_psf_image(m.file)

@@ -114,7 +114,7 @@ def case_sag_map(sim: Simulation, spacing_mm: float = 0.5, cache_dir: str | Path
 def nominal_sag_map(sim: Simulation, cache_dir: str | Path | None = None) -> SagMap:
     """The nominal sag map at ``sim.cold_K``: ``sim.sag_file`` if given, else the FEA case."""
     if sim.sag_file is not None:
-        from pipeline.interchange import read_sag_map
+        from pipeline.io.registry import read_sag_map
 
         try:
             return read_sag_map(sim.sag_file)

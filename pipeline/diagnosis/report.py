@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.io_common import atomic_write
+from pipeline.io.common import atomic_write
 
 from .effects import library_rows
 

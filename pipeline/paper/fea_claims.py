@@ -51,7 +51,7 @@ EXTRA_CASES: dict[str, dict] = {
 class PaperFEA:
     """The model's FEA results the scorecard rests on.
 
-    ``rows`` are :class:`pipeline.fea_cases.TableRow` at the stored calibration;
+    ``rows`` are :class:`pipeline.sweeps.fea_cases.TableRow` at the stored calibration;
     ``maps[(coverage, t0_um, polish)]`` and ``extra[label]`` are sag maps (µm) rescaled to
     ``stress_scale`` (the Table 1-only fit); ``scale_factor`` = stress_scale / STRESS_SCALE.
     """
@@ -75,7 +75,7 @@ class PaperFEA:
 
 
 def _maps_of(res, label) -> SagMap:
-    from pipeline.fea_cases import SAG_GRID_X_MM, SAG_GRID_Y_MM
+    from pipeline.sweeps.fea_cases import SAG_GRID_X_MM, SAG_GRID_Y_MM
 
     (_, out), = list(res)
     s = out["sag_um"][1] if isinstance(out["sag_um"], tuple) else out["sag_um"]
@@ -85,7 +85,7 @@ def _maps_of(res, label) -> SagMap:
 def solve_paper_cases(out_dir, progress: bool = True) -> PaperFEA:
     """Solve (or reload from ``out_dir/fea``'s case cache) the 15 paper cases and the extras,
     and fit the stress scale on Table 1 alone."""
-    from pipeline.fea_cases import run_fea_sweep, run_tables
+    from pipeline.sweeps.fea_cases import run_fea_sweep, run_tables
 
     fea = Path(out_dir) / "fea"
     rows, maps = run_tables(fea / "tables", progress=progress, return_maps=True)

@@ -48,7 +48,7 @@ def _figures(fea, book: ProfileBook, factor: float, out: Path) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from pipeline.plots import save
+    from pipeline.study.plots import save
 
     names = []
     fig, ax = plt.subplots(figsize=(8, 4))
@@ -92,7 +92,7 @@ def _figures(fea, book: ProfileBook, factor: float, out: Path) -> list[str]:
 
 def write_scorecard(claims: list[Claim], figures: list[str], out_dir) -> None:
     """Write ``scorecard.json`` and ``scorecard.md`` atomically."""
-    from pipeline.io_common import atomic_write
+    from pipeline.io.common import atomic_write
 
     out = Path(out_dir)
     with atomic_write(out / "scorecard.json") as fh:
@@ -106,7 +106,7 @@ def scorecard(out_dir, *, progress: bool = True, figures: bool = True) -> list[C
 
     Returns the claims in report order (FEA tables, optics, design).
     """
-    from pipeline.io_common import ensure_writable_dir
+    from pipeline.io.common import ensure_writable_dir
 
     out = ensure_writable_dir(out_dir)
     fea = solve_paper_cases(out, progress=progress)

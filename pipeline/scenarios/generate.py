@@ -35,7 +35,7 @@ from optics.zernike import zernike_xy
 from pipeline.diagnosis.manifest import NOMINAL_SIMULATION, Simulation
 from pipeline.diagnosis.nominal import case_sag_map, thermal_factor
 from pipeline.diagnosis.synth import shape_discrepancy, synthetic_profile, synthetic_surface, write_profile_csv
-from pipeline.interchange import write_sag_map
+from pipeline.io.registry import write_sag_map
 
 HERE = Path(__file__).parent
 SIM = "[simulation]\n" + "".join(f'{k} = "{v}"\n' if isinstance(v, str) else f"{k} = {v:g}\n"

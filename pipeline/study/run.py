@@ -1,7 +1,7 @@
 """End-to-end studies: FEA cases → sag maps → line profiles → tables, figures, report.
 
 ``run_study(out_dir, config=None)`` (CLI: ``cryograting run [CONFIG.toml]``) runs a
-:class:`pipeline.config.StudyConfig`; without one it runs :func:`default_study`, the
+:class:`pipeline.study.config.StudyConfig`; without one it runs :func:`default_study`, the
 paper's study: the 15 FEA cases of Tables 1 and 2; detected line profiles of J, H, K at
 band centre and edges in 250/100/25 mas for a perfect grating and the 200 µm / 75 %
 deformation (J also 200 µm / 50 %); the 1.25 µm line on the J, H and K gratings in
@@ -16,7 +16,7 @@ orders −2/−3/−4 (J with 200/50, H and K with 200/75, as the paper). It wri
 * ``study.nc`` — the one labelled dataset: every case's parameters, P/V and RMS, sag
   map, Zernike (Fringe 1–37 over the 82 × 72 mm box) and Fourier quilt fits with their
   residuals, the grating wavefronts of the profiles, and the line profiles
-  (:mod:`pipeline.study_data`);
+  (:mod:`pipeline.study.dataset`);
 * ``exports/`` (``[output] exports``) — sag maps as 16-bit CODE V INT and Zemax Grid Sag
   DAT, the Zernike fit as a CODE V ZFR deck, OpticStudio Zernike Standard/Fringe Sag
   extra data and project lists (Fringe and Noll), grating wavefronts as CODE V INT WFR;
@@ -25,6 +25,7 @@ orders −2/−3/−4 (J with 200/50, H and K with 200/75, as the paper). It wri
 
 from __future__ import annotations
 
+import base64
 import csv
 import html
 import time
@@ -32,7 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.config import (
+from fea.calibration import paper_cases
+from optics.grating import get_grating
+from optics.lineprofile import line_profile, point_psf
+from optics.metrics import profile_metrics
+from optics.sagmap import SagMap
+from pipeline.bounds import GEOMETRY_KEYS, SECONDS, fea_case_seconds, warn_if_long
+from pipeline.io.common import atomic_path, atomic_write, ensure_writable_dir
+from pipeline.study.config import (
     CaseSelector,
     CompareFigure,
     FEAGroup,
@@ -44,6 +52,29 @@ from pipeline.config import (
     StudyConfig,
     load_study_config,
 )
+from pipeline.study.dataset import (
+    REPORT_QUILT,
+    REPORT_ZERNIKES,
+    fit_cases,
+    study_dataset,
+    wavefront_jobs,
+    write_exports,
+    write_study_netcdf,
+)
+from pipeline.study.plots import plot_line_profiles, plot_multigrating, plot_psfs, plot_sag_maps
+from pipeline.study.render3d import start_study_render, study_renders
+from pipeline.sweeps.fea_cases import (
+    SAG_GRID_X_MM,
+    SAG_GRID_Y_MM,
+    FEACaseRunner,
+    TableRow,
+    case_namespace,
+    figure_of,
+    format_table,
+    write_figure_summary,
+    write_table_rows,
+)
+from pipeline.sweeps.sweep import Case, run_sweep
 
 __all__ = ["default_study", "run_study"]
 
@@ -86,29 +117,11 @@ def default_study() -> StudyConfig:
 
 def _prepare_out(out: Path) -> None:
     """Create ``out`` and prove it writable before anything is computed or written."""
-    from pipeline.io_common import ensure_writable_dir
-
     ensure_writable_dir(out)
 
 
 def _run_fea(config: StudyConfig, out: Path, progress: bool):
     """Solve (or reuse) every FEA case; write the case and paper tables; return maps by label."""
-    from fea.calibration import paper_cases
-    from optics.sagmap import SagMap
-    from pipeline.fea_cases import (
-        SAG_GRID_X_MM,
-        SAG_GRID_Y_MM,
-        FEACaseRunner,
-        TableRow,
-        _write_rows,
-        case_namespace,
-        figure_of,
-        write_figure_summary,
-    )
-    from pipeline.sweep import Case, run_sweep
-
-    from pipeline.render3d import study_renders
-
     cases = config.cases()
     # the 3-D renders reuse these solutions instead of solving their cases again
     keep = [p for _, ps, _ in study_renders(cases).values() for p in ps] if config.output.figures else []
@@ -135,14 +148,12 @@ def _run_fea(config: StudyConfig, out: Path, progress: bool):
                                  float(o["pv_center_um"]), pc.direction, float(o["quilt_direction_um"]),
                                  pc.calibrate, figure_of(o)))
     if rows:
-        _write_rows(rows, out / "tables.csv")
+        write_table_rows(rows, out / "tables.csv")
     return cases, outputs, maps, rows, in_paper
 
 
 def _write_cases(cases, outputs, path: Path) -> None:
     """One row per FEA case: label, group, P/V and RMS (µm), then every parameter's value."""
-    from pipeline.io_common import atomic_write
-
     keys = ["pv_center_um", "rms_center_um", "pv_full_um", "rms_full_um", "quilt_direction_um"]
     with atomic_write(path) as fh:
         w = csv.writer(fh, lineterminator="\n")
@@ -163,9 +174,6 @@ def format_cases(cases, outputs) -> str:
 
 
 def _profiles(config: StudyConfig, maps: dict, progress: bool) -> list:
-    from optics.lineprofile import line_profile
-    from optics.metrics import profile_metrics
-
     out = []
     t0 = time.perf_counter()
     for job in config.profile_jobs():
@@ -187,7 +195,6 @@ def _write_profiles(results, out: Path):
     """Write ``profiles.csv`` and ``profiles.nc``; return the profiles' Dataset (None without profiles)."""
     import xarray as xr
 
-    from pipeline.io_common import atomic_path, atomic_write
 
     if not results:
         return None
@@ -228,15 +235,6 @@ def _curve_label(job) -> str:
 
 def _figures(config: StudyConfig, maps: dict, results: list, out: Path) -> dict:
     """Draw the config's figures; returns {file: (heading, path)} in config order."""
-    from optics.grating import get_grating
-    from optics.lineprofile import point_psf
-    from pipeline.plots import (
-        plot_line_profiles,
-        plot_multigrating,
-        plot_psfs,
-        plot_sag_maps,
-    )
-
     figs = {}
     for fig in config.figures:
         path = out / fig.file
@@ -269,8 +267,6 @@ def _figures(config: StudyConfig, maps: dict, results: list, out: Path) -> dict:
 def estimate_seconds(config: StudyConfig) -> tuple[float, str]:
     """A study's run time (s) from the benchmarks' per-case seconds (:mod:`pipeline.bounds`),
     and what it is made of, e.g. ``"15 FEA cases x ~3.5 s + 72 line profiles x ~0.05 s"``."""
-    from pipeline.bounds import GEOMETRY_KEYS, SECONDS, fea_case_seconds
-
     cases, n_prof = config.cases(), config.n_profile_jobs()
     fea_s = [fea_case_seconds(c.full["mesh_size_mm"]) for c in cases]
     n_geo = len({tuple(c.full[k] for k in GEOMETRY_KEYS) for c in cases})  # each meshed once (if not cached)
@@ -282,8 +278,6 @@ def estimate_seconds(config: StudyConfig) -> tuple[float, str]:
 
 def _warn_if_long(config: StudyConfig) -> None:
     """One stderr line before any work when the study is estimated to take over an hour."""
-    from pipeline.bounds import warn_if_long
-
     seconds, detail = estimate_seconds(config)
     warn_if_long(seconds, "run", detail)
 
@@ -314,8 +308,6 @@ def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progre
     NotADirectoryError, PermissionError
         ``out_dir`` is a file or cannot be written.
     """
-    from pipeline.fea_cases import format_table
-
     if config is None:
         config = default_study()
     elif not isinstance(config, StudyConfig):
@@ -331,8 +323,8 @@ def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progre
     text = "\n\n".join(t for t in (table, format_cases(others, outputs) if others else "") if t)
     print(text, flush=True)
     t_fea = time.perf_counter() - t0
-    from pipeline.render3d import start_study_render  # 3-D render: guarded child process, beside the profiles
 
+    # 3-D render: a guarded child process, running while the profiles are computed
     render = start_study_render(cases, out, progress=progress) if config.output.figures else None
     results = _profiles(config, maps, progress)
     profiles_ds = _write_profiles(results, out)
@@ -355,14 +347,6 @@ def run_study(out_dir, config: StudyConfig | str | Path | None = None, *, progre
 
 def _fits_dataset_exports(config, cases, outputs, maps, results, profiles_ds, out: Path, progress: bool):
     """Zernike + Fourier fits of every case, ``study.nc``, and (if configured) ``exports/``."""
-    from pipeline.study_data import (
-        fit_cases,
-        study_dataset,
-        wavefront_jobs,
-        write_exports,
-        write_study_netcdf,
-    )
-
     t = time.perf_counter()
     zfits, ffits = fit_cases(cases, maps)
     waves = wavefront_jobs([j for j, _, _ in results])
@@ -379,8 +363,6 @@ def _fits_dataset_exports(config, cases, outputs, maps, results, profiles_ds, ou
 
 def format_fits_html(cases, zfits, ffits) -> str:
     """HTML table: the main Zernike terms (nm, RMS-normalised) and quilt amplitudes (nm) per case."""
-    from pipeline.study_data import REPORT_QUILT, REPORT_ZERNIKES
-
     def cell(v):
         return f"<td>{v * 1e3:.1f}</td>" if v is not None and np.isfinite(v) else "<td>–</td>"
 
@@ -399,11 +381,6 @@ def format_fits_html(cases, zfits, ffits) -> str:
 
 def _report(out: Path, config: StudyConfig, table: str, cases_table: str, results, figs: dict,
             t_fea: float, t_all: float, fits_table: str = "") -> None:
-    import base64
-
-    from optics.grating import get_grating
-    from pipeline.io_common import atomic_write
-
     def img(p):
         return f'<img src="data:image/png;base64,{base64.b64encode(Path(p).read_bytes()).decode()}" style="max-width:100%">'
 

@@ -16,6 +16,7 @@ and one that is not what it claims to be is recomputed with a :class:`CacheWarni
 from __future__ import annotations
 
 import csv
+import importlib.util
 import io
 import itertools
 import math
@@ -28,8 +29,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from tqdm.auto import tqdm
 
-from pipeline.cache import (
+from pipeline.io.common import atomic_path, atomic_write, ensure_writable_dir
+from pipeline.store import CacheWarning
+from pipeline.sweeps.cache import (
     COORD_PREFIX,
     CacheMiss,
     canonical_token,
@@ -38,9 +42,7 @@ from pipeline.cache import (
     load_case,
     save_case,
 )
-from pipeline.executors import check_scheduler, iter_dask, iter_inline, iter_processes
-from pipeline.io_common import atomic_path, atomic_write
-from pipeline.store import CacheWarning
+from pipeline.sweeps.executors import check_scheduler, iter_dask, iter_inline, iter_processes
 
 __all__ = ["Case", "grid", "parse_range", "run_sweep", "SweepResult", "SweepError", "CacheWarning"]
 
@@ -226,8 +228,6 @@ def parse_range(text: str) -> list[float]:
 
 def _prepare_out_dir(out_dir) -> Path:
     """Create ``out_dir/cases`` and prove it writable, before any case runs."""
-    from pipeline.io_common import ensure_writable_dir
-
     path = Path(out_dir)
     if path.exists() and not path.is_dir():
         raise ValueError(f"out_dir {str(path)!r} exists and is not a directory")
@@ -327,8 +327,6 @@ def run_sweep(func, cases, out_dir, *, namespace: str, workers: int | None = Non
                       "do not verify", CacheWarning, stacklevel=2)
     n_reused, failures = len(results), []
 
-    from tqdm.auto import tqdm
-
     bar = tqdm(total=len(unique), initial=n_reused, desc=description, unit="case",
                file=sys.stderr, disable=not progress, dynamic_ncols=True)
     bar.set_postfix_str(f"reused {n_reused}, computed 0", refresh=True)
@@ -403,8 +401,6 @@ class SweepResult(Sequence):
         Uses the h5netcdf engine when its h5py backend is installed (h5netcdf >= 1.4
         no longer pulls h5py in), else netCDF4; both write the same netCDF-4 file.
         """
-        import importlib.util
-
         find = importlib.util.find_spec
         engine = "h5netcdf" if find("h5py") and find("h5netcdf") else "netcdf4"  # h5py alone (XDMF) is not enough
         if engine == "netcdf4" and not importlib.util.find_spec("netCDF4"):

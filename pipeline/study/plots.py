@@ -14,13 +14,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
+from pipeline.io.common import atomic_path  # noqa: E402
+
 __all__ = ["plot_sag_maps", "plot_line_profiles", "plot_psfs", "plot_multigrating", "save"]
 
 
 def save(fig, path: Path) -> Path:
     """Write ``fig`` to ``path`` atomically (temp file + rename) and close it."""
-    from pipeline.io_common import atomic_path
-
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     try:

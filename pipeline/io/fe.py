@@ -14,11 +14,16 @@ joined. Positions, displacements and plane values are in ``length_unit`` (mm, m,
 
 from __future__ import annotations
 
+import contextlib
+import io
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from fea.external import face_sag_map
+from fea.fe_face import parse_surface, select_face
 
 __all__ = ["LENGTH_UNITS_MM", "FEResultData", "read_fe_result", "import_fe"]
 
@@ -159,9 +164,6 @@ def read_fe_result(path, *, displacement_csv=None, field: str | None = None,
     path = Path(path)
     if not path.is_file():
         raise ValueError(f"{path}: file does not exist")
-    import contextlib
-    import io
-
     said = io.StringIO()  # meshio prints its complaint before exiting: keep it for the one-line error
     try:
         with contextlib.redirect_stdout(said), contextlib.redirect_stderr(said):
@@ -227,9 +229,6 @@ def import_fe(path, surface: str, *, displacement_csv=None, field: str | None = 
     fea.external.FaceSagResult
         ``.sag_map`` (a SagMap for fits, exports, optics), ``.rigid_body``, ``.stats``.
     """
-    from fea.external import face_sag_map
-    from fea.fe_face import parse_surface, select_face
-
     scale = _unit_scale(length_unit)
     data = read_fe_result(path, displacement_csv=displacement_csv, field=field, length_unit=length_unit)
     spec = parse_surface(surface)

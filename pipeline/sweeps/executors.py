@@ -9,13 +9,16 @@ function never escape an executor; they come back as ``("error", ...)`` outcomes
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 import threading
 import time
 import traceback
 from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 
-from pipeline.cache import normalise_result
+from pipeline.sweeps.cache import normalise_result
 
 __all__ = ["run_case", "iter_inline", "iter_processes", "iter_dask", "check_scheduler"]
 
@@ -68,10 +71,6 @@ def iter_processes(func, jobs, workers: int) -> Iterator[tuple[str, tuple]]:
     gmsh/OpenMP state of the parent out of the workers. The price is one interpreter
     start and the imports of ``func``'s module per worker, once per sweep.
     """
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    from concurrent.futures.process import BrokenProcessPool
-
     pool = ProcessPoolExecutor(
         max_workers=min(workers, len(jobs)),
         mp_context=multiprocessing.get_context("spawn"),

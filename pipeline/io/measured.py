@@ -6,11 +6,12 @@ order. Only non-finite values, duplicate samples and a total flux <= 0 are refus
 
 from __future__ import annotations
 
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from pipeline.io_common import atomic_write, parse_error, read_csv_columns
+from pipeline.io.common import atomic_write, parse_error, read_csv_columns
 
 __all__ = ["read_line_profile", "read_psf_image", "write_psf_image_csv"]
 
@@ -64,8 +65,6 @@ def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndar
 
 def _load_npz_columns(path: Path, names: tuple[str, ...]) -> np.ndarray:
     """Arrays ``names`` of an ``.npz`` flattened into columns; errors name the file."""
-    import zipfile
-
     try:
         with np.load(path, allow_pickle=False) as z:
             missing = [k for k in names if k not in z.files]

@@ -2,7 +2,7 @@
 
 Units: µm for film thickness and sag, mm for geometry.
 
-The slice (``fea.cell.cell_mesh``) is a quarter of one lightweighting cell in the x–z
+The slice (``fea.verification.cell.cell_mesh``) is a quarter of one lightweighting cell in the x–z
 plane (x ∈ [0, pitch/2], z ∈ [0, T/2], minus the quarter hole), extruded one slice in
 y. Both models use the same boundary conditions: symmetry (u_x = 0) on x = 0 and
 x = pitch/2 (a periodic row of holes), u_z = 0 on the mid-plane, u_y = 0 on both
@@ -19,12 +19,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .assembly import bulk_stiffness, scalar_basis
+from ..assembly import bulk_stiffness, scalar_basis
 from .cell import cell_mesh
-from .coating import Coating
-from .linsolve import solve_spd
-from .materials import AL6061_T6, NIP_HIGH_P, Material
-from .model import PreparedBlank, ThermalLoad
+from ..coating import Coating
+from ..linsolve import solve_spd
+from ..materials import AL6061_T6, NIP_HIGH_P, Material
+from ..model import PreparedBlank, ThermalLoad
 
 __all__ = ["LayerComparison", "compare_thin_vs_explicit"]
 

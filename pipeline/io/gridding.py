@@ -13,6 +13,7 @@ into the regular µm grid of :class:`optics.sagmap.SagMap`.
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import Delaunay, QhullError, cKDTree
 
 __all__ = ["GRID_TOLERANCE", "MAX_GRID_NODES", "SAG_UNITS_TO_UM", "LENGTH_UNITS_TO_MM", "grid_points",
            "detect_axis", "sag_unit_factor", "length_unit_factor"]
@@ -170,8 +171,6 @@ def grid_points(x_mm: np.ndarray, y_mm: np.ndarray, sag_um: np.ndarray, *, spaci
 
 
 def _scattered(x, y, s, spacing_mm, source):
-    from scipy.spatial import Delaunay, QhullError, cKDTree
-
     ok = np.isfinite(s)
     x, y, s = x[ok], y[ok], s[ok]
     if x.size < 3:

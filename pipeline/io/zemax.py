@@ -50,7 +50,7 @@ The order (terms, radius, coefficients) is the layout those surfaces list in the
 Extra Data Editor *(unverified against an OpticStudio installation: after import,
 check that "Number of Terms" and "Norm Radius" show the first two values)*. A cross-check
 inside OpticStudio: its File > Convert File Formats > "INT Zernike to OpticStudio DAT"
-turns our CODE V ZFR deck (:mod:`pipeline.io_codev_zfr`) into its own Fringe list.
+turns our CODE V ZFR deck (:mod:`pipeline.io.codev_zfr`) into its own Fringe list.
 """
 
 from __future__ import annotations
@@ -61,8 +61,8 @@ import numpy as np
 
 from optics.sagmap import SagMap
 from optics.zernike import fringe_to_nm, nm_to_fringe, nm_to_noll, noll_to_nm
-from pipeline.io_common import atomic_write, numbered_lines, parse_error, read_text
-from pipeline.io_zernike import check_coefficients, convert_normalisation
+from pipeline.io.common import atomic_write, numbered_lines, parse_error, read_text
+from pipeline.io.zernike import check_coefficients, convert_normalisation
 
 __all__ = ["write_zemax_grid_sag", "read_zemax_grid_sag", "nan_gradient", "ZEMAX_UNITS_MM",
            "write_zemax_zernike", "read_zemax_zernike", "ZEMAX_ZERNIKE"]

@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import codecs
 import csv
 import io
 import os
@@ -115,8 +116,6 @@ def decode_text(raw: bytes, path: str | Path, what: str, strict: bool = False) -
 
     Undecodable bytes become U+FFFD unless ``strict``, which raises a ``ValueError``
     naming the file and the byte offset."""
-    import codecs
-
     for bom, enc in ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"),
                      (codecs.BOM_UTF8, "utf-8-sig"), (codecs.BOM_UTF16_LE, "utf-16"), (codecs.BOM_UTF16_BE, "utf-16")):
         if raw.startswith(bom):

@@ -1,6 +1,6 @@
 """The keys of a study config, their types and units, and how a value becomes a sweep axis.
 
-A study config (:mod:`pipeline.config`) is TOML; every parameter value in it may be
+A study config (:mod:`pipeline.study.config`) is TOML; every parameter value in it may be
 
 * a scalar: ``t0_um = 200``;
 * a list: ``t0_um = [200, 150, 100]``;
@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass
 
 from fea.case import PARAMETERS
+from pipeline.sweeps.sweep import parse_range
 
 __all__ = [
     "FEA_KEYS",
@@ -165,8 +166,6 @@ def _scalar(path: str, value: object, name: str, p: Param):
 
 
 def _range(path: str, table: dict, name: str, p: Param) -> list:
-    from pipeline.sweep import parse_range
-
     if p.kind == "str":
         raise ConfigError(path, table, f"a range needs a numeric parameter; give a list ({p.allowed})")
     check_keys(table, _RANGE_KEYS, path)
@@ -213,8 +212,6 @@ def parse_axis(path: str, raw: object, name: str, p: Param) -> tuple:
             if isinstance(v, (list, dict)):
                 raise ConfigError(f"{path}[{i}]", v, f"list items must be scalars ({p.allowed})")
     elif isinstance(raw, str) and p.kind != "str" and raw.lower() not in _WORDS.get(name, ()):
-        from pipeline.sweep import parse_range
-
         try:
             values = parse_range(raw)
         except ValueError as exc:

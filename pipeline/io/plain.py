@@ -1,79 +1,34 @@
-"""Interchange of sag maps, Zernike lists and measured line profiles with other tools.
+"""Sag maps in plain files no design code owns: a CSV point table, NetCDF and NumPy ``.npz``.
 
-One reader/writer pair per sag-map format, registered in :data:`SAG_FORMATS`;
-:func:`write_sag_map` / :func:`read_sag_map` dispatch on the file suffix.
+======== ================================== ==============================
+suffix   layout                             precision
+======== ================================== ==============================
+``.csv`` ``x_mm,y_mm,sag_um`` table, a row    12 significant digits
+         per point (masked or scattered ok)
+``.nc``  NetCDF4 (xarray): ``sag_um[y_mm,     float64, exact
+         x_mm]`` with units attributes
+``.npz`` arrays ``x_mm``, ``y_mm``,           float64, exact
+         ``sag_um[y, x]``, ``label``
+======== ================================== ==============================
 
-======== ================================ ======================================
-suffix   format                           module / quantisation
-======== ================================ ======================================
-``.int`` CODE V grid interferogram (GRD)  :mod:`pipeline.io_codev`; 16 bit, max|v|/65532
-``.dat`` Zemax Grid Sag                   :mod:`pipeline.io_zemax`; 12 digits
-``.csv`` ``x_mm,y_mm,sag_um`` table        here; 12 significant digits
-``.nc``  NetCDF4 (xarray, default engine)  here; float64, exact
-``.npz`` NumPy arrays                     here; float64, exact
-======== ================================ ======================================
-
-Every writer goes through a temporary file in the target directory and
-``os.replace`` (atomic). All maps follow :mod:`optics.sagmap`: ``x`` dispersion,
-``y`` ruling direction, ``sag_um[y, x]`` along +z, NaN invalid.
-
-Sign and frame when loading into a lens file
---------------------------------------------
-Values are written in the grating frame unchanged: ``+z`` is the outward normal of
-the ruled face (positive sag moves the surface *towards* the incoming light), x is
-the dispersion direction, y the ruling direction. CODE V and Zemax measure sag along
-the surface's *local* +Z, which for a mirror met by light travelling along +Z points
-*away* from the incoming light; if the grating is set up that way the design code
-needs ``-sag`` (and, to stay right-handed, one of x/y mirrored). That depends on the
-lens file, so no flip is applied here; the orientation tests pin our own layout.
-
-Also here (re-exported): Zernike coefficient lists (:mod:`pipeline.io_zernike`),
-measured line profiles and PSF images (:mod:`pipeline.io_measured`), and
-:func:`load_sag_map` used by the ``--sag`` option of the CLI. Point lists and units:
-:mod:`pipeline.io_gridding`.
+Readers take files other tools wrote (other units, descending or meshgrid axes,
+masked or scattered points); every writer is atomic (:mod:`pipeline.io.common`).
+The registry of every format is :mod:`pipeline.io.registry`.
 """
 
 from __future__ import annotations
 
-import inspect
 import json
+import zipfile
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from optics.sagmap import SagMap
-from pipeline.io_codev import read_codev_int, write_codev_int
-from pipeline.io_common import atomic_path, atomic_write, parse_error, read_csv_columns
-from pipeline.io_gridding import grid_points, length_unit_factor, sag_unit_factor
-from pipeline.io_measured import read_line_profile, read_psf_image, write_psf_image_csv
-from pipeline.io_zemax import read_zemax_grid_sag, write_zemax_grid_sag
-from pipeline.io_zernike import (ZERNIKE_CONVENTIONS, convert_normalisation, read_zernike_list,
-                                 write_zernike_list)
+from pipeline.io.common import atomic_path, atomic_write, parse_error, read_csv_columns
+from pipeline.io.gridding import grid_points, length_unit_factor, sag_unit_factor
 
-__all__ = [
-    "SAG_FORMATS",
-    "read_psf_image",
-    "write_psf_image_csv",
-    "write_sag_map",
-    "read_sag_map",
-    "load_sag_map",
-    "write_codev_int",
-    "read_codev_int",
-    "write_zemax_grid_sag",
-    "read_zemax_grid_sag",
-    "write_sag_csv",
-    "read_sag_csv",
-    "write_sag_netcdf",
-    "read_sag_netcdf",
-    "write_sag_npz",
-    "read_sag_npz",
-    "ZERNIKE_CONVENTIONS",
-    "convert_normalisation",
-    "write_zernike_list",
-    "read_zernike_list",
-    "read_line_profile",
-]
+__all__ = ["write_sag_csv", "read_sag_csv", "write_sag_netcdf", "read_sag_netcdf", "write_sag_npz", "read_sag_npz"]
 
 _CSV_COLUMNS = ("x_mm", "y_mm", "sag_um")
 
@@ -99,7 +54,7 @@ def read_sag_csv(path: str | Path, spacing_mm: float | None = None) -> SagMap:
     inside its aperture), are put back on that grid with NaN at the absent nodes and at
     ``nan`` sag values; truly scattered points are interpolated linearly onto a grid of
     ``spacing_mm`` (default: their median nearest-neighbour distance), NaN outside their
-    convex hull (:func:`pipeline.io_gridding.grid_points`). ``meta["gridding"]`` says which.
+    convex hull (:func:`pipeline.io.gridding.grid_points`). ``meta["gridding"]`` says which.
 
     Parameters
     ----------
@@ -250,8 +205,6 @@ def read_sag_npz(path: str | Path) -> SagMap:
     """Read a ``.npz`` sag map: arrays ``x_mm``, ``y_mm`` (1-D, or 2-D meshgrids),
     ``sag_um[y, x]`` (µm, NaN = no data) and optional ``label``. Complex arrays are
     refused; descending axes are flipped."""
-    import zipfile
-
     path = Path(path)
     if not path.exists():
         raise ValueError(f"{path}: file does not exist")
@@ -269,86 +222,3 @@ def read_sag_npz(path: str | Path) -> SagMap:
             raise
         raise ValueError(f"{path}: not a readable .npz file ({exc})") from None
     return _axes_map(path, "sag_um", x, y, sag, label, {})
-
-
-# ------------------------------------------------------------------ registry
-#: suffix -> (reader(path, **options) -> SagMap, writer(sagmap, path, **options) -> Path)
-SAG_FORMATS: dict[str, tuple[Callable[..., SagMap], Callable[..., Path]]] = {
-    ".int": (read_codev_int, write_codev_int),
-    ".dat": (read_zemax_grid_sag, write_zemax_grid_sag),
-    ".csv": (read_sag_csv, write_sag_csv),
-    ".nc": (read_sag_netcdf, write_sag_netcdf),
-    ".npz": (read_sag_npz, write_sag_npz),
-}
-_WRITERS = {w for _, w in SAG_FORMATS.values()}
-
-
-def _check_options(func: Callable, path: Path, options: dict) -> None:
-    """Unknown keyword options become a ValueError listing the valid ones for the format."""
-    params = list(inspect.signature(func).parameters)[2 if func in _WRITERS else 1:]
-    bad = sorted(set(options) - set(params))
-    if bad:
-        raise ValueError(f"{path}: option(s) {bad} are not valid for {func.__name__} "
-                         f"({path.suffix} files); valid are {params}")
-
-
-def _format_for(path: Path) -> tuple[Callable, Callable]:
-    try:
-        return SAG_FORMATS[path.suffix.lower()]
-    except KeyError:
-        raise ValueError(
-            f"{path}: unknown sag-map format {path.suffix!r}; valid suffixes are {sorted(SAG_FORMATS)}"
-        ) from None
-
-
-def write_sag_map(sagmap: SagMap, path: str | Path, **options) -> Path:
-    """Write ``sagmap`` in the format given by the suffix of ``path``.
-
-    Parameters
-    ----------
-    sagmap : SagMap
-        The map.
-    path : str or Path
-        Output file; suffix one of :data:`SAG_FORMATS`.
-    **options
-        Passed to the format's writer (e.g. ``kind``, ``wavelength_um`` for ``.int``).
-    """
-    path = Path(path)
-    writer = _format_for(path)[1]
-    if not isinstance(sagmap, SagMap):
-        raise ValueError(f"sagmap must be an optics.sagmap.SagMap, got {type(sagmap).__name__}")
-    _check_options(writer, path, options)
-    try:
-        return writer(sagmap, path, **options)
-    except OSError as exc:  # e.g. a directory in the way, disk full
-        raise ValueError(f"cannot write {path}: {exc.strerror or exc}") from None
-
-
-def read_sag_map(path: str | Path, **options) -> SagMap:
-    """Read a sag map, choosing the reader by the suffix of ``path``.
-
-    ``**options`` go to the reader (``extent_mm``/``spacing_mm``, ``quantity``,
-    ``wfr_to_sag_factor`` for ``.int``, ``spacing_mm`` for scattered ``.csv``,
-    ``wavelength_um`` for a ``.nc`` in waves); an option the format does not use is
-    refused naming the valid ones.
-    """
-    path = Path(path)
-    reader = _format_for(path)[0]
-    _check_options(reader, path, options)
-    if not path.exists():
-        raise ValueError(f"{path}: file does not exist")
-    return reader(path, **options)
-
-
-def load_sag_map(path: str | Path) -> SagMap:
-    """Sag map for the CLI ``--sag FILE`` option (any :data:`SAG_FORMATS` suffix);
-    errors are prefixed with ``--sag``."""
-    from pipeline.io_codev import GridUnknownError
-
-    try:
-        return read_sag_map(path)
-    except GridUnknownError as exc:  # the command line has no grid options: the title must carry it
-        remedy = "add EXTENT_MM x0 x1 y0 y1 (mm, first/last sample centres) to the title"
-        raise ValueError(f"--sag {exc.with_remedy(remedy)}") from None
-    except ValueError as exc:
-        raise ValueError(f"--sag {exc}") from None

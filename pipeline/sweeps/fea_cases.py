@@ -12,6 +12,7 @@ sweep over coatings and temperatures assembles the bulk once.
 from __future__ import annotations
 
 import csv
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -21,12 +22,17 @@ from fea.calibration import STRESS_SCALE, paper_cases
 from fea.case import PARAMETERS, FEACase, model_namespace
 from fea.front_figure import front_figure_outputs
 from fea.geometry import Blank
-from fea.mesh import MeshSpec
-from fea.model import PreparedBlank
+from fea.mesh import MeshSpec, blank_mesh
+from fea.model import FEAResult, PreparedBlank
+from optics.sagmap import SagMap
+from pipeline import store
+from pipeline.bounds import MAX_FEA_CASES, check_count, product_count
+from pipeline.io.common import atomic_write
+from pipeline.sweeps.sweep import Case, grid, run_sweep
 
 __all__ = ["FEACaseRunner", "fea_grid", "run_fea_sweep", "run_tables",
            "TableRow", "format_table", "SAG_GRID_X_MM", "SAG_GRID_Y_MM", "FIGURE_KEYS", "case_namespace",
-           "write_figure_summary", "quilt_direction_um", "field_path", "save_field", "load_field"]
+           "write_figure_summary", "write_table_rows", "quilt_direction_um", "field_path", "save_field", "load_field"]
 
 #: Fixed output grid of the sag maps (covers the default 160 x 140 mm face).
 SAG_SPACING_MM = 0.5
@@ -53,8 +59,6 @@ def quilt_direction_um(sag, blank: Blank) -> float:
 def field_path(fields_dir, params: dict):
     """The :mod:`pipeline.store` entry of the displacement field of the case ``params``
     (key: params + model version; ``.payload`` is the ``.npz``)."""
-    from pipeline import store
-
     norm = {k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v)) for k, v in params.items()}
     return store.entry(fields_dir, f"field-{model_namespace()}", norm)
 
@@ -62,10 +66,6 @@ def field_path(fields_dir, params: dict):
 def save_field(entry, result) -> None:
     """Displacement field (mm, float32) + node positions + case info, written atomically
     with its checksummed sidecar (``entry`` from :func:`field_path`)."""
-    import json
-
-    from pipeline import store
-
     store.save_arrays(entry, {"coords_mm": result.coords_mm,
                               "displacement_mm": result.displacement_mm.astype(np.float32),
                               "uniform_strain": result.uniform_strain,
@@ -75,11 +75,6 @@ def save_field(entry, result) -> None:
 def load_field(entry):
     """The :class:`fea.model.FEAResult` (without sag) saved by :func:`save_field`, or None
     (absent; a damaged or mismatched file also warns)."""
-    import json
-
-    from fea.model import FEAResult
-    from pipeline import store
-
     try:
         z, _ = store.load_arrays(entry)
         return FEAResult(z["coords_mm"], z["displacement_mm"].astype(float), float(z["uniform_strain"]),
@@ -92,7 +87,7 @@ def load_field(entry):
 
 
 class FEACaseRunner:
-    """Callable case function for :func:`pipeline.sweep.run_sweep`.
+    """Callable case function for :func:`pipeline.sweeps.sweep.run_sweep`.
 
     Keeps prepared models (mesh + bulk stiffness) per (blank, mesh, substrate) in the
     instance; pickling sends an empty cache, so each worker process builds its own.
@@ -119,8 +114,6 @@ class FEACaseRunner:
                 "_models": {}}
 
     def model(self, blank: Blank, spec: MeshSpec, substrate: str) -> PreparedBlank:
-        from fea.mesh import blank_mesh
-
         key = (blank, spec, substrate)
         if key not in self._models:
             self._models = {key: PreparedBlank(blank_mesh(blank, spec), substrate)}  # keep one: memory
@@ -205,8 +198,6 @@ class FEACaseRunner:
 
 def fea_grid(**axes) -> list:
     """Cartesian product of FEA parameter values, validated before any meshing."""
-    from pipeline.sweep import grid
-
     cases = grid(**axes)
     for c in cases:
         FEACase.from_params(c.as_dict())  # raises with the parameter's name, value and range
@@ -244,8 +235,6 @@ FIGURE_KEYS = {
 def write_figure_summary(path, labels, outputs: dict) -> Path:
     """SigFit-style summary CSV: one row per case, rigid-body motion then P/V and RMS with
     piston/tilt (PT) and piston/tilt/power (PTP) removed; a units row under the header."""
-    from pipeline.io_common import atomic_write
-
     keys = [k for k in FIGURE_KEYS if all(k in outputs[lb] for lb in labels)]
     with atomic_write(Path(path)) as fh:
         w = csv.writer(fh, lineterminator="\n")
@@ -265,13 +254,9 @@ def run_fea_sweep(axes: dict, out_dir, *, scheduler: str | None = None, workers:
     cached under ``out_dir/cases`` and reused on re-run, so a killed sweep resumes.
     ``workers=1`` (default) solves in this process: PARDISO already uses both cores.
     """
-    from pipeline.sweep import run_sweep
-
     # the table always names the case: unswept core parameters appear as one-value axes
     core = {k: [PARAMETERS[k].default] for k in ("coverage", "t0_um", "polish")}
     axes = {**core, **axes}
-    from pipeline.bounds import MAX_FEA_CASES, check_count, product_count
-
     check_count(product_count(len(v) if isinstance(v, (list, tuple)) else 1 for v in axes.values()),
                 "cases", MAX_FEA_CASES, "the product of the axes' value counts; give fewer values")
     cases = fea_grid(**axes)
@@ -320,8 +305,6 @@ def run_tables(out_dir, *, progress: bool = True, mesh_size_mm: float | None = N
     with ``maps[(coverage, t0_um, polish)]`` a :class:`optics.sagmap.SagMap` when
     ``return_maps``.
     """
-    from pipeline.sweep import Case, run_sweep
-
     extra = {k: v for k, v in (("mesh_size_mm", mesh_size_mm), ("mesh_bulk_mm", mesh_bulk_mm),
                                ("stress_scale", stress_scale)) if v is not None}
     paper = paper_cases()
@@ -334,13 +317,11 @@ def run_tables(out_dir, *, progress: bool = True, mesh_size_mm: float | None = N
             for c, (_, out) in zip(paper, res)]
     out = Path(out_dir)
     res.write_netcdf(out / "sweep.nc")
-    _write_rows(rows, out / "tables.csv")
+    write_table_rows(rows, out / "tables.csv")
     labels = [f"{r.table} {r.coverage} {r.t0_um:g}/{100 * r.polish:g}" for r in rows]
     write_figure_summary(out / "figure_summary.csv", labels, {lb: r.figure for lb, r in zip(labels, rows)})
     if not return_maps:
         return rows
-    from optics.sagmap import SagMap
-
     maps = {(c.coverage, c.t0_um, c.polish): SagMap(SAG_GRID_X_MM, SAG_GRID_Y_MM,
                                                     np.asarray(o["sag_um"][1] if isinstance(o["sag_um"], tuple)
                                                                else o["sag_um"], float),
@@ -358,9 +339,8 @@ _TABLE_FIGURE_KEYS = [k for k in FIGURE_KEYS if k not in ("pv_center_um", "rms_c
                                                           "rms_full_um")]
 
 
-def _write_rows(rows, path: Path) -> None:
-    from pipeline.io_common import atomic_write
-
+def write_table_rows(rows, path: Path) -> None:
+    """Write the paper-table rows (:class:`TableRow`) as ``tables.csv``, atomically."""
     extra = [k for k in _TABLE_FIGURE_KEYS if rows and all(k in r.figure for r in rows)]
     buf = [["table", "coverage", "t0_um", "polish", "paper_pv_center_um", "model_pv_center_um",
              "error_percent", "paper_direction", "model_quilt_direction_um", "direction_ok",

@@ -35,7 +35,7 @@ plus the customary 16-bit conventions of interferometer exports. Items marked
   ``OPD = -(cos alpha + cos beta) * sag``), so a reader never does it silently:
   :func:`read_codev_int` with ``quantity="sag"`` refuses a ``WFR`` file unless the
   caller passes ``wfr_to_sag_factor`` (``sag = factor * OPD``; see
-  :mod:`pipeline.io_codev_quantity`), and ``quantity="wavefront"`` refuses ``SUR``.
+  :mod:`pipeline.io.codev_quantity`), and ``quantity="wavefront"`` refuses ``SUR``.
 * ``GRD nx ny``: ``nx`` columns (x), ``ny`` rows (y), row-major from the top row (+y),
   each row from -x to +x *(unverified; interferometer image order)*.
 * ``XSC``/``YSC`` (aperture scaling) and ``NNB`` (with or without a value) are read
@@ -64,8 +64,8 @@ from pathlib import Path
 import numpy as np
 
 from optics.sagmap import SagMap
-from pipeline.io_codev_quantity import check_request, grating_wfr_to_sag_factor, sag_factor
-from pipeline.io_common import atomic_write, numbered_lines, parse_error, read_text
+from pipeline.io.codev_quantity import check_request, grating_wfr_to_sag_factor, sag_factor
+from pipeline.io.common import atomic_write, numbered_lines, parse_error, read_text
 
 __all__ = ["GridUnknownError", "write_codev_int", "read_codev_int", "grating_wfr_to_sag_factor", "choose_ssz",
            "MAX_COUNT", "CODEV_NDA"]
@@ -227,7 +227,7 @@ def _parse_header(path, lineno: int, line: str) -> dict:
     tok = line.split()
     if not tok or tok[0].upper() != "GRD":
         if tok and tok[0].upper() in _OTHER_FILE_TYPES:
-            hint = " (a Zernike deck: read it with pipeline.io_codev_zfr.read_codev_zernike)" \
+            hint = " (a Zernike deck: read it with pipeline.io.codev_zfr.read_codev_zernike)" \
                 if tok[0].upper() == "ZFR" else ""
             raise parse_error(path, lineno, f"INT type {tok[0]!r} is not a grid; only GRD grid files{hint}")
         raise parse_error(path, lineno, f"header must start with 'GRD nx ny', found {line.strip()[:40]!r}")

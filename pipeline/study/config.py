@@ -12,13 +12,13 @@ key with its meaning, unit and range)::
                      this key one sag-map figure and one profile figure per set and grating
     [output]         figures, report, exports (booleans)
 
-Values are scalars, lists or ranges (:mod:`pipeline.config_schema`). FEA cases are
+Values are scalars, lists or ranges (:mod:`pipeline.study.schema`). FEA cases are
 selected for profiles and figures by *selectors*, inline tables of parameter values
 (``{t0_um = 200, polish = 0.75}``) that match every case with those values; the key
 ``group`` matches a ``[[fea.cases]]`` table's ``name``.
 
 :func:`load_study_config` reads and validates a file; :class:`StudyConfig` can also be
-built in Python (``pipeline.study.default_study()`` does). Validation happens on
+built in Python (``pipeline.study.run.default_study()`` does). Validation happens on
 construction: every FEA case goes through :meth:`fea.case.FEACase.from_params` (the
 blank, coating, mesh, thermal load, the materials' temperature range, the caps and the
 mesh's memory estimate), every line through the grating equation of
@@ -27,6 +27,7 @@ mesh's memory estimate), every line through the grating equation of
 
 from __future__ import annotations
 
+import copy
 import itertools
 import math
 import re
@@ -35,8 +36,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from fea import case as fea_case  # (this module's FEACase is a study's case, not the model's)
+from fea.errors import ParameterError
+from optics.grating import SPIFFI, get_grating
 from pipeline.bounds import MAX_FEA_CASES, MAX_PROFILE_JOBS, product_count
-from pipeline.config_schema import (
+from pipeline.store import canonical_token
+from pipeline.study.schema import (
     FEA_KEYS,
     PROFILE_KEYS,
     ConfigError,
@@ -44,6 +49,7 @@ from pipeline.config_schema import (
     closest,
     parse_axis,
 )
+from pipeline.sweeps.fea_cases import SAG_GRID_X_MM, SAG_GRID_Y_MM
 
 __all__ = [
     "PRESET_DIR",
@@ -76,24 +82,17 @@ _CAP_HINT = "check the ranges (a step too small, a list repeated?)"
 
 
 def _token(v) -> str:
-    from pipeline.cache import canonical_token
-
     return canonical_token(v)
 
 
 def _resolve(combo: dict) -> dict:
     """A group's combination → every FEA parameter with its effective value."""
-    from fea.case import PARAMETERS, resolve_params
-
-    full = resolve_params(combo)
-    return {k: full[k] for k in PARAMETERS}
+    full = fea_case.resolve_params(combo)
+    return {k: full[k] for k in fea_case.PARAMETERS}
 
 
 def _check_case(combo: dict, full: dict) -> None:
     """Run one resolved case through the FEA case's checks; blame the config key they name."""
-    from fea import case as fea_case  # (this module's FEACase is a study's case, not the model's)
-    from fea.errors import ParameterError
-
     try:
         fea_case.FEACase.from_params(full)
     except ValueError as exc:
@@ -121,7 +120,7 @@ class FEAGroup:
         Label of the group (shown in case labels when the study varies more than
         coverage, t0 and polish; matched by the selector key ``group``).
     axes : mapping or tuple of (key, values) pairs
-        FEA parameter (:data:`pipeline.config_schema.FEA_KEYS`) → value, list or range.
+        FEA parameter (:data:`pipeline.study.schema.FEA_KEYS`) → value, list or range.
         ``polish_front`` is stored as ``polish``. Unset parameters take the paper's
         values (Al 6061 blank 160 x 140 x 20 mm, 7 x 7 holes of 15 mm at 21 x 18 mm,
         NiP 200 µm / 75 %, 293 K → 80 K, default mesh).
@@ -270,7 +269,7 @@ class ProfileSpec:
         Name of the profile set (figures and tables group by it; several tables may
         share a set).
     grating, order, wavelength_um, pixel_scale_mas, pupil_shift_x_mm, pupil_shift_y_mm
-        Scalars, lists or ranges (see :data:`pipeline.config_schema.PROFILE_KEYS`);
+        Scalars, lists or ranges (see :data:`pipeline.study.schema.PROFILE_KEYS`);
         ``order = "blaze"`` (stored as None) is the grating's own order,
         ``wavelength_um = "band"`` its (short, centre, long) wavelengths.
     deformation : list of "perfect" or CaseSelector/mapping
@@ -287,8 +286,6 @@ class ProfileSpec:
     deformation: tuple = ("perfect",)
 
     def __post_init__(self):
-        from optics.grating import get_grating
-
         if not isinstance(self.set, str) or not self.set:
             raise ConfigError("set", self.set, "must be a non-empty string")
         for key, p in PROFILE_KEYS.items():
@@ -340,8 +337,6 @@ class ProfileSpec:
 
     def wavelengths_for(self, grating: str) -> list[float]:
         """The wavelengths (µm) of this table on ``grating`` ("band"/"centre" resolved)."""
-        from optics.grating import get_grating
-
         band = get_grating(grating).band_um
         out = []
         for w in self.wavelength_um:
@@ -430,8 +425,6 @@ class PsfFigure:
     kind = "psf"
 
     def __post_init__(self):
-        from optics.grating import get_grating
-
         _file_name("file", self.file)
         object.__setattr__(self, "case", _selectors("case", self.case)[0])
         lines = []
@@ -616,9 +609,6 @@ class StudyConfig:
 
     # ---------------------------------------------------------------- checks
     def _check_profile(self, i: int, spec: ProfileSpec) -> None:
-        from optics.grating import SPIFFI, get_grating
-        from pipeline.fea_cases import SAG_GRID_X_MM, SAG_GRID_Y_MM
-
         R = 0.5 * SPIFFI.pupil_diameter_mm
         for j, d in enumerate(spec.deformation):
             matched = self.select(d)
@@ -838,8 +828,6 @@ def apply_overrides(data: dict, overrides) -> dict:
     table), ``profiles.key`` (every ``[[profiles]]`` table) or ``profiles[i].key`` (one).
     The result is validated like a file (:func:`study_config_from_dict`).
     """
-    import copy
-
     data = copy.deepcopy(data)
     for item in overrides or ():
         key, val = item if isinstance(item, tuple) else parse_override(item)

@@ -27,8 +27,9 @@ import numpy as np
 
 from fea.case import PARAMETERS, FEACase, model_namespace
 from fea.surrogate import FEASurrogate, SurrogateDomain, build_surrogate
-
-from .fea_cases import (
+from pipeline.bounds import MAX_FEA_CASES, MAX_SURROGATE_CASES, check_count, product_count
+from pipeline.io.common import atomic_write
+from pipeline.sweeps.fea_cases import (
     SAG_GRID_X_MM,
     SAG_GRID_Y_MM,
     SAG_SPACING_MM,
@@ -36,6 +37,7 @@ from .fea_cases import (
     fea_grid,
     quilt_direction_um,
 )
+from pipeline.sweeps.sweep import run_sweep
 
 __all__ = ["SURROGATE_PARAMETERS", "SurrogateCaseRunner", "run_surrogate_sweep"]
 
@@ -83,7 +85,7 @@ class SurrogateCaseRunner:
         return self.surrogate
 
     def plan(self, cases) -> None:
-        """Announce the cases about to run (the ``planner`` of :func:`pipeline.sweep.run_sweep`:
+        """Announce the cases about to run (the ``planner`` of :func:`pipeline.sweeps.sweep.run_sweep`:
         the uncached ones): the first call that needs the surrogate then evaluates them all
         in one batch (a fully cached re-run builds nothing)."""
         self._planned = list(cases)
@@ -173,14 +175,10 @@ def run_surrogate_sweep(axes: dict, out_dir, *, validate: int = 3, tol: float = 
     (SweepResult, list of dict, dict)
         The results, the validation rows and the build information.
     """
-    from .sweep import run_sweep
-
     if not (isinstance(validate, int) and validate >= 0):
         raise ValueError(f"validate={validate!r} must be an int >= 0")
     if not (0 < tol < 1):
         raise ValueError(f"tol={tol!r} must be in (0, 1)")
-    from pipeline.bounds import MAX_FEA_CASES, MAX_SURROGATE_CASES, check_count, product_count
-
     if validate > MAX_FEA_CASES:
         raise ValueError(f"validate={validate} is outside the valid range 0..{MAX_FEA_CASES} (full FEA solves)")
     core = {k: [PARAMETERS[k].default] for k in ("coverage", "t0_um", "polish")}
@@ -216,8 +214,6 @@ def run_surrogate_sweep(axes: dict, out_dir, *, validate: int = 3, tol: float = 
 
 
 def _write_validation(rows: list[dict], path: Path) -> None:
-    from .io_common import atomic_write
-
     keys = list(rows[0])
     with atomic_write(path) as fh:
         w = csv.writer(fh, lineterminator="\n")

@@ -23,7 +23,7 @@ File layout (as written and read here)
   fit) must be set when loading. We write it into the title as ``NRADIUS_MM r``
   and read it back; for decks without it the caller passes ``radius_mm``.
 * ``SUR`` coefficients describe surface sag, ``WFR`` a wavefront: as for grid
-  files (:mod:`pipeline.io_codev`) the reader never turns one into the other
+  files (:mod:`pipeline.io.codev`) the reader never turns one into the other
   silently (``quantity`` / ``wfr_to_sag_factor``).
 
 The reader accepts any number of values per line, LF or CRLF line ends, and
@@ -39,9 +39,9 @@ from typing import Mapping
 import numpy as np
 
 from optics.zernike import fringe_to_nm, nm_to_fringe
-from pipeline.io_codev_quantity import check_request, sag_factor
-from pipeline.io_common import atomic_write, numbered_lines, parse_error, read_text
-from pipeline.io_zernike import check_coefficients, convert_normalisation
+from pipeline.io.codev_quantity import check_request, sag_factor
+from pipeline.io.common import atomic_write, numbered_lines, parse_error, read_text
+from pipeline.io.zernike import check_coefficients, convert_normalisation
 
 __all__ = ["write_codev_zernike", "read_codev_zernike", "MAX_FRINGE_TERMS"]
 
@@ -168,7 +168,7 @@ def read_codev_zernike(
         Normalisation radius (mm); overrides the title's ``NRADIUS_MM``. Required for
         decks without it.
     quantity : {"sag", "wavefront"}
-        As in :func:`pipeline.io_codev.read_codev_int`: a ``WFR`` deck is refused as
+        As in :func:`pipeline.io.codev.read_codev_int`: a ``WFR`` deck is refused as
         sag unless ``wfr_to_sag_factor`` is given; a ``SUR`` deck is refused as a
         wavefront.
     wfr_to_sag_factor : float, optional

@@ -31,7 +31,7 @@ from typing import Mapping
 import numpy as np
 
 from optics.zernike import fringe_to_nm, nm_to_fringe, nm_to_noll, noll_to_nm, norm_factor
-from pipeline.io_common import atomic_write, numbered_lines, parse_error, read_text
+from pipeline.io.common import atomic_write, numbered_lines, parse_error, read_text
 
 __all__ = ["ZERNIKE_CONVENTIONS", "convert_normalisation", "write_zernike_list", "read_zernike_list",
            "check_coefficients"]

@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 from skfem import MeshTet2
 
-from .mesh import generate_order2
-from .mesh_cache import (FORMAT_VERSION, cached_mesh, gmsh_session,
+from ..mesh import generate_order2
+from ..mesh_cache import (FORMAT_VERSION, cached_mesh, gmsh_session,
                          tet2_from_gmsh)
 
 __all__ = ["cell_mesh", "cell_volumes_mm3"]

@@ -1,6 +1,6 @@
 """The study's fits, its one labelled dataset (``study.nc``) and the exports for design codes.
 
-Used by :func:`pipeline.study.run_study` after the FEA cases and line profiles:
+Used by :func:`pipeline.study.run.run_study` after the FEA cases and line profiles:
 
 * :func:`fit_cases` — every FEA sag map over the central 82 × 72 mm region
   (``optics.sagmap`` region ``center``) with
@@ -30,6 +30,18 @@ import re
 from pathlib import Path
 
 import numpy as np
+
+from optics.fitting import fit_fourier, fit_fourier_maps, fit_zernike_map, fit_zernike_maps, resolve_terms
+from optics.grating import get_grating
+from optics.sagmap import SagMap
+from optics.zernike import nm_to_fringe, nm_to_noll, norm_factor, zernike_name
+from pipeline.io.codev_zfr import write_codev_zernike
+from pipeline.io.common import atomic_path, atomic_write
+from pipeline.io.registry import write_sag_map
+from pipeline.io.zemax import write_zemax_zernike
+from pipeline.io.zernike import write_zernike_list
+from pipeline.study.schema import FEA_KEYS
+from pipeline.sweeps.fea_cases import FIGURE_KEYS
 
 __all__ = [
     "FOURIER_HARMONICS",
@@ -62,14 +74,6 @@ def fit_cases(cases, maps: dict) -> tuple[list, list]:
     Returns ``(zernike_fits, fourier_fits)``, one per case in order; an entry is None
     where the map has too few valid samples in the region (its values become NaN).
     """
-    from optics.fitting import (
-        fit_fourier,
-        fit_fourier_maps,
-        fit_zernike_map,
-        fit_zernike_maps,
-        resolve_terms,
-    )
-
     terms = resolve_terms(N_FRINGE, "fringe")
     sags = [maps[c.label] for c in cases]
     periods = [(float(c.full["pitch_x_mm"]), float(c.full["pitch_y_mm"])) for c in cases]
@@ -95,8 +99,6 @@ def _or_none(f, *args, **kw):
 def wavefront_jobs(jobs) -> list[dict]:
     """The distinct (case, grating, order, wavelength) of the deformed line profiles, with
     ``opd_per_sag = -(cos alpha + cos beta)`` (:func:`optics.pupil.grating_opd_um`)."""
-    from optics.grating import get_grating
-
     out, seen = [], set()
     for j in jobs:
         if j.case is None:
@@ -147,8 +149,6 @@ def study_dataset(cases, outputs: dict, maps: dict, zfits: list, ffits: list, pr
     """
     import xarray as xr
 
-    from optics.zernike import nm_to_fringe, nm_to_noll, norm_factor, zernike_name
-
     labels = [c.label for c in cases]
     K = len(cases)
     first = maps[labels[0]]
@@ -162,8 +162,6 @@ def study_dataset(cases, outputs: dict, maps: dict, zfits: list, ffits: list, pr
         "x_mm": ("x_mm", first.x_mm, {"units": "mm", "long_name": "x on the grating face, dispersion direction"}),
         "y_mm": ("y_mm", first.y_mm, {"units": "mm", "long_name": "y on the grating face, ruling direction"}),
     }
-    from pipeline.config_schema import FEA_KEYS
-
     for k in cases[0].full:
         p = FEA_KEYS.get(k)
         a = {"long_name": f"FEA parameter {k}" + (f": {p.meaning}" if p is not None and p.meaning else "")}
@@ -174,8 +172,6 @@ def study_dataset(cases, outputs: dict, maps: dict, zfits: list, ffits: list, pr
     data = {}
     numeric = [k for k, v in outputs[labels[0]].items()
                if not k.startswith("coord:") and isinstance(v, (int, float, np.integer, np.floating))]
-    from pipeline.fea_cases import FIGURE_KEYS
-
     for k in numeric:
         units, long = _OUTPUT_UNITS.get(k) or FIGURE_KEYS.get(k, ("", "", k))[1:]
         a = {"units": units, "long_name": long}
@@ -251,8 +247,6 @@ def study_dataset(cases, outputs: dict, maps: dict, zfits: list, ffits: list, pr
 
 def write_study_netcdf(ds, path: Path) -> Path:
     """Write ``ds`` atomically (temporary file + rename)."""
-    from pipeline.io_common import atomic_path
-
     with atomic_path(path) as tmp:
         ds.to_netcdf(tmp)
     return Path(path)
@@ -281,12 +275,6 @@ def write_exports(out: Path, cases, maps: dict, zfits: list, wavefronts: list) -
     ``-(cos alpha + cos beta) h`` on the face grid, CODE V ``WFR`` at that wavelength.
     Files written by an earlier run and not rewritten (listed in the old index) are removed.
     """
-    from optics.sagmap import SagMap
-    from pipeline.interchange import write_sag_map, write_zernike_list
-    from pipeline.io_codev_zfr import write_codev_zernike
-    from pipeline.io_common import atomic_write
-    from pipeline.io_zemax import write_zemax_zernike
-
     out.mkdir(parents=True, exist_ok=True)
     index = []
     stem = {c.label: f"case{i:02d}_{_slug(c.label)}" for i, c in enumerate(cases)}

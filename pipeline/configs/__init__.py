@@ -1,2 +1,0 @@
-"""Shipped study configs (TOML): the paper's default study, the design what-ifs and the
-commented example. See :mod:`pipeline.config` and ``cryograting config --list``."""

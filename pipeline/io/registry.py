@@ -1,0 +1,205 @@
+"""The one registry of file formats: every format the toolkit reads or writes.
+
+:data:`FORMATS` lists each format once — what it holds (``kind``), its suffixes, its
+reader and writer and the module that implements them; ``python -m pipeline.io.registry``
+prints the table. Sag maps are dispatched on the suffix: :func:`read_sag_map` /
+:func:`write_sag_map` (and :func:`load_sag_map` for the CLI's ``--sag FILE``) use
+:data:`SAG_FORMATS`, the ``"sag map"`` rows of :data:`FORMATS`. Other kinds share
+suffixes with sag maps (a CODE V ``ZFR`` deck is an ``.int`` like a ``GRD`` grid), so
+their readers are called by name.
+
+Adding a format: write its reader/writer in a module of this package and add one
+:class:`Format` row below; a sag-map row makes it readable by ``--sag``, diagnosis
+manifests and :func:`read_sag_map` at once.
+
+Sign and frame when loading into a lens file
+--------------------------------------------
+Sag maps follow :mod:`optics.sagmap`: ``x`` dispersion, ``y`` ruling direction,
+``sag_um[y, x]`` along +z (the outward normal of the ruled face: positive sag moves
+the surface *towards* the incoming light), NaN invalid. CODE V and Zemax measure sag
+along the surface's *local* +Z, which for a mirror met by light travelling along +Z
+points *away* from the incoming light; if the grating is set up that way the design
+code needs ``-sag`` (and, to stay right-handed, one of x/y mirrored). That depends on
+the lens file, so no flip is applied here; the orientation tests pin our own layout.
+"""
+
+from __future__ import annotations
+
+import inspect
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from optics.sagmap import SagMap
+from pipeline.io.codev import GridUnknownError, read_codev_int, write_codev_int
+from pipeline.io.codev_zfr import read_codev_zernike, write_codev_zernike
+from pipeline.io.fe import read_fe_result
+from pipeline.io.measured import read_line_profile, read_psf_image, write_psf_image_csv
+from pipeline.io.plain import (read_sag_csv, read_sag_netcdf, read_sag_npz, write_sag_csv, write_sag_netcdf,
+                               write_sag_npz)
+from pipeline.io.zemax import read_zemax_grid_sag, read_zemax_zernike, write_zemax_grid_sag, write_zemax_zernike
+from pipeline.io.zernike import read_zernike_list, write_zernike_list
+
+__all__ = ["KINDS", "Format", "FORMATS", "SAG_FORMATS", "formats", "format_table", "write_sag_map", "read_sag_map",
+           "load_sag_map"]
+
+#: What a file holds.
+KINDS = ("sag map", "zernike list", "line profile", "psf image", "fe result")
+
+
+@dataclass(frozen=True)
+class Format:
+    """One file format.
+
+    Attributes
+    ----------
+    kind : str
+        What the file holds, one of :data:`KINDS`.
+    suffixes : tuple of str
+        File suffixes (lower case, with the dot).
+    name : str
+        The format as its users call it.
+    reader, writer : callable or None
+        ``reader(path, **options)``; for sag maps ``writer(sagmap, path, **options) -> Path``,
+        for the other kinds the writer's own signature. None: not read / not written.
+    notes : str
+        Precision, quantisation or what the reader accepts.
+    """
+
+    kind: str
+    suffixes: tuple[str, ...]
+    name: str
+    reader: Callable | None
+    writer: Callable | None
+    notes: str = ""
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(f"kind={self.kind!r} is not one of {KINDS}")
+
+    @property
+    def module(self) -> str:
+        """The module that implements the format."""
+        return (self.reader or self.writer).__module__
+
+
+#: Every format, once.
+FORMATS: tuple[Format, ...] = (
+    Format("sag map", (".int",), "CODE V grid interferogram (GRD), SUR or WFR", read_codev_int, write_codev_int,
+           "16 bit, max|v|/65532"),
+    Format("sag map", (".dat",), "Zemax Grid Sag", read_zemax_grid_sag, write_zemax_grid_sag, "12 digits"),
+    Format("sag map", (".csv",), "x_mm,y_mm,sag_um point table", read_sag_csv, write_sag_csv,
+           "12 significant digits; masked or scattered points gridded"),
+    Format("sag map", (".nc",), "NetCDF4 sag_um[y_mm, x_mm]", read_sag_netcdf, write_sag_netcdf,
+           "float64, exact; units attributes honoured"),
+    Format("sag map", (".npz",), "NumPy arrays x_mm, y_mm, sag_um", read_sag_npz, write_sag_npz, "float64, exact"),
+    Format("zernike list", (".txt",), "project Zernike list (Fringe or Noll, header says which)", read_zernike_list,
+           write_zernike_list, "self-describing: convention, normalisation, radius"),
+    Format("zernike list", (".int",), "CODE V Zernike deck (ZFR), Fringe order", read_codev_zernike,
+           write_codev_zernike, "37 terms, unnormalised, waves"),
+    Format("zernike list", (".dat",), "Zemax Zernike Standard / Fringe Sag extra data", read_zemax_zernike,
+           write_zemax_zernike, "Extra Data Editor order, mm"),
+    Format("line profile", (".csv",), "measured line profile offset_um,intensity", read_line_profile, None,
+           "counts, pedestal, negative noise, any grid accepted"),
+    Format("psf image", (".csv", ".npz"), "measured point-source image x_um,y_um,intensity", read_psf_image,
+           write_psf_image_csv, "counts, pedestal, negative noise, any grid accepted"),
+    Format("fe result", (".vtu", ".vtk", ".xdmf", ".exo", ".e", ".msh", ".inp", ".bdf", ".nas"),
+           "another FE solver's mesh with nodal displacements (meshio)", read_fe_result, None,
+           ".inp/.bdf/.nas with a node_id,ux,uy,uz CSV; cryograting import-fe"),
+)
+
+
+def formats(kind: str | None = None) -> tuple[Format, ...]:
+    """The formats of one ``kind`` (all of them for None)."""
+    if kind is not None and kind not in KINDS:
+        raise ValueError(f"kind={kind!r} is not one of {KINDS}")
+    return tuple(f for f in FORMATS if kind is None or f.kind == kind)
+
+
+def format_table() -> str:
+    """Plain-text table of :data:`FORMATS`: kind, suffixes, name, reader, writer, module."""
+    rows = [("kind", "suffixes", "format", "reader", "writer", "module")]
+    rows += [(f.kind, " ".join(f.suffixes), f.name, f.reader.__name__ if f.reader else "-",
+              f.writer.__name__ if f.writer else "-", f.module) for f in FORMATS]
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows)
+
+
+#: suffix -> (reader(path, **options) -> SagMap, writer(sagmap, path, **options) -> Path)
+SAG_FORMATS: dict[str, tuple[Callable[..., SagMap], Callable[..., Path]]] = {
+    s: (f.reader, f.writer) for f in formats("sag map") for s in f.suffixes}
+_WRITERS = {w for _, w in SAG_FORMATS.values()}
+
+
+def _check_options(func: Callable, path: Path, options: dict) -> None:
+    """Unknown keyword options become a ValueError listing the valid ones for the format."""
+    params = list(inspect.signature(func).parameters)[2 if func in _WRITERS else 1:]
+    bad = sorted(set(options) - set(params))
+    if bad:
+        raise ValueError(f"{path}: option(s) {bad} are not valid for {func.__name__} "
+                         f"({path.suffix} files); valid are {params}")
+
+
+def _format_for(path: Path) -> tuple[Callable, Callable]:
+    try:
+        return SAG_FORMATS[path.suffix.lower()]
+    except KeyError:
+        raise ValueError(
+            f"{path}: unknown sag-map format {path.suffix!r}; valid suffixes are {sorted(SAG_FORMATS)}"
+        ) from None
+
+
+def write_sag_map(sagmap: SagMap, path: str | Path, **options) -> Path:
+    """Write ``sagmap`` in the format given by the suffix of ``path``.
+
+    Parameters
+    ----------
+    sagmap : SagMap
+        The map.
+    path : str or Path
+        Output file; suffix one of :data:`SAG_FORMATS`.
+    **options
+        Passed to the format's writer (e.g. ``kind``, ``wavelength_um`` for ``.int``).
+    """
+    path = Path(path)
+    writer = _format_for(path)[1]
+    if not isinstance(sagmap, SagMap):
+        raise ValueError(f"sagmap must be an optics.sagmap.SagMap, got {type(sagmap).__name__}")
+    _check_options(writer, path, options)
+    try:
+        return writer(sagmap, path, **options)
+    except OSError as exc:  # e.g. a directory in the way, disk full
+        raise ValueError(f"cannot write {path}: {exc.strerror or exc}") from None
+
+
+def read_sag_map(path: str | Path, **options) -> SagMap:
+    """Read a sag map, choosing the reader by the suffix of ``path``.
+
+    ``**options`` go to the reader (``extent_mm``/``spacing_mm``, ``quantity``,
+    ``wfr_to_sag_factor`` for ``.int``, ``spacing_mm`` for scattered ``.csv``,
+    ``wavelength_um`` for a ``.nc`` in waves); an option the format does not use is
+    refused naming the valid ones.
+    """
+    path = Path(path)
+    reader = _format_for(path)[0]
+    _check_options(reader, path, options)
+    if not path.exists():
+        raise ValueError(f"{path}: file does not exist")
+    return reader(path, **options)
+
+
+def load_sag_map(path: str | Path) -> SagMap:
+    """Sag map for the CLI ``--sag FILE`` option (any :data:`SAG_FORMATS` suffix);
+    errors are prefixed with ``--sag``."""
+    try:
+        return read_sag_map(path)
+    except GridUnknownError as exc:  # the command line has no grid options: the title must carry it
+        remedy = "add EXTENT_MM x0 x1 y0 y1 (mm, first/last sample centres) to the title"
+        raise ValueError(f"--sag {exc.with_remedy(remedy)}") from None
+    except ValueError as exc:
+        raise ValueError(f"--sag {exc}") from None
+
+
+if __name__ == "__main__":
+    sys.stdout.write(format_table() + "\n")
