@@ -154,7 +154,7 @@ def test_campaign_config_truth_families():
 def test_profile_csv_keeps_subpixel_samples_1e5_um_apart_distinct(tmp_path):
     """Two sub-pixel phases 1e-5 µm apart (and one 1e-9 µm) stay two samples at their
     own offsets through the project's line-profile reader."""
-    from pipeline.io_measured import read_line_profile
+    from pipeline.io.measured import read_line_profile
 
     x = np.array([-126.123456, -18.0, 0.0, 35.999995, 36.000005, 36.000005 + 1e-9, 90.5])
     y = np.array([10.0, 200.0, 1000.0, 400.0, 401.0, 402.0, 5.0])
