@@ -19,7 +19,8 @@ import os
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["SPDFactor", "SolverError", "available_backends", "solve_spd", "solve_spd_perturbed"]
+__all__ = ["SPDFactor", "SolverError", "available_backends", "resolve_backend", "rigid_modes", "solve_spd",
+           "solve_spd_perturbed"]
 
 
 class SolverError(RuntimeError):
@@ -38,8 +39,19 @@ def available_backends() -> list[str]:
     return (["pardiso"] if _have_pardiso() else []) + ["amg"]
 
 
-def _rigid_modes(coords_mm: np.ndarray) -> np.ndarray:
-    """Six rigid-body modes on the DOF layout 3*d + i, shape (3N, 6)."""
+def rigid_modes(coords_mm: np.ndarray) -> np.ndarray:
+    """Six rigid-body modes on the DOF layout 3*d + i.
+
+    Parameters
+    ----------
+    coords_mm : ndarray, shape (3, N)
+        Node positions (mm); centre them first for well-conditioned rotations.
+
+    Returns
+    -------
+    ndarray, shape (3N, 6)
+        Translations x, y, z, then the rotations about z, x and y (mm per radian).
+    """
     x, y, z = coords_mm
     N = x.size
     B = np.zeros((3 * N, 6))
@@ -77,7 +89,16 @@ def solve_spd(K: sp.spmatrix, f: np.ndarray, backend: str = "auto", rtol: float 
     return solve_spd_perturbed(K, None, f, backend=backend, rtol=rtol, coords_mm=coords_mm, free=free)
 
 
-def _resolve_backend(backend: str) -> str:
+def resolve_backend(backend: str) -> str:
+    """The back-end ``"pardiso"`` or ``"amg"`` that ``backend`` names ("auto": pardiso if installed).
+
+    Raises
+    ------
+    ValueError
+        For an unknown name.
+    SolverError
+        When pardiso is requested but pypardiso does not import.
+    """
     if backend not in ("auto", "pardiso", "amg"):
         raise ValueError(f"backend={backend!r} is unknown; valid values are ['auto', 'pardiso', 'amg']")
     if backend == "auto":
@@ -115,7 +136,7 @@ class SPDFactor:
     """
 
     def __init__(self, K: sp.csr_matrix, backend: str = "auto", coords_mm=None, free=None):
-        backend = _resolve_backend(backend)
+        backend = resolve_backend(backend)
         self.backend = backend
         self.shape = K.shape
         if backend == "pardiso":
@@ -139,7 +160,7 @@ class SPDFactor:
 
             B = None
             if coords_mm is not None:
-                B = _rigid_modes(coords_mm)
+                B = rigid_modes(coords_mm)
                 if free is not None:
                     B = B[free]
             self._ml = pyamg.smoothed_aggregation_solver(K, B=B, max_coarse=500)
@@ -191,7 +212,7 @@ def solve_spd_perturbed(K: sp.spmatrix, apply_extra, f: np.ndarray, backend: str
     """
     from scipy.sparse.linalg import LinearOperator, cg
 
-    backend = factor.backend if factor is not None else _resolve_backend(backend)
+    backend = factor.backend if factor is not None else resolve_backend(backend)
     K = sp.csr_matrix(K)
     fnorm = np.linalg.norm(f)
     if fnorm == 0:

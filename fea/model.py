@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from .assembly import FilmOperators, _shared_csr, bulk_stiffness, film_operators, renumbered, scalar_basis
+from .assembly import FilmOperators, shared_csr, bulk_stiffness, film_operators, renumbered, scalar_basis
 from .coating import SURFACE_GROUPS, Coating
-from .linsolve import SPDFactor, _rigid_modes, solve_spd, solve_spd_perturbed
+from .linsolve import SPDFactor, rigid_modes, solve_spd, solve_spd_perturbed
 from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
 from .errors import ParameterError
 from .mesh_cache import default_cache_dir
@@ -93,7 +93,7 @@ class FEAResult:
 
 def _pattern_ones(A: sp.csr_matrix) -> sp.csr_matrix:
     """The sparsity pattern of ``A`` with every stored entry set to 1."""
-    return _shared_csr(np.ones(A.indices.size), A.indices, A.indptr, A.shape)
+    return shared_csr(np.ones(A.indices.size), A.indices, A.indptr, A.shape)
 
 
 class PreparedBlank:
@@ -203,7 +203,7 @@ class PreparedBlank:
 
     def _constrained_dofs(self) -> np.ndarray:
         fixed = self.plane_fixed
-        B = _rigid_modes(self.coords_mm - self.coords_mm.mean(axis=1, keepdims=True))
+        B = rigid_modes(self.coords_mm - self.coords_mm.mean(axis=1, keepdims=True))
         # rigid modes that survive the symmetry constraints
         if fixed.size:
             _, s, Vt = np.linalg.svd(B[fixed], full_matrices=True)
@@ -347,12 +347,12 @@ class PreparedBlank:
         with per-case thickness powers). Converged cases leave the block. Small meshes, the
         AMG back-end and cases CG cannot finish fall back to :meth:`solve`.
         """
-        from .linsolve import SolverError, _resolve_backend
+        from .linsolve import SolverError, resolve_backend
 
         film = get_material(film)
         coatings = list(coatings)
         fallback = (len(coatings) < 2 or self.ndof <= self.explicit_offset_max_dof
-                    or _resolve_backend(backend) != "pardiso")
+                    or resolve_backend(backend) != "pardiso")
         if fallback:
             return [self.solve(c, film, load, stress_scale, backend, rtol=rtol) for c in coatings]
         self._check_inputs(film, load, stress_scale)
@@ -494,7 +494,7 @@ class PreparedBlank:
                 data[pos_t] += C[keep]
             else:
                 data[pos] += t * ops.A00.data[keep]
-        return _shared_csr(data, Kb.indices, Kb.indptr, Kb.shape)
+        return shared_csr(data, Kb.indices, Kb.indptr, Kb.shape)
 
     def _free_layouts(self, groups: tuple[str, ...], film: Material) -> dict[str, tuple]:
         """Where the entries of each group's film matrices land in ``_bulk_free().data``.
@@ -517,7 +517,7 @@ class PreparedBlank:
                 raise RuntimeError(f"film operators of {g!r} do not share one sparsity pattern")
             A = ops.A00
             # the film's entries on the free DOFs, carrying their entry numbers in A00.data
-            ids = _shared_csr(np.arange(1, A.nnz + 1, dtype=float), A.indices, A.indptr, A.shape)
+            ids = shared_csr(np.arange(1, A.nnz + 1, dtype=float), A.indices, A.indptr, A.shape)
             F, _ = renumbered(ids, to_free, to_free, (free.size, free.size))
             FT = F.T.tocsr()
             FT.sort_indices()
@@ -531,12 +531,12 @@ class PreparedBlank:
             union = union + _pattern_ones(F)
         if union.nnz != Kb.nnz:
             union.sum_duplicates()
-            union_ids = _shared_csr(np.arange(1, union.nnz + 1, dtype=float), union.indices,
+            union_ids = shared_csr(np.arange(1, union.nnz + 1, dtype=float), union.indices,
                                     union.indptr, union.shape)
             at = union_ids.multiply(_pattern_ones(Kb)).tocsr().data.astype(np.int64) - 1
             data = np.zeros(union.nnz)
             data[at] = Kb.data
-            Kb = self._K_bulk_free = _shared_csr(data, union.indices, union.indptr, union.shape)
+            Kb = self._K_bulk_free = shared_csr(data, union.indices, union.indptr, union.shape)
             self._layouts.clear()  # positions moved; other groups are redone on demand
             need = list(groups)
             for g in groups:
@@ -544,7 +544,7 @@ class PreparedBlank:
                     return self._free_layouts(groups, film)
         # positions by sparse products (linear merges of sorted rows): the bulk's data
         # carries its entry numbers, a film pattern of ones picks them out
-        bulk_ids = _shared_csr(np.arange(1, Kb.nnz + 1, dtype=float), Kb.indices, Kb.indptr, Kb.shape)
+        bulk_ids = shared_csr(np.arange(1, Kb.nnz + 1, dtype=float), Kb.indices, Kb.indptr, Kb.shape)
         for g in need:
             nnz, F, FT = films[g]
             hit = bulk_ids.multiply(_pattern_ones(F)).tocsr()
