@@ -8,11 +8,8 @@ homogeneous body, so the problem is solved for the displacement *relative* to th
 uniform contraction; only the film/substrate mismatch strain loads the body. The
 uniform part is added back for VTU output (``total_displacement_mm``).
 
-Boundary conditions: symmetry planes named ``sym_x``/``sym_y``/``sym_z`` fix the
-normal displacement; whatever rigid-body motion survives them is removed by the
-minimum number of point constraints (statically determinate, so they carry no
-load): none for the eighth model, one for the quarter model, six (3-2-1) for the
-full body.
+Boundary conditions: symmetry planes fix the normal displacement and point constraints
+remove the rigid-body motion that survives them (:mod:`fea.constraints`).
 """
 
 from __future__ import annotations
@@ -26,7 +23,9 @@ import scipy.sparse as sp
 
 from .assembly import FilmOperators, shared_csr, bulk_stiffness, film_operators, renumbered, scalar_basis
 from .coating import SURFACE_GROUPS, Coating
-from .linsolve import SPDFactor, rigid_modes, solve_spd, solve_spd_perturbed
+from .constraints import (check_symmetry, constrained_dofs, plane_constrained_dofs, symmetry_constraints,
+                          symmetry_planes)
+from .linsolve import SPDFactor, solve_spd, solve_spd_perturbed
 from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
 from .errors import ParameterError
 from .mesh_cache import default_cache_dir
@@ -35,9 +34,6 @@ from .reduced import FilmPolynomial, ReducedBasis
 from .surface import FrontSag, FrontSampler
 
 __all__ = ["FEAResult", "PreparedBlank", "ThermalLoad"]
-
-_SYM_COMPONENT = {"sym_x": 0, "sym_y": 1, "sym_z": 2}
-
 
 @dataclass(frozen=True)
 class ThermalLoad:
@@ -132,12 +128,12 @@ class PreparedBlank:
         self.coords_mm = self.basis.doflocs
         self.K_bulk = bulk_stiffness(self.basis, self.substrate.youngs_modulus_Pa * 1e-6,
                                      self.substrate.poisson_ratio)
-        self.symmetry_planes = tuple(s for s in _SYM_COMPONENT if s in mesh.boundaries)
+        self.symmetry_planes = symmetry_planes(mesh)
         # boundary name -> displacement component held at zero (symmetry planes by default)
-        self.constraints = ({s: _SYM_COMPONENT[s] for s in self.symmetry_planes}
+        self.constraints = (symmetry_constraints(self.symmetry_planes)
                             if constraints is None else dict(constraints))
-        self.plane_fixed = self._plane_constrained_dofs()
-        self.fixed = self._constrained_dofs()
+        self.plane_fixed = plane_constrained_dofs(mesh, self.basis, self.constraints)
+        self.fixed = constrained_dofs(self.coords_mm, self.plane_fixed)
         self.free = np.setdiff1d(np.arange(self.ndof), self.fixed)
         self._film_ops: dict[tuple, FilmOperators] = {}
         self._layouts: dict[tuple, tuple] = {}
@@ -195,38 +191,6 @@ class PreparedBlank:
             self._shared[0].free()
             self._shared = None
 
-    # ------------------------------------------------------------------ constraints
-    def _plane_constrained_dofs(self) -> np.ndarray:
-        fixed = [3 * self.basis.get_dofs(self.mesh.boundaries[s]).all() + c
-                 for s, c in self.constraints.items()]
-        return np.unique(np.concatenate(fixed)) if fixed else np.zeros(0, dtype=int)
-
-    def _constrained_dofs(self) -> np.ndarray:
-        fixed = self.plane_fixed
-        B = rigid_modes(self.coords_mm - self.coords_mm.mean(axis=1, keepdims=True))
-        # rigid modes that survive the symmetry constraints
-        if fixed.size:
-            _, s, Vt = np.linalg.svd(B[fixed], full_matrices=True)
-            rank = int((s > 1e-9 * s.max()).sum())
-            null = Vt[rank:].T
-        else:
-            null = np.eye(6)
-        k = null.shape[1]
-        if k == 0:
-            return fixed
-        # pick k well-separated DOFs that pin the surviving modes (QR with pivoting)
-        from scipy.linalg import qr
-
-        rng = np.random.default_rng(0)
-        cand_nodes = rng.choice(self.basis.N, size=min(400, self.basis.N), replace=False)
-        cand = (3 * cand_nodes[:, None] + np.arange(3)).ravel()
-        Bs = B[cand] @ null
-        _, _, piv = qr(Bs.T, pivoting=True, mode="economic")
-        extra = cand[piv[:k]]
-        if np.linalg.matrix_rank(Bs[piv[:k]]) < k:
-            raise RuntimeError("could not find point constraints that remove the rigid-body modes")
-        return np.unique(np.concatenate([fixed, extra]))
-
     # ------------------------------------------------------------------ solve
     def solve(self, coating: Coating, film: Material | str = NIP_HIGH_P,
               load: ThermalLoad = ThermalLoad(), stress_scale: float = 1.0,
@@ -271,7 +235,7 @@ class PreparedBlank:
         """
         film = get_material(film)
         self._check_inputs(film, load, stress_scale)
-        self._check_symmetry(coating)
+        check_symmetry(coating, self.symmetry_planes)
         t0 = time.perf_counter()
         eps_sub = self.substrate.strain_between(load.warm_K, load.cold_K)
         eps_mis = self.mismatch_strain(film, load, stress_scale)
@@ -357,7 +321,7 @@ class PreparedBlank:
             return [self.solve(c, film, load, stress_scale, backend, rtol=rtol) for c in coatings]
         self._check_inputs(film, load, stress_scale)
         for c in coatings:
-            self._check_symmetry(c)
+            check_symmetry(c, self.symmetry_planes)
         t0 = time.perf_counter()
         eps_mis = self.mismatch_strain(film, load, stress_scale)
         fr = self.free
@@ -614,10 +578,3 @@ class PreparedBlank:
             return sum(op(v) for op in parts)[free]
 
         return apply
-
-    def _check_symmetry(self, coating: Coating) -> None:
-        if "sym_z" in self.symmetry_planes and not coating.is_z_symmetric:
-            raise ValueError(
-                f"coating with polish_front={coating.polish_front} != polish_back={coating.polish_back} "
-                "is not symmetric about the mid-plane; use a quarter or full mesh (MeshSpec(symmetry='quarter'))"
-            )
