@@ -16,18 +16,20 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
-from .assembly import FilmOperators, shared_csr, bulk_stiffness, film_operators, renumbered, scalar_basis
+from .assembly import FilmOperators, bulk_stiffness, film_operators, scalar_basis
 from .coating import SURFACE_GROUPS, Coating
 from .constraints import (check_symmetry, constrained_dofs, plane_constrained_dofs, symmetry_constraints,
                           symmetry_planes)
 from .linsolve import SPDFactor, solve_spd, solve_spd_perturbed
 from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
 from .errors import ParameterError
+from .free_dofs import FreeStiffness
 from .mesh_cache import default_cache_dir
 from .operator_cache import load_film_ops, operator_key, save_film_ops
 from .reduced import FilmPolynomial, ReducedBasis
@@ -87,11 +89,6 @@ class FEAResult:
         return self.displacement_mm + self.uniform_strain * self.coords_mm
 
 
-def _pattern_ones(A: sp.csr_matrix) -> sp.csr_matrix:
-    """The sparsity pattern of ``A`` with every stored entry set to 1."""
-    return shared_csr(np.ones(A.indices.size), A.indices, A.indptr, A.shape)
-
-
 class PreparedBlank:
     """A meshed blank with its bulk stiffness assembled, ready to solve many coatings.
 
@@ -136,7 +133,6 @@ class PreparedBlank:
         self.fixed = constrained_dofs(self.coords_mm, self.plane_fixed)
         self.free = np.setdiff1d(np.arange(self.ndof), self.fixed)
         self._film_ops: dict[tuple, FilmOperators] = {}
-        self._layouts: dict[tuple, tuple] = {}
         #: systems up to this size get the offset coupling assembled explicitly
         self.explicit_offset_max_dof = 70_000
         #: larger systems: one factorisation is shared by the following cases as CG
@@ -184,6 +180,17 @@ class PreparedBlank:
             films = {g: FilmPolynomial(self.film_ops(g, film), offset) for g in self.coatable_groups()}
             self._reduced[key] = ReducedBasis(self.K_bulk, films, self.free)
         return self._reduced[key]
+
+    @cached_property
+    def free_stiffness(self) -> FreeStiffness:
+        """Bulk + local film stiffness on the free DOFs (:mod:`fea.free_dofs`)."""
+        return FreeStiffness(self.K_bulk, self.free)
+
+    def _free_stiffness(self, used_um: dict[str, float], film: Material, offset: bool) -> sp.csr_matrix:
+        """Bulk + local film stiffness on the free DOFs for film thicknesses ``used_um`` (µm)."""
+        return self.free_stiffness.stiffness(
+            {(g, film.youngs_modulus_Pa, film.poisson_ratio): (self.film_ops(g, film), t_um * 1e-3)
+             for g, t_um in used_um.items()}, offset)
 
     def release_preconditioner(self) -> None:
         """Free the shared factorisation (~0.7 GB at the default mesh)."""
@@ -335,7 +342,7 @@ class PreparedBlank:
             F[:, j] = f[fr]
         # per group and case: the powers t, t², t³, t⁴ (zero where the group is bare)
         P = {g: np.array([(u_.get(g, 0.0) * 1e-3) ** np.arange(1, 5) for u_ in used]).T for g in groups}
-        Kb = self._bulk_free()
+        Kb = self.free_stiffness.bulk
         full = np.zeros((self.ndof, len(coatings)))
 
         acc = np.zeros((self.ndof, len(coatings)))
@@ -419,107 +426,6 @@ class PreparedBlank:
         if getattr(self, "_sampler", None) is None:
             self._sampler = FrontSampler(self.mesh, self.basis, self.symmetry_planes)
         return self._sampler
-
-    def _bulk_free(self) -> sp.csr_matrix:
-        """Bulk stiffness on the free DOFs (sliced once per mesh)."""
-        if getattr(self, "_K_bulk_free", None) is None:
-            K = self.K_bulk.tocsr()
-            K.sum_duplicates()  # canonical (sorted, unique) indices: _free_layouts relies on them
-            self._K_bulk_free, _ = renumbered(K, self._to_free, self._to_free, (self.free.size,) * 2)
-        return self._K_bulk_free
-
-    @property
-    def _to_free(self) -> np.ndarray:
-        """Full DOF number → free DOF number (−1 for constrained DOFs)."""
-        if getattr(self, "_to_free_map", None) is None:
-            m = np.full(self.ndof, -1, dtype=np.int64)
-            m[self.free] = np.arange(self.free.size)
-            self._to_free_map = m
-        return self._to_free_map
-
-    def _free_stiffness(self, used_um: dict[str, float], film: Material, offset: bool) -> sp.csr_matrix:
-        """Bulk + local film stiffness on the free DOFs, for film thicknesses ``used_um`` (µm).
-
-        The film's element matrices live on the bulk's pattern (a facet's DOFs are those of
-        its tetrahedron), so the sum is formed on the ``data`` array of the sliced bulk
-        matrix: no sparse additions or slicing per case (those cost ~1.5 s per case at the
-        default mesh, more than the CG iterations of a neighbouring case).
-        """
-        layouts = self._free_layouts(tuple(used_um), film)  # may widen the bulk pattern: first
-        Kb = self._bulk_free()
-        data = Kb.data.copy()
-        for group, t_um in used_um.items():
-            ops = self.film_ops(group, film)
-            keep, pos, pos_t = layouts[group]
-            t = t_um * 1e-3
-            if offset:
-                S, C = ops.power_data(t)
-                data[pos] += S[keep] + C[keep]
-                data[pos_t] += C[keep]
-            else:
-                data[pos] += t * ops.A00.data[keep]
-        return shared_csr(data, Kb.indices, Kb.indptr, Kb.shape)
-
-    def _free_layouts(self, groups: tuple[str, ...], film: Material) -> dict[str, tuple]:
-        """Where the entries of each group's film matrices land in ``_bulk_free().data``.
-
-        Per group (keep, pos, pos_t): the entries of ``A00.data`` with a free row and
-        column, and the positions of those entries and of their transposes in the bulk's
-        data (all six film matrices share ``A00``'s pattern).
-        """
-        def key(g):
-            return (g, film.youngs_modulus_Pa, film.poisson_ratio)
-
-        need = [g for g in groups if key(g) not in self._layouts]
-        if not need:
-            return {g: self._layouts[key(g)] for g in groups}
-        free, to_free = self.free, self._to_free
-        films = {}
-        for g in need:
-            ops = self.film_ops(g, film)
-            if not ops.shares_pattern():
-                raise RuntimeError(f"film operators of {g!r} do not share one sparsity pattern")
-            A = ops.A00
-            # the film's entries on the free DOFs, carrying their entry numbers in A00.data
-            ids = shared_csr(np.arange(1, A.nnz + 1, dtype=float), A.indices, A.indptr, A.shape)
-            F, _ = renumbered(ids, to_free, to_free, (free.size, free.size))
-            FT = F.T.tocsr()
-            FT.sort_indices()
-            films[g] = (A.nnz, F, FT)
-        Kb = self._bulk_free()
-        # The bulk assembly drops entries that happen to be exactly zero; the film's are
-        # kept: widen the bulk pattern by explicit zeros where needed (sums of patterns of
-        # ones never cancel, so the union is exact)
-        union = _pattern_ones(Kb)
-        for _, F, _ in films.values():
-            union = union + _pattern_ones(F)
-        if union.nnz != Kb.nnz:
-            union.sum_duplicates()
-            union_ids = shared_csr(np.arange(1, union.nnz + 1, dtype=float), union.indices,
-                                    union.indptr, union.shape)
-            at = union_ids.multiply(_pattern_ones(Kb)).tocsr().data.astype(np.int64) - 1
-            data = np.zeros(union.nnz)
-            data[at] = Kb.data
-            Kb = self._K_bulk_free = shared_csr(data, union.indices, union.indptr, union.shape)
-            self._layouts.clear()  # positions moved; other groups are redone on demand
-            need = list(groups)
-            for g in groups:
-                if g not in films:
-                    return self._free_layouts(groups, film)
-        # positions by sparse products (linear merges of sorted rows): the bulk's data
-        # carries its entry numbers, a film pattern of ones picks them out
-        bulk_ids = shared_csr(np.arange(1, Kb.nnz + 1, dtype=float), Kb.indices, Kb.indptr, Kb.shape)
-        for g in need:
-            nnz, F, FT = films[g]
-            hit = bulk_ids.multiply(_pattern_ones(F)).tocsr()
-            hit_t = bulk_ids.multiply(_pattern_ones(FT)).tocsr()
-            if hit.nnz != F.nnz or hit_t.nnz != FT.nnz:
-                raise RuntimeError(f"film pattern of {g!r} is not inside the widened bulk pattern")
-            keep = F.data.astype(np.int64) - 1
-            by_entry = np.empty(nnz, dtype=np.int64)
-            by_entry[FT.data.astype(np.int64) - 1] = hit_t.data.astype(np.int64) - 1
-            self._layouts[key(g)] = (keep, hit.data.astype(np.int64) - 1, by_entry[keep])
-        return {g: self._layouts[key(g)] for g in groups}
 
     def mismatch_strain(self, film: Material | str = NIP_HIGH_P, load: ThermalLoad = ThermalLoad(),
                         stress_scale: float = 1.0) -> float:
