@@ -23,10 +23,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from .assembly import FilmOperators, bulk_stiffness, film_operators, scalar_basis
+from .batch_solve import block_pcg, film_block_operator, thickness_powers
 from .coating import SURFACE_GROUPS, Coating
 from .constraints import (check_symmetry, constrained_dofs, plane_constrained_dofs, symmetry_constraints,
                           symmetry_planes)
-from .linsolve import SPDFactor, solve_spd, solve_spd_perturbed
+from .linsolve import SharedFactor, SolverError, resolve_backend, restricted_sum, solve_spd
 from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
 from .errors import ParameterError
 from .free_dofs import FreeStiffness
@@ -135,10 +136,8 @@ class PreparedBlank:
         self._film_ops: dict[tuple, FilmOperators] = {}
         #: systems up to this size get the offset coupling assembled explicitly
         self.explicit_offset_max_dof = 70_000
-        #: larger systems: one factorisation is shared by the following cases as CG
-        #: preconditioner, and refreshed when a case needs more iterations than this
-        self.refactor_after_iterations = 14
-        self._shared: tuple[SPDFactor, str] | None = None
+        # larger systems: one factorisation is shared by the following cases as CG preconditioner
+        self._preconditioner = SharedFactor()
         self._reduced: dict[tuple, ReducedBasis] = {}
         self.assembly_s = time.perf_counter() - t0
 
@@ -194,9 +193,7 @@ class PreparedBlank:
 
     def release_preconditioner(self) -> None:
         """Free the shared factorisation (~0.7 GB at the default mesh)."""
-        if self._shared is not None:
-            self._shared[0].free()
-            self._shared = None
+        self._preconditioner.release()
 
     # ------------------------------------------------------------------ solve
     def solve(self, coating: Coating, film: Material | str = NIP_HIGH_P,
@@ -275,8 +272,14 @@ class PreparedBlank:
                 if rb is not None:  # a surrogate is training on this model: it needs these solves
                     rb.add(u)
             else:
-                u[fr] = self._solve_iterative(Kff, couplings, f, film, offset, used,
-                                              eps_mis, backend, rtol, solve_info)
+                # start from the Galerkin solution on the span of the previous cases' solutions
+                rb = self.reduced_basis(film, offset)
+                x0 = rb.expand(rb.solve({g: t * 1e-3 for g, t in used.items()}, eps_mis))[fr] if rb.size else None
+                offset_terms = restricted_sum([ops.coupling_operator(t) for t, ops in couplings], fr, self.ndof)
+                u[fr] = self._preconditioner.solve(Kff, offset_terms, f[fr], backend=backend, rtol=rtol,
+                                                   coords_mm=self.coords_mm, free=fr, info=solve_info, x0=x0)
+                solve_info.update(reduced_basis_size=rb.size)
+                rb.add(u)
         t_solve = time.perf_counter() - t0 - t_asm
         return self._result(coating, film, load, stress_scale, offset, used, eps_mis, u,
                             t_asm, t_solve, solve_info)
@@ -310,16 +313,10 @@ class PreparedBlank:
                    maxiter: int = 200) -> list[FEAResult]:
         """Solve several coatings together; same answers as :meth:`solve` one by one.
 
-        Large meshes: conjugate gradients run in lockstep on all cases, so that each step
-        applies the shared PARDISO factor to a block of residuals at once (one pass over the
-        ~0.7 GB factor for the whole block instead of one per case: 16 right-hand sides cost
-        0.6 s instead of 16 x 0.15 s at the default mesh); the film terms of every case
-        come from one set of products per surface group (:meth:`FilmOperators.apply_power_terms`
-        with per-case thickness powers). Converged cases leave the block. Small meshes, the
-        AMG back-end and cases CG cannot finish fall back to :meth:`solve`.
+        Large meshes: conjugate gradients in lockstep on all cases with the shared PARDISO
+        factor (:mod:`fea.batch_solve`). Small meshes, the AMG back-end and cases CG cannot
+        finish fall back to :meth:`solve`.
         """
-        from .linsolve import SolverError, resolve_backend
-
         film = get_material(film)
         coatings = list(coatings)
         fallback = (len(coatings) < 2 or self.ndof <= self.explicit_offset_max_dof
@@ -340,65 +337,25 @@ class PreparedBlank:
             for g, t_um in u_.items():
                 f += self.film_ops(g, film).load(t_um * 1e-3, eps_mis)
             F[:, j] = f[fr]
-        # per group and case: the powers t, t², t³, t⁴ (zero where the group is bare)
-        P = {g: np.array([(u_.get(g, 0.0) * 1e-3) ** np.arange(1, 5) for u_ in used]).T for g in groups}
-        Kb = self.free_stiffness.bulk
-        full = np.zeros((self.ndof, len(coatings)))
-
-        acc = np.zeros((self.ndof, len(coatings)))
-
-        def apply(V, cols):
-            m = len(cols)
-            full[:, :m] = 0.0
-            full[fr, :m] = V
-            acc[:, :m] = 0.0
-            for g in groups:
-                idx, y = self.film_ops(g, film).apply_with_powers(full[:, :m], P[g][:, cols])
-                acc[idx, :m] += y
-            return Kb @ V + acc[fr, :m]
-
+        apply = film_block_operator(self.free_stiffness.bulk, fr, self.ndof,
+                                    [(self.film_ops(g, film), thickness_powers([u_.get(g, 0.0) * 1e-3 for u_ in used]))
+                                     for g in groups])
         solve_case = [j for j in range(len(coatings)) if used[j] and eps_mis != 0]
-        X = np.zeros_like(F)
-        info = [dict() for _ in coatings]
-        if self._shared is not None and self._shared[1] != "pardiso":
-            self.release_preconditioner()
-        own = self._shared is None
+        own = self._preconditioner.held("pardiso") is None
         if own and solve_case:
-            j0 = solve_case[0]
-            self._shared = (SPDFactor(self._free_stiffness(used[j0], film, True), "pardiso",
-                                      self.coords_mm, fr), "pardiso")
+            self._preconditioner.factorise(self._free_stiffness(used[solve_case[0]], film, True), "pardiso",
+                                           self.coords_mm, fr)
         t_asm = time.perf_counter() - t0
-        fac = self._shared[0] if solve_case else None
-        act = np.array(solve_case, dtype=int)
+        X = np.zeros_like(F)
         it = np.zeros(len(coatings), dtype=int)
-        if act.size:
-            fn = np.linalg.norm(F[:, act], axis=0)
-            target = dict(zip(act.tolist(), 0.5 * rtol * fn))
-            X[:, act] = fac.solve(np.asfortranarray(F[:, act]))
-            R = F[:, act] - apply(X[:, act], act)
-            res0 = np.linalg.norm(R, axis=0) / fn
-            for j, r0 in zip(act, res0):
-                info[j]["initial_residual"] = float(r0)
-            Z = fac.solve(np.asfortranarray(R))
-            Pd = Z.copy()
-            rz = np.einsum("nm,nm->m", R, Z)
-            for _ in range(maxiter):
-                keep = np.linalg.norm(R, axis=0) > np.array([target[j] for j in act])
-                if not keep.any():
-                    break
-                act, R, Pd, rz = act[keep], R[:, keep], Pd[:, keep], rz[keep]
-                AP = apply(Pd, act)
-                alpha = rz / np.einsum("nm,nm->m", Pd, AP)
-                X[:, act] += Pd * alpha
-                R -= AP * alpha
-                it[act] += 1
-                Z = fac.solve(np.asfortranarray(R))
-                rz_new = np.einsum("nm,nm->m", R, Z)
-                Pd = Z + Pd * (rz_new / rz)
-                rz = rz_new
+        res0 = np.full(len(coatings), np.nan)
+        cases = np.array(solve_case, dtype=int)
+        if solve_case:
+            X[:, cases], it[cases], res0[cases] = block_pcg(lambda V, cols: apply(V, cases[cols]), F[:, cases],
+                                                            self._preconditioner.held("pardiso"), rtol, maxiter)
         t_solve = time.perf_counter() - t0 - t_asm
         results = []
-        checked = apply(X[:, solve_case], np.array(solve_case, dtype=int)) if solve_case else None
+        checked = apply(X[:, cases], cases) if solve_case else None
         for j, c in enumerate(coatings):
             u = np.zeros(self.ndof)
             solve_info = {}
@@ -414,7 +371,7 @@ class PreparedBlank:
                                           f"{exc}") from None
                 u[fr] = X[:, j]
                 solve_info = {"method": "block CG (lockstep, shared factor)", "iterations": int(it[j]),
-                              "residual": res, "initial_residual": info[j].get("initial_residual"),
+                              "residual": res, "initial_residual": float(res0[j]),
                               "backend": "pardiso", "preconditioner": "own" if own else "shared",
                               "block_size": len(solve_case)}
             results.append(self._result(c, film, load, stress_scale, True, used[j], eps_mis, u,
@@ -448,39 +405,3 @@ class PreparedBlank:
                 continue  # e.g. hole walls of a blank without lightweighting holes
             used[group] = float(t_um)
         return used
-
-    def _solve_iterative(self, Kff, couplings, f, film, offset, used_um, eps_mis, backend, rtol,
-                         solve_info) -> np.ndarray:
-        fr = self.free
-        rb = self.reduced_basis(film, offset)
-        t_mm = {g: t * 1e-3 for g, t in used_um.items()}
-        x0 = rb.expand(rb.solve(t_mm, eps_mis))[fr] if rb.size else None
-        if self._shared is not None and self._shared[1] != backend:
-            self.release_preconditioner()
-        fresh = self._shared is None
-        if fresh:
-            self._shared = (SPDFactor(Kff, backend, self.coords_mm, fr), backend)
-        u = solve_spd_perturbed(Kff, self._offset_operator(couplings, fr), f[fr], backend=backend,
-                                coords_mm=self.coords_mm, free=fr, info=solve_info, rtol=rtol,
-                                factor=self._shared[0], x0=x0)
-        solve_info.update(preconditioner="own" if fresh else "shared", reduced_basis_size=rb.size)
-        if not fresh and solve_info.get("iterations", 0) > self.refactor_after_iterations:
-            self.release_preconditioner()  # this case is far from the factored one: next one refactors
-        full = np.zeros(self.ndof)
-        full[fr] = u
-        rb.add(full)
-        return u
-
-    def _offset_operator(self, couplings, free):
-        """v ↦ Σ (non-local film coupling) v on the free DOFs, without forming the matrices."""
-        if not couplings:
-            return None
-        n = self.ndof
-        parts = [ops.coupling_operator(t) for t, ops in couplings]
-
-        def apply(v_free):
-            v = np.zeros(n)
-            v[free] = v_free
-            return sum(op(v) for op in parts)[free]
-
-        return apply
