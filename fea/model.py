@@ -241,7 +241,6 @@ class PreparedBlank:
         self._check_inputs(film, load, stress_scale)
         check_symmetry(coating, self.symmetry_planes)
         t0 = time.perf_counter()
-        eps_sub = self.substrate.strain_between(load.warm_K, load.cold_K)
         eps_mis = self.mismatch_strain(film, load, stress_scale)
         used = self.film_thickness_um(coating, thickness_override_um)
         f = np.zeros(self.ndof)
@@ -380,9 +379,11 @@ class PreparedBlank:
 
     def front_sampler(self) -> FrontSampler:
         """Front-face sag of a displacement field on this mesh (built once)."""
-        if getattr(self, "_sampler", None) is None:
-            self._sampler = FrontSampler(self.mesh, self.basis, self.symmetry_planes)
-        return self._sampler
+        return self._front_sampler
+
+    @cached_property
+    def _front_sampler(self) -> FrontSampler:
+        return FrontSampler(self.mesh, self.basis, self.symmetry_planes)
 
     def mismatch_strain(self, film: Material | str = NIP_HIGH_P, load: ThermalLoad = ThermalLoad(),
                         stress_scale: float = 1.0) -> float:
