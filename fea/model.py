@@ -38,6 +38,7 @@ from .surface import FrontSag, FrontSampler
 
 __all__ = ["FEAResult", "PreparedBlank", "ThermalLoad"]
 
+
 @dataclass(frozen=True)
 class ThermalLoad:
     """Uniform cool-down from ``warm_K`` to ``cold_K`` (K).
