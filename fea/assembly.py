@@ -47,7 +47,8 @@ import numpy as np
 import scipy.sparse as sp
 from skfem import CellBasis, ElementTetP2, FacetBasis
 
-__all__ = ["scalar_basis", "bulk_stiffness", "film_operators", "FilmOperators"]
+__all__ = ["scalar_basis", "bulk_stiffness", "film_operators", "FilmOperators", "combine", "renumbered",
+           "shared_csr"]
 
 def scalar_basis(mesh, intorder: int = 2) -> CellBasis:
     """Scalar P2 basis on ``mesh`` (isoparametric on a MeshTet2)."""
@@ -86,11 +87,21 @@ class _Scatter:
 
     def __call__(self, local: np.ndarray) -> sp.csr_matrix:
         data = np.bincount(self._inverse.ravel(), weights=local.ravel(), minlength=self.indices.size)
-        return _shared_csr(data, self.indices, self.indptr, self.shape)
+        return shared_csr(data, self.indices, self.indptr, self.shape)
 
 
-def _shared_csr(data, indices, indptr, shape) -> sp.csr_matrix:
-    """A CSR matrix that keeps (does not copy or re-check) the given index arrays."""
+def shared_csr(data, indices, indptr, shape) -> sp.csr_matrix:
+    """A CSR matrix that keeps (does not copy or re-check) the given index arrays.
+
+    Parameters
+    ----------
+    data : ndarray, shape (nnz,)
+        Entry values.
+    indices, indptr : ndarray of int
+        A canonical (sorted, duplicate-free) CSR pattern; kept by reference, so several
+        matrices can share it and their sums stay sums of ``data`` (:func:`combine`).
+    shape : tuple of int
+    """
     A = sp.csr_matrix(shape, dtype=float)
     A.data, A.indices, A.indptr = data, indices, indptr
     A.has_sorted_indices = True
@@ -111,7 +122,7 @@ def renumbered(A: sp.csr_matrix, row_map: np.ndarray, col_map: np.ndarray, shape
     keep = np.flatnonzero((rows >= 0) & (cols >= 0))
     indptr = np.zeros(shape[0] + 1, dtype=np.int64)
     np.cumsum(np.bincount(rows[keep], minlength=shape[0]), out=indptr[1:])
-    B = _shared_csr(A.data[keep], cols[keep].astype(np.int32), indptr.astype(np.int32), shape)
+    B = shared_csr(A.data[keep], cols[keep].astype(np.int32), indptr.astype(np.int32), shape)
     return B, keep
 
 
@@ -120,7 +131,7 @@ def combine(coefs, mats) -> sp.csr_matrix:
     first = mats[0]
     if all(A.indices is first.indices and A.indptr is first.indptr for A in mats):
         data = sum(c * A.data for c, A in zip(coefs, mats))
-        return _shared_csr(data, first.indices, first.indptr, first.shape)
+        return shared_csr(data, first.indices, first.indptr, first.shape)
     return sum((c * A for c, A in zip(coefs, mats)), sp.csr_matrix(first.shape)).tocsr()
 
 
@@ -258,7 +269,7 @@ class FilmOperators:
             return (idx, *mats, R)
         # one pattern, renumbered once and shared: t-weighted sums stay data sums (combine)
         A00, keep = renumbered(self.A00, to_active, to_active, shape)
-        mats = [A00] + [_shared_csr(M.data[keep], A00.indices, A00.indptr, shape)
+        mats = [A00] + [shared_csr(M.data[keep], A00.indices, A00.indptr, shape)
                         for M in (self.A00k, self.A0C, self.A0Ck, self.ACC, self.ACCk)]
         return (idx, *mats, R)
 

@@ -8,35 +8,35 @@ homogeneous body, so the problem is solved for the displacement *relative* to th
 uniform contraction; only the film/substrate mismatch strain loads the body. The
 uniform part is added back for VTU output (``total_displacement_mm``).
 
-Boundary conditions: symmetry planes named ``sym_x``/``sym_y``/``sym_z`` fix the
-normal displacement; whatever rigid-body motion survives them is removed by the
-minimum number of point constraints (statically determinate, so they carry no
-load): none for the eighth model, one for the quarter model, six (3-2-1) for the
-full body.
+Boundary conditions: symmetry planes fix the normal displacement and point constraints
+remove the rigid-body motion that survives them (:mod:`fea.constraints`).
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
-from .assembly import FilmOperators, _shared_csr, bulk_stiffness, film_operators, renumbered, scalar_basis
+from .assembly import FilmOperators, bulk_stiffness, film_operators, scalar_basis
+from .batch_solve import block_pcg, film_block_operator, thickness_powers
 from .coating import SURFACE_GROUPS, Coating
-from .linsolve import SPDFactor, _rigid_modes, solve_spd, solve_spd_perturbed
+from .constraints import (check_symmetry, constrained_dofs, plane_constrained_dofs, symmetry_constraints,
+                          symmetry_planes)
+from .linsolve import SharedFactor, SolverError, resolve_backend, restricted_sum, solve_spd
 from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
 from .errors import ParameterError
+from .free_dofs import FreeStiffness
 from .mesh_cache import default_cache_dir
 from .operator_cache import load_film_ops, operator_key, save_film_ops
 from .reduced import FilmPolynomial, ReducedBasis
 from .surface import FrontSag, FrontSampler
 
 __all__ = ["FEAResult", "PreparedBlank", "ThermalLoad"]
-
-_SYM_COMPONENT = {"sym_x": 0, "sym_y": 1, "sym_z": 2}
 
 
 @dataclass(frozen=True)
@@ -91,11 +91,6 @@ class FEAResult:
         return self.displacement_mm + self.uniform_strain * self.coords_mm
 
 
-def _pattern_ones(A: sp.csr_matrix) -> sp.csr_matrix:
-    """The sparsity pattern of ``A`` with every stored entry set to 1."""
-    return _shared_csr(np.ones(A.indices.size), A.indices, A.indptr, A.shape)
-
-
 class PreparedBlank:
     """A meshed blank with its bulk stiffness assembled, ready to solve many coatings.
 
@@ -132,21 +127,18 @@ class PreparedBlank:
         self.coords_mm = self.basis.doflocs
         self.K_bulk = bulk_stiffness(self.basis, self.substrate.youngs_modulus_Pa * 1e-6,
                                      self.substrate.poisson_ratio)
-        self.symmetry_planes = tuple(s for s in _SYM_COMPONENT if s in mesh.boundaries)
+        self.symmetry_planes = symmetry_planes(mesh)
         # boundary name -> displacement component held at zero (symmetry planes by default)
-        self.constraints = ({s: _SYM_COMPONENT[s] for s in self.symmetry_planes}
+        self.constraints = (symmetry_constraints(self.symmetry_planes)
                             if constraints is None else dict(constraints))
-        self.plane_fixed = self._plane_constrained_dofs()
-        self.fixed = self._constrained_dofs()
+        self.plane_fixed = plane_constrained_dofs(mesh, self.basis, self.constraints)
+        self.fixed = constrained_dofs(self.coords_mm, self.plane_fixed)
         self.free = np.setdiff1d(np.arange(self.ndof), self.fixed)
         self._film_ops: dict[tuple, FilmOperators] = {}
-        self._layouts: dict[tuple, tuple] = {}
         #: systems up to this size get the offset coupling assembled explicitly
         self.explicit_offset_max_dof = 70_000
-        #: larger systems: one factorisation is shared by the following cases as CG
-        #: preconditioner, and refreshed when a case needs more iterations than this
-        self.refactor_after_iterations = 14
-        self._shared: tuple[SPDFactor, str] | None = None
+        # larger systems: one factorisation is shared by the following cases as CG preconditioner
+        self._preconditioner = SharedFactor()
         self._reduced: dict[tuple, ReducedBasis] = {}
         self.assembly_s = time.perf_counter() - t0
 
@@ -189,43 +181,20 @@ class PreparedBlank:
             self._reduced[key] = ReducedBasis(self.K_bulk, films, self.free)
         return self._reduced[key]
 
+    @cached_property
+    def free_stiffness(self) -> FreeStiffness:
+        """Bulk + local film stiffness on the free DOFs (:mod:`fea.free_dofs`)."""
+        return FreeStiffness(self.K_bulk, self.free)
+
+    def _free_stiffness(self, used_um: dict[str, float], film: Material, offset: bool) -> sp.csr_matrix:
+        """Bulk + local film stiffness on the free DOFs for film thicknesses ``used_um`` (µm)."""
+        return self.free_stiffness.stiffness(
+            {(g, film.youngs_modulus_Pa, film.poisson_ratio): (self.film_ops(g, film), t_um * 1e-3)
+             for g, t_um in used_um.items()}, offset)
+
     def release_preconditioner(self) -> None:
         """Free the shared factorisation (~0.7 GB at the default mesh)."""
-        if self._shared is not None:
-            self._shared[0].free()
-            self._shared = None
-
-    # ------------------------------------------------------------------ constraints
-    def _plane_constrained_dofs(self) -> np.ndarray:
-        fixed = [3 * self.basis.get_dofs(self.mesh.boundaries[s]).all() + c
-                 for s, c in self.constraints.items()]
-        return np.unique(np.concatenate(fixed)) if fixed else np.zeros(0, dtype=int)
-
-    def _constrained_dofs(self) -> np.ndarray:
-        fixed = self.plane_fixed
-        B = _rigid_modes(self.coords_mm - self.coords_mm.mean(axis=1, keepdims=True))
-        # rigid modes that survive the symmetry constraints
-        if fixed.size:
-            _, s, Vt = np.linalg.svd(B[fixed], full_matrices=True)
-            rank = int((s > 1e-9 * s.max()).sum())
-            null = Vt[rank:].T
-        else:
-            null = np.eye(6)
-        k = null.shape[1]
-        if k == 0:
-            return fixed
-        # pick k well-separated DOFs that pin the surviving modes (QR with pivoting)
-        from scipy.linalg import qr
-
-        rng = np.random.default_rng(0)
-        cand_nodes = rng.choice(self.basis.N, size=min(400, self.basis.N), replace=False)
-        cand = (3 * cand_nodes[:, None] + np.arange(3)).ravel()
-        Bs = B[cand] @ null
-        _, _, piv = qr(Bs.T, pivoting=True, mode="economic")
-        extra = cand[piv[:k]]
-        if np.linalg.matrix_rank(Bs[piv[:k]]) < k:
-            raise RuntimeError("could not find point constraints that remove the rigid-body modes")
-        return np.unique(np.concatenate([fixed, extra]))
+        self._preconditioner.release()
 
     # ------------------------------------------------------------------ solve
     def solve(self, coating: Coating, film: Material | str = NIP_HIGH_P,
@@ -271,9 +240,8 @@ class PreparedBlank:
         """
         film = get_material(film)
         self._check_inputs(film, load, stress_scale)
-        self._check_symmetry(coating)
+        check_symmetry(coating, self.symmetry_planes)
         t0 = time.perf_counter()
-        eps_sub = self.substrate.strain_between(load.warm_K, load.cold_K)
         eps_mis = self.mismatch_strain(film, load, stress_scale)
         used = self.film_thickness_um(coating, thickness_override_um)
         f = np.zeros(self.ndof)
@@ -304,8 +272,14 @@ class PreparedBlank:
                 if rb is not None:  # a surrogate is training on this model: it needs these solves
                     rb.add(u)
             else:
-                u[fr] = self._solve_iterative(Kff, couplings, f, film, offset, used,
-                                              eps_mis, backend, rtol, solve_info)
+                # start from the Galerkin solution on the span of the previous cases' solutions
+                rb = self.reduced_basis(film, offset)
+                x0 = rb.expand(rb.solve({g: t * 1e-3 for g, t in used.items()}, eps_mis))[fr] if rb.size else None
+                offset_terms = restricted_sum([ops.coupling_operator(t) for t, ops in couplings], fr, self.ndof)
+                u[fr] = self._preconditioner.solve(Kff, offset_terms, f[fr], backend=backend, rtol=rtol,
+                                                   coords_mm=self.coords_mm, free=fr, info=solve_info, x0=x0)
+                solve_info.update(reduced_basis_size=rb.size)
+                rb.add(u)
         t_solve = time.perf_counter() - t0 - t_asm
         return self._result(coating, film, load, stress_scale, offset, used, eps_mis, u,
                             t_asm, t_solve, solve_info)
@@ -339,25 +313,19 @@ class PreparedBlank:
                    maxiter: int = 200) -> list[FEAResult]:
         """Solve several coatings together; same answers as :meth:`solve` one by one.
 
-        Large meshes: conjugate gradients run in lockstep on all cases, so that each step
-        applies the shared PARDISO factor to a block of residuals at once (one pass over the
-        ~0.7 GB factor for the whole block instead of one per case: 16 right-hand sides cost
-        0.6 s instead of 16 x 0.15 s at the default mesh); the film terms of every case
-        come from one set of products per surface group (:meth:`FilmOperators.apply_power_terms`
-        with per-case thickness powers). Converged cases leave the block. Small meshes, the
-        AMG back-end and cases CG cannot finish fall back to :meth:`solve`.
+        Large meshes: conjugate gradients in lockstep on all cases with the shared PARDISO
+        factor (:mod:`fea.batch_solve`). Small meshes, the AMG back-end and cases CG cannot
+        finish fall back to :meth:`solve`.
         """
-        from .linsolve import SolverError, _resolve_backend
-
         film = get_material(film)
         coatings = list(coatings)
         fallback = (len(coatings) < 2 or self.ndof <= self.explicit_offset_max_dof
-                    or _resolve_backend(backend) != "pardiso")
+                    or resolve_backend(backend) != "pardiso")
         if fallback:
             return [self.solve(c, film, load, stress_scale, backend, rtol=rtol) for c in coatings]
         self._check_inputs(film, load, stress_scale)
         for c in coatings:
-            self._check_symmetry(c)
+            check_symmetry(c, self.symmetry_planes)
         t0 = time.perf_counter()
         eps_mis = self.mismatch_strain(film, load, stress_scale)
         fr = self.free
@@ -369,65 +337,25 @@ class PreparedBlank:
             for g, t_um in u_.items():
                 f += self.film_ops(g, film).load(t_um * 1e-3, eps_mis)
             F[:, j] = f[fr]
-        # per group and case: the powers t, t², t³, t⁴ (zero where the group is bare)
-        P = {g: np.array([(u_.get(g, 0.0) * 1e-3) ** np.arange(1, 5) for u_ in used]).T for g in groups}
-        Kb = self._bulk_free()
-        full = np.zeros((self.ndof, len(coatings)))
-
-        acc = np.zeros((self.ndof, len(coatings)))
-
-        def apply(V, cols):
-            m = len(cols)
-            full[:, :m] = 0.0
-            full[fr, :m] = V
-            acc[:, :m] = 0.0
-            for g in groups:
-                idx, y = self.film_ops(g, film).apply_with_powers(full[:, :m], P[g][:, cols])
-                acc[idx, :m] += y
-            return Kb @ V + acc[fr, :m]
-
+        apply = film_block_operator(self.free_stiffness.bulk, fr, self.ndof,
+                                    [(self.film_ops(g, film), thickness_powers([u_.get(g, 0.0) * 1e-3 for u_ in used]))
+                                     for g in groups])
         solve_case = [j for j in range(len(coatings)) if used[j] and eps_mis != 0]
-        X = np.zeros_like(F)
-        info = [dict() for _ in coatings]
-        if self._shared is not None and self._shared[1] != "pardiso":
-            self.release_preconditioner()
-        own = self._shared is None
+        own = self._preconditioner.held("pardiso") is None
         if own and solve_case:
-            j0 = solve_case[0]
-            self._shared = (SPDFactor(self._free_stiffness(used[j0], film, True), "pardiso",
-                                      self.coords_mm, fr), "pardiso")
+            self._preconditioner.factorise(self._free_stiffness(used[solve_case[0]], film, True), "pardiso",
+                                           self.coords_mm, fr)
         t_asm = time.perf_counter() - t0
-        fac = self._shared[0] if solve_case else None
-        act = np.array(solve_case, dtype=int)
+        X = np.zeros_like(F)
         it = np.zeros(len(coatings), dtype=int)
-        if act.size:
-            fn = np.linalg.norm(F[:, act], axis=0)
-            target = dict(zip(act.tolist(), 0.5 * rtol * fn))
-            X[:, act] = fac.solve(np.asfortranarray(F[:, act]))
-            R = F[:, act] - apply(X[:, act], act)
-            res0 = np.linalg.norm(R, axis=0) / fn
-            for j, r0 in zip(act, res0):
-                info[j]["initial_residual"] = float(r0)
-            Z = fac.solve(np.asfortranarray(R))
-            Pd = Z.copy()
-            rz = np.einsum("nm,nm->m", R, Z)
-            for _ in range(maxiter):
-                keep = np.linalg.norm(R, axis=0) > np.array([target[j] for j in act])
-                if not keep.any():
-                    break
-                act, R, Pd, rz = act[keep], R[:, keep], Pd[:, keep], rz[keep]
-                AP = apply(Pd, act)
-                alpha = rz / np.einsum("nm,nm->m", Pd, AP)
-                X[:, act] += Pd * alpha
-                R -= AP * alpha
-                it[act] += 1
-                Z = fac.solve(np.asfortranarray(R))
-                rz_new = np.einsum("nm,nm->m", R, Z)
-                Pd = Z + Pd * (rz_new / rz)
-                rz = rz_new
+        res0 = np.full(len(coatings), np.nan)
+        cases = np.array(solve_case, dtype=int)
+        if solve_case:
+            X[:, cases], it[cases], res0[cases] = block_pcg(lambda V, cols: apply(V, cases[cols]), F[:, cases],
+                                                            self._preconditioner.held("pardiso"), rtol, maxiter)
         t_solve = time.perf_counter() - t0 - t_asm
         results = []
-        checked = apply(X[:, solve_case], np.array(solve_case, dtype=int)) if solve_case else None
+        checked = apply(X[:, cases], cases) if solve_case else None
         for j, c in enumerate(coatings):
             u = np.zeros(self.ndof)
             solve_info = {}
@@ -443,7 +371,7 @@ class PreparedBlank:
                                           f"{exc}") from None
                 u[fr] = X[:, j]
                 solve_info = {"method": "block CG (lockstep, shared factor)", "iterations": int(it[j]),
-                              "residual": res, "initial_residual": info[j].get("initial_residual"),
+                              "residual": res, "initial_residual": float(res0[j]),
                               "backend": "pardiso", "preconditioner": "own" if own else "shared",
                               "block_size": len(solve_case)}
             results.append(self._result(c, film, load, stress_scale, True, used[j], eps_mis, u,
@@ -452,110 +380,11 @@ class PreparedBlank:
 
     def front_sampler(self) -> FrontSampler:
         """Front-face sag of a displacement field on this mesh (built once)."""
-        if getattr(self, "_sampler", None) is None:
-            self._sampler = FrontSampler(self.mesh, self.basis, self.symmetry_planes)
-        return self._sampler
+        return self._front_sampler
 
-    def _bulk_free(self) -> sp.csr_matrix:
-        """Bulk stiffness on the free DOFs (sliced once per mesh)."""
-        if getattr(self, "_K_bulk_free", None) is None:
-            K = self.K_bulk.tocsr()
-            K.sum_duplicates()  # canonical (sorted, unique) indices: _free_layouts relies on them
-            self._K_bulk_free, _ = renumbered(K, self._to_free, self._to_free, (self.free.size,) * 2)
-        return self._K_bulk_free
-
-    @property
-    def _to_free(self) -> np.ndarray:
-        """Full DOF number → free DOF number (−1 for constrained DOFs)."""
-        if getattr(self, "_to_free_map", None) is None:
-            m = np.full(self.ndof, -1, dtype=np.int64)
-            m[self.free] = np.arange(self.free.size)
-            self._to_free_map = m
-        return self._to_free_map
-
-    def _free_stiffness(self, used_um: dict[str, float], film: Material, offset: bool) -> sp.csr_matrix:
-        """Bulk + local film stiffness on the free DOFs, for film thicknesses ``used_um`` (µm).
-
-        The film's element matrices live on the bulk's pattern (a facet's DOFs are those of
-        its tetrahedron), so the sum is formed on the ``data`` array of the sliced bulk
-        matrix: no sparse additions or slicing per case (those cost ~1.5 s per case at the
-        default mesh, more than the CG iterations of a neighbouring case).
-        """
-        layouts = self._free_layouts(tuple(used_um), film)  # may widen the bulk pattern: first
-        Kb = self._bulk_free()
-        data = Kb.data.copy()
-        for group, t_um in used_um.items():
-            ops = self.film_ops(group, film)
-            keep, pos, pos_t = layouts[group]
-            t = t_um * 1e-3
-            if offset:
-                S, C = ops.power_data(t)
-                data[pos] += S[keep] + C[keep]
-                data[pos_t] += C[keep]
-            else:
-                data[pos] += t * ops.A00.data[keep]
-        return _shared_csr(data, Kb.indices, Kb.indptr, Kb.shape)
-
-    def _free_layouts(self, groups: tuple[str, ...], film: Material) -> dict[str, tuple]:
-        """Where the entries of each group's film matrices land in ``_bulk_free().data``.
-
-        Per group (keep, pos, pos_t): the entries of ``A00.data`` with a free row and
-        column, and the positions of those entries and of their transposes in the bulk's
-        data (all six film matrices share ``A00``'s pattern).
-        """
-        def key(g):
-            return (g, film.youngs_modulus_Pa, film.poisson_ratio)
-
-        need = [g for g in groups if key(g) not in self._layouts]
-        if not need:
-            return {g: self._layouts[key(g)] for g in groups}
-        free, to_free = self.free, self._to_free
-        films = {}
-        for g in need:
-            ops = self.film_ops(g, film)
-            if not ops.shares_pattern():
-                raise RuntimeError(f"film operators of {g!r} do not share one sparsity pattern")
-            A = ops.A00
-            # the film's entries on the free DOFs, carrying their entry numbers in A00.data
-            ids = _shared_csr(np.arange(1, A.nnz + 1, dtype=float), A.indices, A.indptr, A.shape)
-            F, _ = renumbered(ids, to_free, to_free, (free.size, free.size))
-            FT = F.T.tocsr()
-            FT.sort_indices()
-            films[g] = (A.nnz, F, FT)
-        Kb = self._bulk_free()
-        # The bulk assembly drops entries that happen to be exactly zero; the film's are
-        # kept: widen the bulk pattern by explicit zeros where needed (sums of patterns of
-        # ones never cancel, so the union is exact)
-        union = _pattern_ones(Kb)
-        for _, F, _ in films.values():
-            union = union + _pattern_ones(F)
-        if union.nnz != Kb.nnz:
-            union.sum_duplicates()
-            union_ids = _shared_csr(np.arange(1, union.nnz + 1, dtype=float), union.indices,
-                                    union.indptr, union.shape)
-            at = union_ids.multiply(_pattern_ones(Kb)).tocsr().data.astype(np.int64) - 1
-            data = np.zeros(union.nnz)
-            data[at] = Kb.data
-            Kb = self._K_bulk_free = _shared_csr(data, union.indices, union.indptr, union.shape)
-            self._layouts.clear()  # positions moved; other groups are redone on demand
-            need = list(groups)
-            for g in groups:
-                if g not in films:
-                    return self._free_layouts(groups, film)
-        # positions by sparse products (linear merges of sorted rows): the bulk's data
-        # carries its entry numbers, a film pattern of ones picks them out
-        bulk_ids = _shared_csr(np.arange(1, Kb.nnz + 1, dtype=float), Kb.indices, Kb.indptr, Kb.shape)
-        for g in need:
-            nnz, F, FT = films[g]
-            hit = bulk_ids.multiply(_pattern_ones(F)).tocsr()
-            hit_t = bulk_ids.multiply(_pattern_ones(FT)).tocsr()
-            if hit.nnz != F.nnz or hit_t.nnz != FT.nnz:
-                raise RuntimeError(f"film pattern of {g!r} is not inside the widened bulk pattern")
-            keep = F.data.astype(np.int64) - 1
-            by_entry = np.empty(nnz, dtype=np.int64)
-            by_entry[FT.data.astype(np.int64) - 1] = hit_t.data.astype(np.int64) - 1
-            self._layouts[key(g)] = (keep, hit.data.astype(np.int64) - 1, by_entry[keep])
-        return {g: self._layouts[key(g)] for g in groups}
+    @cached_property
+    def _front_sampler(self) -> FrontSampler:
+        return FrontSampler(self.mesh, self.basis, self.symmetry_planes)
 
     def mismatch_strain(self, film: Material | str = NIP_HIGH_P, load: ThermalLoad = ThermalLoad(),
                         stress_scale: float = 1.0) -> float:
@@ -578,46 +407,3 @@ class PreparedBlank:
                 continue  # e.g. hole walls of a blank without lightweighting holes
             used[group] = float(t_um)
         return used
-
-    def _solve_iterative(self, Kff, couplings, f, film, offset, used_um, eps_mis, backend, rtol,
-                         solve_info) -> np.ndarray:
-        fr = self.free
-        rb = self.reduced_basis(film, offset)
-        t_mm = {g: t * 1e-3 for g, t in used_um.items()}
-        x0 = rb.expand(rb.solve(t_mm, eps_mis))[fr] if rb.size else None
-        if self._shared is not None and self._shared[1] != backend:
-            self.release_preconditioner()
-        fresh = self._shared is None
-        if fresh:
-            self._shared = (SPDFactor(Kff, backend, self.coords_mm, fr), backend)
-        u = solve_spd_perturbed(Kff, self._offset_operator(couplings, fr), f[fr], backend=backend,
-                                coords_mm=self.coords_mm, free=fr, info=solve_info, rtol=rtol,
-                                factor=self._shared[0], x0=x0)
-        solve_info.update(preconditioner="own" if fresh else "shared", reduced_basis_size=rb.size)
-        if not fresh and solve_info.get("iterations", 0) > self.refactor_after_iterations:
-            self.release_preconditioner()  # this case is far from the factored one: next one refactors
-        full = np.zeros(self.ndof)
-        full[fr] = u
-        rb.add(full)
-        return u
-
-    def _offset_operator(self, couplings, free):
-        """v ↦ Σ (non-local film coupling) v on the free DOFs, without forming the matrices."""
-        if not couplings:
-            return None
-        n = self.ndof
-        parts = [ops.coupling_operator(t) for t, ops in couplings]
-
-        def apply(v_free):
-            v = np.zeros(n)
-            v[free] = v_free
-            return sum(op(v) for op in parts)[free]
-
-        return apply
-
-    def _check_symmetry(self, coating: Coating) -> None:
-        if "sym_z" in self.symmetry_planes and not coating.is_z_symmetric:
-            raise ValueError(
-                f"coating with polish_front={coating.polish_front} != polish_back={coating.polish_back} "
-                "is not symmetric about the mid-plane; use a quarter or full mesh (MeshSpec(symmetry='quarter'))"
-            )

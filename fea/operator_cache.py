@@ -28,7 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import MODEL_VERSION
-from .assembly import FilmOperators, _shared_csr
+from .assembly import FilmOperators, shared_csr
 from .mesh_cache import atomic_file
 
 __all__ = ["FORMAT_VERSION", "operator_key", "load_film_ops", "save_film_ops"]
@@ -92,7 +92,7 @@ def load_film_ops(cache_dir: Path, key: str) -> FilmOperators | None:
                 raise ValueError("stored key differs")
             shape = tuple(int(s) for s in z["shape"])
             indices, indptr = z["indices"], z["indptr"]
-            mats = {name: _shared_csr(z[name], indices, indptr, shape) for name in _PATTERNED}
+            mats = {name: shared_csr(z[name], indices, indptr, shape) for name in _PATTERNED}
             if any(m.data.size != indices.size for m in mats.values()) or indptr.size != shape[0] + 1:
                 raise ValueError("array sizes are inconsistent")
             R = sp.csr_matrix((z["R_data"], z["R_indices"], z["R_indptr"]), shape=shape)
