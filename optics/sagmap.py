@@ -17,7 +17,9 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
-from scipy.interpolate import LinearNDInterpolator, RegularGridInterpolator
+from scipy.interpolate import RegularGridInterpolator
+
+from optics.triangulation import linear_on_grid
 
 __all__ = [
     "Region",
@@ -270,9 +272,7 @@ class SagMap:
         ny = int(round((y1 - y0) / spacing_mm)) + 1
         gx = np.linspace(x0, x1, nx)
         gy = np.linspace(y0, y1, ny)
-        X, Y = np.meshgrid(gx, gy)
-        interp = LinearNDInterpolator(np.column_stack([x, y]), s)
-        return cls(gx, gy, interp(X, Y), label)
+        return cls(gx, gy, linear_on_grid(x, y, s, gx, gy), label)
 
 
 def quilt_sag_map(

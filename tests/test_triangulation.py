@@ -1,0 +1,63 @@
+"""Linear interpolation of scattered samples: the closed-form rasterisation against scipy's
+LinearNDInterpolator (the reference implementation of the same interpolant), on samples
+shaped as they come (a curved FE lattice with samples on grid nodes, a random cloud, a
+masked disc), and against exactly linear data."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.interpolate import LinearNDInterpolator
+from scipy.spatial import QhullError
+
+from optics.triangulation import linear_on_grid
+
+
+def _lattice_samples():
+    """A P2-like lattice: 1 mm nodes, every fourth row shifted by half a step, so many
+    samples sit exactly on the 0.5 mm grid nodes (the case scipy's walk ties on)."""
+    xs, ys = np.meshgrid(np.arange(-20.0, 20.01, 1.0), np.arange(-15.0, 15.01, 0.5))
+    xs = xs + 0.25 * (np.round(ys / 0.5) % 4 == 1)
+    return xs.ravel(), ys.ravel()
+
+
+def _reference(x, y, v, gx, gy):
+    X, Y = np.meshgrid(gx, gy)
+    return LinearNDInterpolator(np.column_stack([x, y]), v)(X, Y)
+
+
+@pytest.mark.parametrize("kind", ["lattice", "cloud", "disc"])
+def test_equals_scipy_linear_interpolator(kind):
+    rng = np.random.default_rng(3)
+    if kind == "lattice":
+        x, y = _lattice_samples()
+    elif kind == "cloud":
+        x, y = rng.uniform(-20, 20, 3000), rng.uniform(-15, 15, 3000)
+    else:
+        r, t = 18 * np.sqrt(rng.uniform(0, 1, 4000)), rng.uniform(0, 2 * np.pi, 4000)
+        x, y = r * np.cos(t), r * np.sin(t)
+    v = np.sin(x / 3.0) * np.cos(y / 4.0) + 0.1 * rng.standard_normal(x.size)
+    gx, gy = np.arange(-22.0, 22.01, 0.5), np.arange(-17.0, 17.01, 0.5)
+    got, ref = linear_on_grid(x, y, v, gx, gy), _reference(x, y, v, gx, gy)
+    assert np.array_equal(np.isnan(got), np.isnan(ref))  # the same convex hull
+    assert np.nanmax(np.abs(got - ref)) < 1e-12
+    assert np.isfinite(got).sum() > 0.4 * got.size
+
+
+def test_reproduces_a_plane_exactly_and_is_nan_outside_the_hull():
+    x, y = _lattice_samples()
+    v = 0.3 + 2.0 * x - 0.7 * y
+    gx, gy = np.linspace(-25, 25, 51), np.linspace(-20, 20, 41)
+    got = linear_on_grid(x, y, v, gx, gy)
+    X, Y = np.meshgrid(gx, gy)
+    inside = (np.abs(X) <= 20.0) & (np.abs(Y) <= 15.0)
+    assert np.all(np.isfinite(got[inside])) and np.all(np.isnan(got[~inside]))
+    np.testing.assert_allclose(got[inside], (0.3 + 2.0 * X - 0.7 * Y)[inside], atol=1e-12)
+
+
+def test_one_node_grid_and_collinear_samples():
+    x, y = _lattice_samples()
+    got = linear_on_grid(x, y, x + y, np.array([0.5]), np.array([1.0]))
+    assert got.shape == (1, 1) and got[0, 0] == pytest.approx(1.5)
+    with pytest.raises(QhullError):
+        linear_on_grid(np.arange(5.0), np.zeros(5), np.ones(5), np.arange(3.0), np.arange(3.0))
