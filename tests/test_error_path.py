@@ -164,6 +164,14 @@ def test_diagnose_checks_its_output_before_any_work(tmp_path, capsys, monkeypatc
     one_error_line(capsys, "--out")
 
 
+def test_unknown_truth_family_is_refused_before_the_campaign(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("pipeline.diagnosis.campaign.run_campaign", never)
+    assert main(["diagnose", "--validate", "--cases", "2", "--truth-families", "sum_mix,hexagons",
+                 "--out", str(tmp_path / "o")]) == 2
+    line = one_error_line(capsys, "--truth-families")
+    assert "hexagons" in line and "pocket_jitter" in line  # the value and the valid names
+
+
 @pytest.mark.parametrize("field, value, valid", [("noise_rel", "1e-300", "[1e-06, 1]"),
                                                  ("noise_rel", "2.0", "[1e-06, 1]"),
                                                  ("noise_rel", "-0.01", "[1e-06, 1]")])

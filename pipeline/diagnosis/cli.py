@@ -39,7 +39,7 @@ def _run(args) -> int:
                              profile_specs=PROFILE_SETS[args.profiles], profile_map_K=args.profile_map_K,
                              psf_image=PSF_IMAGE_SPEC if args.psf_image else None,
                              only_types=parse_types(args.types, args.truth), discrepancy=args.discrepancy,
-                             truth=args.truth)
+                             truth=args.truth, truth_families=tuple(f.strip() for f in args.truth_families.split(",")))
         cfg = replace(cfg, criteria=_criteria(args, cfg.criteria))
         ensure_writable_dir(args.out, "--out")  # before the campaign, not after it
         warn_if_long(campaign_seconds(args.cases, args.workers, args.profile_map_K is not None, args.psf_image),
@@ -105,6 +105,9 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                         "quilt-shape mixtures, detector effects and out-of-library families written apart from the "
                         "forward model (default; benchmarks/truth_families.md); model = the diagnosis's own forward "
                         "code with a small discrepancy")
+    p.add_argument("--truth-families", default="sum_mix,product_mix", metavar="FAMILY,...",
+                   help="campaign (with --validate, --truth independent): the truth's grating families, comma-separated: "
+                        "sum_mix, product_mix (default), pocket_jitter, sharp_ribs (benchmarks/truth_families.md)")
     p.add_argument("--discrepancy", default="unmodelled", choices=("unmodelled", "companions"),
                    help="campaign (with --validate, --truth model): the truth's model discrepancy: unmodelled = 0.01 um RMS "
                         "trefoil/tetrafoil/pentafoil (outside the library, default); companions = bow + plating "
