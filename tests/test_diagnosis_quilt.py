@@ -291,3 +291,39 @@ def test_amplitude_in_both_conventions_in_the_summary():
     assert same["temperature"]["temperature_offset_K_projection"] == pytest.approx(30.0, abs=1e-4)
     # without quilt_shape the summaries are unchanged
     assert physical_summary(("amplitude_scale",), {"scale_J": 0.9}, ctx) == {"amplitude_scale": {"scale": 0.9}}
+
+
+def test_amplitude_hidden_by_a_shape_change_is_found_beside_quilt_shape(tmp_path):
+    """A map whose quilt has twice the nominal's cross terms, the whole deformation then times
+    ``a`` (numpy), ``a`` chosen so that its least-squares projection on the nominal over the
+    map is the nominal's: an amplitude fit alone sees (almost) nothing, yet in the engine's
+    convention (x fundamental held by quilt_shape) the amplitude is ``a`` (a warmer blank).
+    Every single is refitted beside the companion the data see, so both amplitude_scale and
+    temperature (not only the best-ranked one) are found with quilt_shape, at ``a``."""
+    from pipeline.diagnosis.criteria import Criteria
+
+    x, y, X, Y = _grid()
+    cross = -2 * CROSS_UM * np.cos(2 * np.pi * X / DX) * np.cos(2 * np.pi * Y / DY)
+    reshaped = _map().sag_um + cross
+    disc = X**2 + Y**2 <= 68.5**2
+    A = np.column_stack([np.ones(disc.sum()), X[disc], Y[disc]])  # piston and tilt, as the map fit removes them
+
+    def detrended(v):
+        return v - A @ np.linalg.lstsq(A, v, rcond=None)[0]
+
+    s, t = detrended(_map().sag_um[disc]), detrended(reshaped[disc])
+    a = float(s @ s / (t @ s))
+    assert a < 0.97  # the shape change alone raises the projection by more than 3 %
+    d = diagnose(_write_map_case(tmp_path, SagMap(x, y, a * reshaped), seed=3),
+                 effects=("amplitude_scale", "temperature", "quilt_shape"), criteria=Criteria(companion_top=1),
+                 heldout=False)
+    ranking = [(f.effect, f.companions, round(f.delta_bic, 1)) for f in d.findings]
+    assert d.verdict == "explained" and d.best.effect in ("amplitude_scale", "temperature"), ranking
+    amp, temp = d.finding("amplitude_scale"), d.finding("temperature")
+    assert amp.companions == temp.companions == ("quilt_shape",), ranking
+    scale = next(v for k, v in amp.parameters.items() if k.startswith("scale_"))
+    assert scale == pytest.approx(a, abs=0.01), (scale, a)
+    # the map is at 128 K: the offset moves its temperature, whose factor is a times the stated one's
+    dT = temp.parameters["temperature_offset_K"]
+    assert thermal_factor(128.0 + dT, 80.0) == pytest.approx(a * thermal_factor(128.0, 80.0), abs=0.01), dT
+    assert amp.parameters["quilt_cross_ratio"] == pytest.approx(2.0, abs=0.05)
