@@ -238,3 +238,92 @@ def test_same_quilt_change_on_maps_and_spectrograph_images(tmp_path):
     assert np.allclose(s.predict(p), expect.sample(s.x, s.y), atol=1e-9)
     sag = ProfileForward(data[1], nominal, 80.0)._memo(p, lambda sag, p: sag)
     assert np.allclose(sag.sag_um, expect.sag_um, atol=1e-12, equal_nan=True)
+
+
+def test_projection_factor_of_a_hand_made_reshaped_quilt():
+    """The least-squares projection on the nominal over the 82 x 72 mm centre (plain numpy,
+    piston removed) of quilts reshaped by hand — the pure sinusoid (cross terms and
+    harmonics removed), and twice the cross terms with half the smooth figure — is what
+    :func:`projection_factor` gives from the nominal's part shares; the shares add up to 1."""
+    from pipeline.diagnosis.quilt import projection_factor
+
+    x, y, X, Y = _grid()
+    nominal = _map()
+    w = quilt_components(nominal).weights
+    assert sum(w.values()) == pytest.approx(1.0, abs=1e-12)
+    centre = (np.abs(X) <= 41.0) & (np.abs(Y) <= 36.0)
+
+    def projection(sag):
+        s, t = nominal.sag_um[centre], sag[centre]
+        s, t = s - s.mean(), t - t.mean()
+        return float(t @ s / (s @ s))
+
+    cx, cy = np.cos(2 * np.pi * X / DX), np.cos(2 * np.pi * Y / DY)
+    sinusoid = _smooth(X, Y) + FUND_X_UM * cx + FUND_Y_UM * cy
+    assert projection_factor(w, {"quilt_cross_ratio": 0.0, "quilt_harmonics_ratio": 0.0}) == pytest.approx(
+        projection(sinusoid), abs=2e-3)
+    assert projection(sinusoid) < 0.97  # the removed cross terms and harmonics carried part of the projection
+    crossed = 0.5 * _smooth(X, Y) + _quilt(X, Y) - 2 * CROSS_UM * cx * cy
+    p = {"quilt_cross_ratio": 2.0, "quilt_figure_ratio": 0.5}
+    assert projection_factor(w, p) == pytest.approx(projection(crossed), abs=2e-3)
+
+
+def test_amplitude_in_both_conventions_in_the_summary():
+    """Beside quilt_shape, a fitted scale and temperature offset are the x fundamental's; the
+    summary adds them as the projection's: scale times the projection factor, and the offset
+    whose thermal factor is that factor times the fitted one's (checked with thermal_factor)."""
+    from pipeline.diagnosis.effects import SummaryContext, physical_summary
+
+    w = {"fundamental_x": 0.45, "fundamental_y": 0.38, "cross": 0.07, "harmonics": 0.02, "figure": 0.08}
+    ctx = SummaryContext(cold_K=80.0, blanks=("J",), quilt_weights=w)
+    ratios = {"quilt_harmonics_ratio": 0.4, "quilt_cross_ratio": 0.4, "quilt_figure_ratio": 0.4}
+    k = 0.45 + 0.38 + 0.4 * (0.07 + 0.02 + 0.08)
+    s = physical_summary(("amplitude_scale", "quilt_shape"), {"scale_J": 0.9, **ratios}, ctx)
+    assert s["quilt_shape"]["projection_factor"] == pytest.approx(k)
+    assert s["amplitude_scale"]["scale_J_projection"] == pytest.approx(0.9 * k)
+    assert "y fundamental not measured" in s["quilt_shape"]["projection_note"]
+    t = physical_summary(("temperature", "quilt_shape"), {"temperature_offset_K": 30.0, **ratios}, ctx)
+    dT = t["temperature"]["temperature_offset_K_projection"]
+    assert dT > 30.0  # a smaller projection is a warmer blank
+    assert thermal_factor(80.0 + dT, 80.0) == pytest.approx(k * thermal_factor(110.0, 80.0), rel=1e-6)
+    nominal_shape = {"quilt_harmonics_ratio": 1.0, "quilt_cross_ratio": 1.0, "quilt_figure_ratio": 1.0}
+    same = physical_summary(("temperature", "quilt_shape"), {"temperature_offset_K": 30.0, **nominal_shape}, ctx)
+    assert same["temperature"]["temperature_offset_K_projection"] == pytest.approx(30.0, abs=1e-4)
+    # without quilt_shape the summaries are unchanged
+    assert physical_summary(("amplitude_scale",), {"scale_J": 0.9}, ctx) == {"amplitude_scale": {"scale": 0.9}}
+
+
+def test_amplitude_hidden_by_a_shape_change_is_found_beside_quilt_shape(tmp_path):
+    """A map whose quilt has twice the nominal's cross terms, the whole deformation then times
+    ``a`` (numpy), ``a`` chosen so that its least-squares projection on the nominal over the
+    map is the nominal's: an amplitude fit alone sees (almost) nothing, yet in the engine's
+    convention (x fundamental held by quilt_shape) the amplitude is ``a`` (a warmer blank).
+    Every single is refitted beside the companion the data see, so both amplitude_scale and
+    temperature (not only the best-ranked one) are found with quilt_shape, at ``a``."""
+    from pipeline.diagnosis.criteria import Criteria
+
+    x, y, X, Y = _grid()
+    cross = -2 * CROSS_UM * np.cos(2 * np.pi * X / DX) * np.cos(2 * np.pi * Y / DY)
+    reshaped = _map().sag_um + cross
+    disc = X**2 + Y**2 <= 68.5**2
+    A = np.column_stack([np.ones(disc.sum()), X[disc], Y[disc]])  # piston and tilt, as the map fit removes them
+
+    def detrended(v):
+        return v - A @ np.linalg.lstsq(A, v, rcond=None)[0]
+
+    s, t = detrended(_map().sag_um[disc]), detrended(reshaped[disc])
+    a = float(s @ s / (t @ s))
+    assert a < 0.97  # the shape change alone raises the projection by more than 3 %
+    d = diagnose(_write_map_case(tmp_path, SagMap(x, y, a * reshaped), seed=3),
+                 effects=("amplitude_scale", "temperature", "quilt_shape"), criteria=Criteria(companion_top=1),
+                 heldout=False)
+    ranking = [(f.effect, f.companions, round(f.delta_bic, 1)) for f in d.findings]
+    assert d.verdict == "explained" and d.best.effect in ("amplitude_scale", "temperature"), ranking
+    amp, temp = d.finding("amplitude_scale"), d.finding("temperature")
+    assert amp.companions == temp.companions == ("quilt_shape",), ranking
+    scale = next(v for k, v in amp.parameters.items() if k.startswith("scale_"))
+    assert scale == pytest.approx(a, abs=0.01), (scale, a)
+    # the map is at 128 K: the offset moves its temperature, whose factor is a times the stated one's
+    dT = temp.parameters["temperature_offset_K"]
+    assert thermal_factor(128.0 + dT, 80.0) == pytest.approx(a * thermal_factor(128.0, 80.0), abs=0.01), dT
+    assert amp.parameters["quilt_cross_ratio"] == pytest.approx(2.0, abs=0.05)

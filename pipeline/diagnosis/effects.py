@@ -312,13 +312,19 @@ def applicable_effects(kinds: set[str], names: tuple[str, ...] | None = None) ->
 class SummaryContext:
     """What the physical summaries of a finding need from the data and the simulation:
     the simulation's cold temperature (K), the blanks seen, the surface maps' aperture
-    radii (mm, where the astigmatism is normalised) and the nominal quilt's RMS
-    amplitudes (µm, :meth:`.quilt.QuiltComponents.amplitudes_um`; None: no quilt fit)."""
+    radii (mm, where the astigmatism is normalised), the nominal quilt's RMS
+    amplitudes (µm, :meth:`.quilt.QuiltComponents.amplitudes_um`; None: no quilt fit),
+    its parts' shares of the nominal's projection (:func:`.quilt.projection_weights`;
+    None: no quilt fit), and the warm temperature (K) and (substrate, film) that set the
+    thermal factor."""
 
     cold_K: float
     blanks: tuple = ()
     surface_radii_mm: tuple = ()
     quilt_rms_um: dict | None = None
+    quilt_weights: dict | None = None
+    warm_K: float = 293.0
+    materials: tuple = ("Al6061-T6", "NiP")
 
 
 def _norm(p: dict, names) -> float:
@@ -384,7 +390,53 @@ def physical_summary(effects, parameters: dict, ctx: SummaryContext) -> dict:
         own = {q.name: parameters[q.name] for q in effect_parameters(LIBRARY[e], ctx.blanks) if q.name in parameters}
         if own:
             out[e] = _SUMMARIES[e](own, ctx)
+    if ctx.quilt_weights and "quilt_shape" in out:
+        _add_projection(out, parameters, ctx)
     return out
+
+
+def _add_projection(out: dict, parameters: dict, ctx: SummaryContext) -> None:
+    """The amplitude in the other convention (``docs/diagnosis.md``, "Two meanings of the
+    amplitude"): beside ``quilt_shape`` a fitted ``scale_<blank>`` or
+    ``temperature_offset_K`` is the x fundamental's amplitude; times
+    :func:`.quilt.projection_factor` it is the reshaped deformation's least-squares
+    projection on the nominal over the centre."""
+    from .quilt import projection_factor
+
+    k = projection_factor(ctx.quilt_weights, parameters)
+    q = out["quilt_shape"]
+    q["projection_factor"] = k
+    if "quilt_fund_xy_ratio" not in parameters:
+        q["projection_note"] = ("y fundamental not measured (line profiles integrate along it): held at the "
+                                f"nominal's ratio, whose share of the projection is {ctx.quilt_weights['fundamental_y']:.2f}")
+    for name, v in parameters.items():
+        if name.startswith("scale_") and "amplitude_scale" in out:
+            out["amplitude_scale"][f"{name}_projection"] = v * k
+    if "temperature_offset_K" in parameters and "temperature" in out:
+        out["temperature"]["temperature_offset_K_projection"] = _offset_for_factor(
+            parameters["temperature_offset_K"], k, ctx)
+
+
+def _offset_for_factor(offset_K: float, k: float, ctx: SummaryContext) -> float:
+    """The cold-temperature offset whose thermal factor at ``ctx.cold_K`` is ``k`` times that
+    of ``offset_K`` (NaN where no temperature within both materials' data range, below the
+    warm one, gives it)."""
+    from scipy.optimize import brentq
+
+    from fea.materials import get_material
+
+    from .nominal import thermal_factor
+
+    def f(dT):
+        return thermal_factor(ctx.cold_K + dT, ctx.cold_K, ctx.warm_K, *ctx.materials)
+
+    target = k * f(offset_K)
+    coldest = max(get_material(m).valid_range_K[0] for m in ctx.materials)
+    lo, hi = coldest - ctx.cold_K, ctx.warm_K - ctx.cold_K - 1e-6
+    g = lambda dT: f(dT) - target  # noqa: E731
+    if not g(lo) * g(hi) < 0:
+        return float("nan")
+    return float(brentq(g, lo, hi, xtol=1e-6))
 
 
 def _prior_text(p: Parameter) -> str:

@@ -106,9 +106,12 @@ def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, Fi
 def summary_context(prob: Problem, cold_K: float) -> SummaryContext:
     """What :func:`.effects.physical_summary` needs from the data and the simulation."""
     quilt = next((f.quilt for f in prob.forwards if getattr(f, "quilt", None) is not None), None)
+    fw = prob.forwards[0]
     return SummaryContext(cold_K=float(cold_K), blanks=tuple(dict.fromkeys(f.blank for f in prob.forwards)),
                           surface_radii_mm=tuple(f.radius_mm for f in prob.forwards if f.kind == "surface"),
-                          quilt_rms_um=quilt.amplitudes_um() if quilt is not None else None)
+                          quilt_rms_um=quilt.amplitudes_um() if quilt is not None else None,
+                          quilt_weights=quilt.weights or None if quilt is not None else None,
+                          warm_K=float(fw.warm_K), materials=tuple(fw.materials))
 
 
 _N_EFF_PASSES = 2  # re-counts (Criteria.n_eff_from = "best_fit")

@@ -37,7 +37,7 @@ plating thickness and symmetry).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -45,7 +45,7 @@ from optics.fitting import FourierFit, fit_fourier
 from optics.sagmap import SagMap
 
 __all__ = ["QUILT_PERIOD_X_MM", "QUILT_PERIOD_Y_MM", "QUILT_HARMONICS", "QUILT_APERTURE", "CROSS_TERMS", "QuiltComponents",
-           "quilt_components"]
+           "quilt_components", "projection_weights", "projection_factor"]
 
 #: The blank's pocket pitch (mm) along x (dispersion) and y (rulings).
 QUILT_PERIOD_X_MM = 21.0
@@ -63,9 +63,12 @@ CROSS_TERMS = ((1, 1), (1, -1))
 @dataclass(frozen=True, eq=False)
 class QuiltComponents:
     """The nominal map's quilt: fundamentals ``F_x``, ``F_y`` and the higher harmonics ``H``
-    (module docstring), evaluable at any blank coordinates (mm) in µm."""
+    (module docstring), evaluable at any blank coordinates (mm) in µm; ``weights``: each
+    part's share of the nominal's least-squares amplitude over the centre
+    (:func:`projection_weights`)."""
 
     fourier: FourierFit
+    weights: dict = field(default_factory=dict)
 
     def _sum(self, x_mm, y_mm, comps) -> np.ndarray:
         f = self.fourier
@@ -113,4 +116,43 @@ def quilt_components(nominal: SagMap) -> QuiltComponents | None:
                         aperture=QUILT_APERTURE, include_cross=True, include_plane=True)
     except ValueError:
         return None
-    return QuiltComponents(f)
+    q = QuiltComponents(f)
+    return QuiltComponents(f, projection_weights(nominal, q))
+
+
+#: The parts of the deformation and the ``quilt_shape`` ratio that scales each (None: held).
+_PART_RATIOS = {"fundamental_x": None, "fundamental_y": "quilt_fund_xy_ratio", "cross": "quilt_cross_ratio",
+                "harmonics": "quilt_harmonics_ratio", "figure": "quilt_figure_ratio"}
+
+
+def projection_weights(nominal: SagMap, q: QuiltComponents) -> dict:
+    """Each part ``P`` of the nominal ``S`` (``F_x``, ``F_y``, ``C``, ``H`` and the smooth
+    figure ``R = S - F_x - F_y - C - H``) as its share ``<P, S> / <S, S>`` of the nominal's
+    least-squares amplitude over the ``center`` aperture (piston removed from both).
+
+    The shares add up to 1 exactly (the parts add up to ``S``); where the parts are
+    orthogonal over the aperture (whole periods; ``R`` is the Fourier fit's residual) each
+    share is the part's fraction of the variance. They convert the amplitude a fit reports
+    with ``F_x`` held (``amplitude_scale``, ``temperature`` beside ``quilt_shape``) into
+    the amplitude a least-squares projection of the same deformation on the nominal gives
+    (:func:`projection_factor`)."""
+    X, Y = nominal.grid()
+    m = nominal.region_mask(QUILT_APERTURE)
+    s = nominal.sag_um[m] - nominal.sag_um[m].mean()
+    fx, fy = q.fundamental_x_um(X[m], Y[m]), q.fundamental_y_um(X[m], Y[m])
+    cc, hh = q.cross_um(X[m], Y[m]), q.harmonics_um(X[m], Y[m])
+    parts = {"fundamental_x": fx, "fundamental_y": fy, "cross": cc, "harmonics": hh,
+             "figure": nominal.sag_um[m] - fx - fy - cc - hh}
+    ss = float(s @ s)
+    return {k: float((v - v.mean()) @ s / ss) for k, v in parts.items()} if ss > 0 else {}
+
+
+def projection_factor(weights: dict, parameters: dict) -> float:
+    """Least-squares projection on the nominal of the nominal reshaped by the ``quilt_shape``
+    ratios in ``parameters`` (missing: 1), relative to the nominal:
+    ``w_Fx + rho w_Fy + c w_C + h w_H + g w_R`` (``weights`` from :func:`projection_weights`).
+
+    1 when the shape change leaves the projection unchanged. A deformation fitted as
+    ``a`` times the reshaped nominal (``F_x`` held by the shape, so ``a`` is the x
+    fundamental's amplitude) has projection amplitude ``a * projection_factor``."""
+    return float(sum(w * parameters.get(_PART_RATIOS[k], 1.0) if _PART_RATIOS[k] else w for k, w in weights.items()))

@@ -89,15 +89,19 @@ def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict,
     w = prob.weights
     # A companion the data see on its own leaks into every other single's score (each
     # mimics some of its signature), so the first ranking no longer says which effect
-    # explains what the companion leaves: then every significant single is refitted too
-    # (a slit-width campaign case, map + PSF image: slit_width ranked below pupil_shift and
+    # explains what the companion leaves: then every single is refitted too (a slit-width
+    # campaign case, map + PSF image: slit_width ranked below pupil_shift and
     # collimator_wfe, which took up part of the bow, and was never refitted with it).
+    # Significant alone or not: the companion's signature can also pull a single the wrong
+    # way (line profiles of a 50 K warmer blank whose quilt has fewer cross terms and
+    # harmonics than the nominal's: temperature alone -18 K and not significant, with
+    # quilt_shape beside it +36 K and the best finding by a delta BIC of 100).
     seen = any(f.significant and set(f.effects) <= set(comp) for f in findings)
     out, done = list(findings), 0
     for i, f in enumerate(findings):
         if set(f.effects) & set(comp):
             continue
-        if done >= c.companion_top and not (seen and f.significant and len(f.effects) == 1):
+        if done >= c.companion_top and not (seen and len(f.effects) == 1):
             continue
         done += 1
         tried = []  # (joint finding, fit, companion subset)
