@@ -193,6 +193,27 @@ def test_zfr_refusals(tmp_path):
     assert c[(1, 1)] == pytest.approx(-0.1)
 
 
+ZFR_HEADER_REFUSALS = [
+    ("deck\nZFR 2 SUR WVL 1 SSZ 1 ZOOM 2\n0.1\n0.2\n", r"line 2: unknown header keyword 'ZOOM'; valid are SUR, WFR"),
+    ("deck\nZFR 2 SUR WVL 1 SSZ 0\n0.1\n0.2\n", r"line 2: SSZ=0\.0 must be a finite number > 0"),
+    ("deck\nZFR 2 SUR WVL abc\n0.1\n0.2\n", r"line 2: WVL value 'abc' is not a number"),
+    ("deck\nZFR 2 SUR WVL\n0.1\n0.2\n", r"line 2: keyword WVL has no value"),
+    ("deck\nZFR 2 SUR SSZ 1\n0.1\n0.2\n", r"line 2: header has no WVL"),
+    ("deck\nZFR 2 WVL 1\n0.1\n0.2\n", r"line 2: header has no data type"),
+    ("deck\nZFR 2 SUR WFR WVL 1\n0.1\n0.2\n", r"line 2: two data types"),
+    ("deck\nGRD 2 2 SUR WVL 1 SSZ 1\n1 2 3 4\n", r"line 2: header must start with 'ZFR <n>'.*read_codev_int"),
+    ("deck ! only a title\n", r"line 1: file ends before the ZFR header line"),
+]
+
+
+@pytest.mark.parametrize("text,pattern", ZFR_HEADER_REFUSALS)
+def test_zfr_header_refusals_name_file_and_line(tmp_path, text, pattern):
+    f = tmp_path / "z.int"
+    f.write_text(text)
+    with pytest.raises(ValueError, match=r"z\.int, " + pattern):
+        read_codev_zernike(f, normalised=False, radius_mm=1.0)
+
+
 def test_zernike_list_refuses_nan(tmp_path):
     with pytest.raises(ValueError, match=r"noll term 4 \(n, m\)=\(2, 0\) is inf"):
         write_zernike_list({(2, 0): float("inf")}, tmp_path / "l.txt", "noll", 10.0, coeffs_normalised=True)
