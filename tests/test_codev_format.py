@@ -78,14 +78,6 @@ GRID_REFUSALS = [
 ]
 
 
-@pytest.mark.parametrize("text,pattern", GRID_REFUSALS)
-def test_grid_refusals_name_file_and_line(tmp_path, text, pattern):
-    f = tmp_path / "bad.int"
-    f.write_text(text)
-    with pytest.raises(ValueError, match=r"bad\.int, " + pattern):
-        read_codev_int(f)
-
-
 def test_wide_legacy_file_with_nda_is_read(tmp_path):
     """An explicit NDA makes 32-bit counts unambiguous: read, and flagged."""
     f = tmp_path / "wide.int"
@@ -205,13 +197,17 @@ ZFR_HEADER_REFUSALS = [
     ("deck ! only a title\n", r"line 1: file ends before the ZFR header line"),
 ]
 
+#: reader name -> how a refusal test reads the file
+INT_READERS = {"grid": read_codev_int, "zfr": lambda f: read_codev_zernike(f, normalised=False, radius_mm=1.0)}
 
-@pytest.mark.parametrize("text,pattern", ZFR_HEADER_REFUSALS)
-def test_zfr_header_refusals_name_file_and_line(tmp_path, text, pattern):
-    f = tmp_path / "z.int"
+
+@pytest.mark.parametrize("reader,text,pattern", [("grid", *r) for r in GRID_REFUSALS]
+                         + [("zfr", *r) for r in ZFR_HEADER_REFUSALS])
+def test_int_refusals_name_file_and_line(tmp_path, reader, text, pattern):
+    f = tmp_path / "bad.int"
     f.write_text(text)
-    with pytest.raises(ValueError, match=r"z\.int, " + pattern):
-        read_codev_zernike(f, normalised=False, radius_mm=1.0)
+    with pytest.raises(ValueError, match=r"bad\.int, " + pattern):
+        INT_READERS[reader](f)
 
 
 def test_zernike_list_refuses_nan(tmp_path):
