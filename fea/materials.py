@@ -109,6 +109,14 @@ class Material:
         self.check_temperature(cold_K, "cold_K")
         return float(self.thermal_strain(cold_K) - self.thermal_strain(warm_K))
 
+    @classmethod
+    def with_al6061_shape(cls, name: str, youngs_modulus_Pa: float, poisson_ratio: float,
+                          cte_293K_per_K: float, source: str) -> Material:
+        """A material without a cryogenic expansion curve of its own: the 6061-T6 NIST
+        curve scaled by the ratio of the room-temperature CTEs (``strain_scale``)."""
+        return cls(name=name, youngs_modulus_Pa=youngs_modulus_Pa, poisson_ratio=poisson_ratio,
+                   cte_293K_per_K=cte_293K_per_K, strain_scale=cte_293K_per_K / AL6061_CTE_293K, source=source)
+
     @property
     def lame_mu_Pa(self) -> float:
         return self.youngs_modulus_Pa / (2.0 * (1.0 + self.poisson_ratio))
@@ -138,12 +146,11 @@ AL6061_T6 = Material(
     ),
 )
 
-NIP_HIGH_P = Material(
+NIP_HIGH_P = Material.with_al6061_shape(
     name="NiP",
     youngs_modulus_Pa=60e9,
     poisson_ratio=0.33,
     cte_293K_per_K=13.0e-6,
-    strain_scale=13.0e-6 / AL6061_CTE_293K,
     source=(
         "Electroless nickel, high phosphorus (10-13 wt% P), as plated (amorphous). "
         "E = 60 GPa: supplier data sheets give 50-70 GPa (7-10 Mpsi) for high-P deposits, "
@@ -158,12 +165,11 @@ NIP_HIGH_P = Material(
     ),
 )
 
-ALSI40 = Material(
+ALSI40 = Material.with_al6061_shape(
     name="AlSi40",
     youngs_modulus_Pa=92e9,
     poisson_ratio=0.28,
     cte_293K_per_K=13.5e-6,
-    strain_scale=13.5e-6 / AL6061_CTE_293K,
     source=(
         "Spray-formed hypereutectic AlSi40 (e.g. RSP/Dispal S221 class; Kinast et al. 2014): "
         "E ~ 92 GPa, nu ~ 0.28, CTE ~ 13.5e-6/K at RT, matched to NiP within 0.5e-6/K as the "

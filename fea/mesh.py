@@ -39,7 +39,7 @@ from .mesh_cache import (FORMAT_VERSION, cached_mesh, gmsh_session,
                          tet2_from_gmsh)
 
 __all__ = ["MeshSpec", "blank_mesh", "blank_recipe", "write_vtu",
-           "SYMMETRIES"]
+           "SYMMETRIES", "name_surfaces", "generate_order2"]
 
 #: Part of the blank that is meshed -> (x >= 0, y >= 0, z >= 0) cuts.
 SYMMETRIES = {"eighth": (True, True, True), "quarter": (True, True, False),
@@ -130,6 +130,42 @@ def _part_bounds(blank: Blank, symmetry: str):
     return lo, half
 
 
+def name_surfaces(gmsh, planes: dict, tol: float, name_curved, what: str = "surface") -> dict[str, list[int]]:
+    """Boundary name -> OCC surface tags of the current gmsh model, from each face's geometry.
+
+    Parameters
+    ----------
+    gmsh : module
+        An open gmsh session with a synchronised OCC model.
+    planes : dict (axis, coordinate_mm) -> str
+        Names of the axis-aligned planes a flat face may lie in.
+    tol : float
+        Geometric tolerance (mm).
+    name_curved : callable (tag, bounding box (2, 3)) -> str or None
+        Name of a face that is not flat in one axis.
+    what : str
+        How the error message calls a face.
+
+    Raises
+    ------
+    RuntimeError
+        A face that gets no name (a modelling error, not bad input).
+    """
+    groups: dict[str, list[int]] = {}
+    for _, tag in gmsh.model.getEntities(2):
+        bb = np.array(gmsh.model.getBoundingBox(2, tag)).reshape(2, 3)
+        flat = np.nonzero(bb[1] - bb[0] < tol)[0]
+        if len(flat) == 1:
+            c = bb[:, flat[0]].mean()
+            name = next((n for (ax, v), n in planes.items() if ax == flat[0] and abs(c - v) < tol), None)
+        else:
+            name = name_curved(tag, bb)
+        if name is None:
+            raise RuntimeError(f"{what} {tag} (bounding box {bb.tolist()}) matches no named boundary")
+        groups.setdefault(name, []).append(tag)
+    return groups
+
+
 def _classify_surfaces(gmsh, blank: Blank, symmetry: str) -> dict:
     """Boundary name -> list of OCC surface tags, from each face's geometry."""
     lo, hi = _part_bounds(blank, symmetry)
@@ -142,39 +178,29 @@ def _classify_surfaces(gmsh, blank: Blank, symmetry: str) -> dict:
         if cut:
             planes[(axis, 0.0)] = "sym_" + "xyz"[axis]
     r, z0 = blank.hole_radius_mm, blank.hole_axis_z_mm
-    groups: dict[str, list[int]] = {}
-    for _, tag in gmsh.model.getEntities(2):
-        bb = np.array(gmsh.model.getBoundingBox(2, tag)).reshape(2, 3)
+
+    def hole_wall(tag, bb):
+        # sample the face; a wall of a hole along x has normals with
+        # zero x-component and lies at distance r from an x-axis
+        umin, umax = gmsh.model.getParametrizationBounds(2, tag)
+        uv = np.array([[umin[0] + f * (umax[0] - umin[0]),
+                        umin[1] + g * (umax[1] - umin[1])]
+                       for f in (0.2, 0.5, 0.8) for g in (0.3, 0.7)])
+        pts = gmsh.model.getValue(2, tag, uv.ravel()).reshape(-1, 3)
+        nrm = np.abs(gmsh.model.getNormal(tag, uv.ravel())).reshape(-1, 3)
         name = None
-        if gmsh.model.getType(2, tag) == "Plane":
-            flat = np.nonzero(bb[1] - bb[0] < tol)[0]
-            if len(flat) == 1:
-                c = bb[:, flat[0]].mean()
-                name = next((n for (ax, v), n in planes.items()
-                             if ax == flat[0] and abs(c - v) < tol), None)
-        else:
-            # sample the face; a wall of a hole along x has normals with
-            # zero x-component and lies at distance r from an x-axis
-            umin, umax = gmsh.model.getParametrizationBounds(2, tag)
-            uv = np.array([[umin[0] + f * (umax[0] - umin[0]),
-                            umin[1] + g * (umax[1] - umin[1])]
-                           for f in (0.2, 0.5, 0.8) for g in (0.3, 0.7)])
-            pts = gmsh.model.getValue(2, tag, uv.ravel()).reshape(-1, 3)
-            nrm = np.abs(gmsh.model.getNormal(tag, uv.ravel())).reshape(-1, 3)
-            for name_, ax, other, axes_pos in (
-                    ("holes_x", 0, 1, blank.hole_y_positions_mm),
-                    ("holes_y", 1, 0, blank.hole_x_positions_mm)):
-                if len(axes_pos) == 0 or nrm[:, ax].max() > 1e-6:
-                    continue
-                rho = np.hypot(pts[:, other][:, None] - axes_pos[None, :],
-                               pts[:, 2][:, None] - z0)
-                if np.all(np.abs(rho - r).min(axis=1) < tol):
-                    name = name_
-        if name is None:
-            raise RuntimeError(f"surface {tag} (bounding box {bb.tolist()}) "
-                               "matches no named boundary")
-        groups.setdefault(name, []).append(tag)
-    return groups
+        for name_, ax, other, axes_pos in (
+                ("holes_x", 0, 1, blank.hole_y_positions_mm),
+                ("holes_y", 1, 0, blank.hole_x_positions_mm)):
+            if len(axes_pos) == 0 or nrm[:, ax].max() > 1e-6:
+                continue
+            rho = np.hypot(pts[:, other][:, None] - axes_pos[None, :],
+                           pts[:, 2][:, None] - z0)
+            if np.all(np.abs(rho - r).min(axis=1) < tol):
+                name = name_
+        return name
+
+    return name_surfaces(gmsh, planes, tol, hole_wall)
 
 
 def _add_size_field(gmsh, blank: Blank, spec: MeshSpec, groups: dict):

@@ -30,7 +30,7 @@ from .zernike import (
 )
 
 __all__ = [
-    "FitResult", "FourierFit", "BasisCapture", "resolve_terms", "fit_zernike",
+    "FitQuality", "FitResult", "FourierFit", "BasisCapture", "resolve_terms", "fit_zernike",
     "fit_zernike_map", "fit_fourier", "fit_fourier_points", "compare_bases",
     "remove_terms", "aperture_geometry", "fit_zernike_maps", "fit_fourier_maps",
 ]
@@ -42,17 +42,35 @@ _MAX_COND = 1e10  # beyond this the coefficients are noise amplifiers, not a fit
 
 # --------------------------------------------------------------------- results
 @dataclass(frozen=True, eq=False)
-class FitResult:
+class FitQuality:
+    """What every least-squares fit here reports about itself.
+
+    ``aperture`` names where it was fitted. ``fitted`` and ``residual`` are SagMaps (NaN
+    outside the fitted samples) for gridded input, or arrays shaped like the input for
+    scattered points. ``residual_rms_um`` / ``residual_pv_um`` and
+    ``captured_fraction = 1 - var(residual) / var(data)`` are over the ``n_points``
+    fitted samples; ``condition_number`` is that of the design matrix.
+    """
+
+    aperture: str
+    fitted: object
+    residual: object
+    residual_rms_um: float
+    residual_pv_um: float
+    captured_fraction: float
+    n_points: int
+    condition_number: float
+
+
+@dataclass(frozen=True, eq=False)
+class FitResult(FitQuality):
     """A Zernike fit. Coefficients are in µm on the disc ``radius_mm`` about ``center_mm``.
 
     ``coefficients`` maps ``(n, m)`` to µm; ``coefficient_array`` follows ``terms``.
     ``norm`` says whether they multiply RMS-normalised (Noll, Zemax Standard) or
     unnormalised (CODE V ZFR / Zemax Fringe) polynomials. ``index`` is the
-    convention the integer ``terms`` were read in ("nm" if pairs were given).
-
-    ``fitted`` and ``residual`` are SagMaps (NaN outside the fitted samples) for
-    gridded input, or arrays shaped like the input for scattered points.
-    ``captured_fraction = 1 - var(residual) / var(data)`` over the fitted samples.
+    convention the integer ``terms`` were read in ("nm" if pairs were given). The
+    fitted surface, residual and statistics are those of :class:`FitQuality`.
     """
 
     coefficients: dict
@@ -62,14 +80,6 @@ class FitResult:
     norm: bool
     radius_mm: float
     center_mm: tuple
-    aperture: str
-    fitted: object
-    residual: object
-    residual_rms_um: float
-    residual_pv_um: float
-    captured_fraction: float
-    n_points: int
-    condition_number: float
 
     def by_index(self, index: str = "noll") -> dict[int, float]:
         """Coefficients (µm) keyed by single index in ``index`` ("noll", "ansi", "fringe")."""
@@ -86,7 +96,7 @@ class FitResult:
 
 
 @dataclass(frozen=True, eq=False)
-class FourierFit:
+class FourierFit(FitQuality):
     """A Fourier (quilt) fit; see the module docstring for the sign/phase convention.
 
     ``amplitude_um[(i, j)]`` and ``phase_rad[(i, j)]`` per half-plane component;
@@ -102,14 +112,6 @@ class FourierFit:
     piston_um: float
     slope_um_per_mm: tuple
     coefficient_array: np.ndarray
-    aperture: str
-    fitted: object
-    residual: object
-    residual_rms_um: float
-    residual_pv_um: float
-    captured_fraction: float
-    n_points: int
-    condition_number: float
 
     def component(self, i: int, j: int) -> tuple[float, float]:
         """``(A, phi)`` of frequency ``(i/Dx, j/Dy)``; ``(-i, -j)`` returns ``(A, -phi)``."""
@@ -240,6 +242,16 @@ def _scatter_back(shape_or_map, mask: np.ndarray, values: np.ndarray, label: str
     return out
 
 
+def _quality(d: np.ndarray, model: np.ndarray, basis: str, aperture: str, mask: np.ndarray, template,
+             cond: float) -> dict:
+    """The :class:`FitQuality` fields of a fit of the samples ``d`` by ``model``."""
+    rms, pv, cap = _stats(d, model)
+    return dict(aperture=aperture, fitted=_scatter_back(template, mask, model, f"{basis} fit"),
+                residual=_scatter_back(template, mask, d - model, f"{basis} residual"),
+                residual_rms_um=rms, residual_pv_um=pv, captured_fraction=cap, n_points=int(d.size),
+                condition_number=cond)
+
+
 def _valid_points(x_mm, y_mm, sag_um):
     x, y, s = (np.asarray(v, float) for v in (x_mm, y_mm, sag_um))
     if not (x.shape == y.shape == s.shape):
@@ -264,16 +276,10 @@ def _zernike_fit(x, y, d, terms, index, center, radius, norm, aperture_name, mas
 
 
 def _zernike_result(nm, index, norm, radius, center, aperture_name, mask, template, A, d, c, cond):
-    model = A @ c
-    rms, pv, cap = _stats(d, model)
     return FitResult(
         coefficients=dict(zip(nm, c.tolist())), coefficient_array=c, terms=nm, index=index,
         norm=norm, radius_mm=float(radius), center_mm=(float(center[0]), float(center[1])),
-        aperture=aperture_name,
-        fitted=_scatter_back(template, mask, model, "Zernike fit"),
-        residual=_scatter_back(template, mask, d - model, "Zernike residual"),
-        residual_rms_um=rms, residual_pv_um=pv, captured_fraction=cap, n_points=int(d.size),
-        condition_number=cond,
+        **_quality(d, A @ c, "Zernike", aperture_name, mask, template, cond),
     )
 
 
@@ -418,8 +424,6 @@ def _fourier_design(x, y, px, py, harmonics, include_cross, include_plane, origi
 
 
 def _fourier_result(px, py, origin, name, mask, template, include_plane, A, comps, n_lead, sx, sy, d, c, cond):
-    model = A @ c
-    rms, pv, cap = _stats(d, model)
     ab = c[n_lead:].reshape(-1, 2)  # (a, b) = (A cos phi, A sin phi)
     slope = (c[1] / sx, c[2] / sy) if include_plane else (0.0, 0.0)
     return FourierFit(
@@ -428,11 +432,7 @@ def _fourier_result(px, py, origin, name, mask, template, include_plane, A, comp
         amplitude_um={k: float(np.hypot(*v)) for k, v in zip(comps, ab)},
         phase_rad={k: float(np.arctan2(v[1], v[0])) for k, v in zip(comps, ab)},
         piston_um=float(c[0]), slope_um_per_mm=(float(slope[0]), float(slope[1])),
-        coefficient_array=c, aperture=name,
-        fitted=_scatter_back(template, mask, model, "Fourier fit"),
-        residual=_scatter_back(template, mask, d - model, "Fourier residual"),
-        residual_rms_um=rms, residual_pv_um=pv, captured_fraction=cap, n_points=int(d.size),
-        condition_number=cond,
+        coefficient_array=c, **_quality(d, A @ c, "Fourier", name, mask, template, cond),
     )
 
 

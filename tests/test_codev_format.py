@@ -78,14 +78,6 @@ GRID_REFUSALS = [
 ]
 
 
-@pytest.mark.parametrize("text,pattern", GRID_REFUSALS)
-def test_grid_refusals_name_file_and_line(tmp_path, text, pattern):
-    f = tmp_path / "bad.int"
-    f.write_text(text)
-    with pytest.raises(ValueError, match=r"bad\.int, " + pattern):
-        read_codev_int(f)
-
-
 def test_wide_legacy_file_with_nda_is_read(tmp_path):
     """An explicit NDA makes 32-bit counts unambiguous: read, and flagged."""
     f = tmp_path / "wide.int"
@@ -191,6 +183,31 @@ def test_zfr_refusals(tmp_path):
         read_codev_zernike(f, normalised=False, radius_mm=1.0)
     c, _ = read_codev_zernike(f, normalised=False, radius_mm=1.0, wfr_to_sag_factor=-0.5)
     assert c[(1, 1)] == pytest.approx(-0.1)
+
+
+ZFR_HEADER_REFUSALS = [
+    ("deck\nZFR 2 SUR WVL 1 SSZ 1 ZOOM 2\n0.1\n0.2\n", r"line 2: unknown header keyword 'ZOOM'; valid are SUR, WFR"),
+    ("deck\nZFR 2 SUR WVL 1 SSZ 0\n0.1\n0.2\n", r"line 2: SSZ=0\.0 must be a finite number > 0"),
+    ("deck\nZFR 2 SUR WVL abc\n0.1\n0.2\n", r"line 2: WVL value 'abc' is not a number"),
+    ("deck\nZFR 2 SUR WVL\n0.1\n0.2\n", r"line 2: keyword WVL has no value"),
+    ("deck\nZFR 2 SUR SSZ 1\n0.1\n0.2\n", r"line 2: header has no WVL"),
+    ("deck\nZFR 2 WVL 1\n0.1\n0.2\n", r"line 2: header has no data type"),
+    ("deck\nZFR 2 SUR WFR WVL 1\n0.1\n0.2\n", r"line 2: two data types"),
+    ("deck\nGRD 2 2 SUR WVL 1 SSZ 1\n1 2 3 4\n", r"line 2: header must start with 'ZFR <n>'.*read_codev_int"),
+    ("deck ! only a title\n", r"line 1: file ends before the ZFR header line"),
+]
+
+#: reader name -> how a refusal test reads the file
+INT_READERS = {"grid": read_codev_int, "zfr": lambda f: read_codev_zernike(f, normalised=False, radius_mm=1.0)}
+
+
+@pytest.mark.parametrize("reader,text,pattern", [("grid", *r) for r in GRID_REFUSALS]
+                         + [("zfr", *r) for r in ZFR_HEADER_REFUSALS])
+def test_int_refusals_name_file_and_line(tmp_path, reader, text, pattern):
+    f = tmp_path / "bad.int"
+    f.write_text(text)
+    with pytest.raises(ValueError, match=r"bad\.int, " + pattern):
+        INT_READERS[reader](f)
 
 
 def test_zernike_list_refuses_nan(tmp_path):

@@ -85,17 +85,15 @@ def test_scattered_cloud_interpolated_within_taylor_bound(tmp_path):
     assert m.mask.mean() > 0.7  # a disc fills pi/4 of its bounding box
 
 
-def test_csv_nonfinite_coordinate_named_with_line(tmp_path):
-    f = tmp_path / "bad.csv"
-    f.write_text("x_mm,y_mm,sag_um\n0,0,1\n1,0,2\n0,nan,3\n1,1,4\n")
-    with pytest.raises(ValueError, match=r"bad\.csv, line 4: .*coordinates must be finite"):
-        ic.read_sag_map(f)
-
-
-def test_csv_duplicate_node_named(tmp_path):
-    f = tmp_path / "dup.csv"
-    f.write_text("x_mm,y_mm,sag_um\n0,0,1\n1,0,2\n0,1,3\n1,1,4\n1,0,5\n")
-    with pytest.raises(ValueError, match=r"same grid node x_mm=1, y_mm=0 \(lines 3 and 6\)"):
+@pytest.mark.parametrize("name,text,pattern", [
+    ("bad.csv", "x_mm,y_mm,sag_um\n0,0,1\n1,0,2\n0,nan,3\n1,1,4\n", r"bad\.csv, line 4: .*coordinates must be finite"),
+    ("dup.csv", "x_mm,y_mm,sag_um\n0,0,1\n1,0,2\n0,1,3\n1,1,4\n1,0,5\n",
+     r"same grid node x_mm=1, y_mm=0 \(lines 3 and 6\)"),
+], ids=["nonfinite_coordinate_named_with_line", "duplicate_node_named"])
+def test_csv_point_list_refused(tmp_path, name, text, pattern):
+    f = tmp_path / name
+    f.write_text(text)
+    with pytest.raises(ValueError, match=pattern):
         ic.read_sag_map(f)
 
 
@@ -180,6 +178,11 @@ def _profile_file(path, u, y, fmt="%.9g"):
     return path
 
 
+def _profile_entry(file, **extra):
+    return {"kind": "line_profile", "file": str(file), "grating": "J", "wavelength_um": 1.25,
+            "pixel_scale_mas": 250, **extra}
+
+
 def test_background_subtracted_profile_with_negative_noise(tmp_path):
     rng = np.random.default_rng(4)
     u = np.linspace(-60, 60, 121)
@@ -205,41 +208,44 @@ def test_counts_pedestal_nonuniform_shifted_unsorted(tmp_path):
     np.testing.assert_allclose(inten, y, rtol=1e-8)
     _, unit_area = read_line_profile(f)
     assert np.trapezoid(unit_area, off) == pytest.approx(1.0)
-    man = parse_manifest({"measurement": [{"kind": "line_profile", "file": str(f), "grating": "J",
-                                           "wavelength_um": 1.25, "pixel_scale_mas": 250}]})
-    (pd,) = load_data(man)
+    (pd,) = load_data(parse_manifest({"measurement": [_profile_entry(f)]}))
     floor = np.percentile(y, 20)
     np.testing.assert_allclose(pd.intensity, (y - floor) / (y.max() - floor), atol=1e-8)  # 9 digits of ~3500 / 3000
     assert pd.intensity.min() < 0  # noise below the floor stays negative
+
+
+def _j_line_on_quilt(seed):
+    """A quilt nominal and its J-band line profile (-2nd order, 250 mas) sampled at 140
+    random offsets in +-60 µm."""
+    from pipeline.diagnosis.forward import profile_curve
+
+    nominal = quilt_sag_map(0.6, "sum", spacing_mm=1.0)
+    u, y = profile_curve("J", 1.25, -2, 250, nominal, {})
+    x = np.sort(np.random.default_rng(seed).uniform(-60, 60, 140))
+    return nominal, x, np.interp(x, u, y)
+
+
+def _best_shift(fw):
+    """Line position (µm) and sum of squared residuals of the best fit of a profile
+    model, searched within 1.5 µm of its starting position."""
+    from scipy.optimize import minimize_scalar
+
+    r = minimize_scalar(lambda d: float(np.sum(fw.residual({}, d) ** 2)),
+                        bounds=(fw.delta0_um - 1.5, fw.delta0_um + 1.5), method="bounded",
+                        options={"xatol": 1e-4})
+    return r.x, r.fun
 
 
 def test_profile_forward_fits_pedestal_counts_and_shift():
     """The line-profile model on a quilt nominal: data transformed to counts + pedestal
     + 7.3 µm shift on a non-uniform grid give the same best residual, at a shift 7.3 µm
     larger (flux and background are linear nuisances, the shift a fit parameter)."""
-    from scipy.optimize import minimize_scalar
-
-    from pipeline.diagnosis.forward import profile_curve
-
-    nominal = quilt_sag_map(0.6, "sum", spacing_mm=1.0)
-    u, y = profile_curve("J", 1.25, -2, 250, nominal, {})
-    rng = np.random.default_rng(6)
-    x = np.sort(rng.uniform(-60, 60, 140))
-    clean = np.interp(x, u, y)
-    man = parse_manifest({"measurement": [{"kind": "line_profile", "file": __file__, "grating": "J",
-                                           "wavelength_um": 1.25, "pixel_scale_mas": 250}]})
-    meas = man.measurements[0]
+    nominal, x, clean = _j_line_on_quilt(6)
+    meas = parse_manifest({"measurement": [_profile_entry(__file__)]}).measurements[0]
     peak = clean.max()
     a = ProfileForward(ProfileData(meas, x, clean / peak), nominal, 80.0)
     b = ProfileForward(ProfileData(meas, x + 7.3, (40.0 * clean + 500.0 * peak) / (40.0 * peak)), nominal, 80.0)
-
-    def best(fw):
-        r = minimize_scalar(lambda d: float(np.sum(fw.residual({}, d) ** 2)),
-                            bounds=(fw.delta0_um - 1.5, fw.delta0_um + 1.5), method="bounded",
-                            options={"xatol": 1e-4})
-        return r.x, r.fun
-
-    (da, ca), (db, cb) = best(a), best(b)
+    (da, ca), (db, cb) = _best_shift(a), _best_shift(b)
     assert db - da == pytest.approx(7.3, abs=0.02)
     # residual in fraction of the peak: both ~ the model's own interpolation error
     assert cb == pytest.approx(ca, rel=0.05, abs=1e-8)
@@ -249,32 +255,18 @@ def test_profile_in_detector_coordinates_is_recentred(tmp_path):
     """A line at 1023.7 µm (detector coordinates, far outside the fit's +-45 µm shift
     range) is moved to the origin on loading; the fit then finds the same line position
     and residual as for the profile written about 0."""
-    from scipy.optimize import minimize_scalar
-
-    from pipeline.diagnosis.forward import profile_curve
-
-    nominal = quilt_sag_map(0.6, "sum", spacing_mm=1.0)
-    u, y = profile_curve("J", 1.25, -2, 250, nominal, {})
-    x = np.sort(np.random.default_rng(7).uniform(-60, 60, 140))
-    clean = np.interp(x, u, y) * 1e4 + 200.0
+    nominal, x, clean = _j_line_on_quilt(7)
+    clean = clean * 1e4 + 200.0
     fws = []
     for name, off in (("near", 0.0), ("far", 1023.7)):
         f = _profile_file(tmp_path / f"{name}.csv", x + off, clean)
-        (pd,) = load_data(parse_manifest({"measurement": [{"kind": "line_profile", "file": str(f), "grating": "J",
-                                                           "wavelength_um": 1.25, "pixel_scale_mas": 250}]}))
+        (pd,) = load_data(parse_manifest({"measurement": [_profile_entry(f)]}))
         fws.append((ProfileForward(pd, nominal, 80.0), pd.origin_um))
         if name == "near":  # its half-maximum centre, left in place (within 20 µm of 0)
             c_near = recentre(pd.offset_um, pd.intensity, 0.0)
     (near, o_near), (far, o_far) = fws
     assert o_near == 0.0 and abs(c_near) < 20 and o_far == pytest.approx(1023.7 + c_near, abs=0.051)
-
-    def best(fw):
-        r = minimize_scalar(lambda d: float(np.sum(fw.residual({}, d) ** 2)),
-                            bounds=(fw.delta0_um - 1.5, fw.delta0_um + 1.5), method="bounded",
-                            options={"xatol": 1e-4})
-        return r.x, r.fun
-
-    (dn, cn), (df, cf) = best(near), best(far)
+    (dn, cn), (df, cf) = _best_shift(near), _best_shift(far)
     assert df + o_far - 1023.7 == pytest.approx(dn, abs=0.02)
     assert cf == pytest.approx(cn, rel=0.05, abs=1e-8)
 

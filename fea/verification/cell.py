@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from skfem import MeshTet2
 
-from ..mesh import generate_order2
+from ..mesh import generate_order2, name_surfaces
 from ..mesh_cache import (FORMAT_VERSION, cached_mesh, gmsh_session,
                          tet2_from_gmsh)
 
@@ -218,26 +218,16 @@ def _classify(gmsh, half_p, half_t, r, t_h, t_f, slice_mm, tol):
               (1, 0.0): "y0", (1, slice_mm): "y1", (2, half_t): "front"}
     if t_f > 0:
         planes[(2, half_t + t_f)] = "film_top"
-    groups: dict[str, list[int]] = {}
-    for _, s in gmsh.model.getEntities(2):
-        bb = np.array(gmsh.model.getBoundingBox(2, s)).reshape(2, 3)
-        name = None
-        flat = np.nonzero(bb[1] - bb[0] < tol)[0]
-        if len(flat) == 1:
-            c = bb[:, flat[0]].mean()
-            name = next((n for (ax, v), n in planes.items()
-                         if ax == flat[0] and abs(c - v) < tol), None)
-        else:
-            rho = bb[1, [0, 2]].max()  # quarter arcs about the y-axis
-            if abs(rho - r) < tol:
-                name = "hole"
-            elif t_h > 0 and abs(rho - (r - t_h)) < tol:
-                name = "film_bore"
-        if name is None:
-            raise RuntimeError(f"cell surface {s} (bounding box "
-                               f"{bb.tolist()}) matches no boundary")
-        groups.setdefault(name, []).append(s)
-    return groups
+
+    def arc(tag, bb):
+        rho = bb[1, [0, 2]].max()  # quarter arcs about the y-axis
+        if abs(rho - r) < tol:
+            return "hole"
+        if t_h > 0 and abs(rho - (r - t_h)) < tol:
+            return "film_bore"
+        return None
+
+    return name_surfaces(gmsh, planes, tol, arc, what="cell surface")
 
 
 def _size_field(gmsh, surf, size_mm, size_bulk_mm):

@@ -64,8 +64,9 @@ from pathlib import Path
 import numpy as np
 
 from optics.sagmap import SagMap
+from pipeline.io.codev_header import DATA_TYPES, parse_keywords, split_int_file
 from pipeline.io.codev_quantity import check_request, grating_wfr_to_sag_factor, sag_factor
-from pipeline.io.common import atomic_write, numbered_lines, parse_error, read_text
+from pipeline.io.common import atomic_write, parse_error
 
 __all__ = ["GridUnknownError", "write_codev_int", "read_codev_int", "grating_wfr_to_sag_factor", "choose_ssz",
            "MAX_COUNT", "CODEV_NDA"]
@@ -76,7 +77,6 @@ MAX_COUNT = 32766
 CODEV_NDA = 32767
 _MARKERS = (32767, -32768)  # 16-bit values that only ever mean "no data"
 _LINE_MAX = 80
-_TYPES = ("SUR", "WFR")
 _VALUED = {"WVL": float, "SSZ": float, "NDA": int, "XSC": float, "YSC": float}
 _OTHER_FILE_TYPES = ("ZFR", "ZRN", "DEF", "FIL", "ZSD")  # other INT variants, not grids
 _EXTENT_RE = re.compile(r"EXTENT_MM\s+(\S+)\s+(\S+)\s+(\S+)\s+(\S+)")
@@ -137,8 +137,8 @@ def write_codev_int(
         at most half a count.
     """
     kind = str(kind).upper()
-    if kind not in _TYPES:
-        raise ValueError(f"kind={kind!r} is not a CODE V grid type; use one of {_TYPES}")
+    if kind not in DATA_TYPES:
+        raise ValueError(f"kind={kind!r} is not a CODE V grid type; use one of {DATA_TYPES}")
     if not (np.isfinite(wavelength_um) and wavelength_um > 0):
         raise ValueError(f"wavelength_um={wavelength_um!r} must be a finite number > 0")
     s = np.asarray(sagmap.sag_um, float)
@@ -215,14 +215,6 @@ def _grid_coordinates(path, nx, ny, title, extent_mm, spacing_mm):
     raise GridUnknownError(f"{path}: CODE V INT files carry no physical grid size and the title has no EXTENT_MM")
 
 
-def _is_number(tok: str) -> bool:
-    try:
-        float(tok)
-    except ValueError:
-        return False
-    return True
-
-
 def _parse_header(path, lineno: int, line: str) -> dict:
     tok = line.split()
     if not tok or tok[0].upper() != "GRD":
@@ -237,44 +229,11 @@ def _parse_header(path, lineno: int, line: str) -> dict:
         raise parse_error(path, lineno, f"'GRD' must be followed by two integers nx ny, found {tok[1:3]}") from None
     if nx < 2 or ny < 2:
         raise parse_error(path, lineno, f"GRD {nx} {ny}: need at least 2 x 2 samples")
-    hdr: dict = {"nx": nx, "ny": ny, "type": None}
-    i = 3
-    while i < len(tok):
-        key = tok[i].upper()
-        if key in _TYPES:
-            if hdr["type"] is not None:
-                raise parse_error(path, lineno, f"two data types {hdr['type']!r} and {key!r}")
-            hdr["type"] = key
-            i += 1
-            continue
-        if key == "NNB":  # a flag for some writers, keyword + value for others: take a number if one follows
-            if i + 1 < len(tok) and _is_number(tok[i + 1]):
-                hdr["NNB"] = float(tok[i + 1])
-                i += 2
-            else:
-                hdr["NNB"] = True
-                i += 1
-            continue
-        if key not in _VALUED:
-            raise parse_error(
-                path, lineno,
-                f"unknown header keyword {tok[i]!r}; valid are {list(_TYPES)}, {sorted(_VALUED)} and 'NNB'",
-            )
-        if i + 1 >= len(tok):
-            raise parse_error(path, lineno, f"keyword {key} has no value")
-        try:
-            hdr[key] = _VALUED[key](tok[i + 1])
-        except ValueError:
-            kind = "an integer" if _VALUED[key] is int else "a number"
-            raise parse_error(path, lineno, f"{key} value {tok[i + 1]!r} is not {kind}") from None
-        i += 2
-    if hdr["type"] is None:
-        raise parse_error(path, lineno, f"header has no data type; expected one of {list(_TYPES)}")
+    # NNB: a flag for some writers, keyword + value for others
+    hdr = {"nx": nx, "ny": ny, **parse_keywords(path, lineno, tok[3:], _VALUED, flags=("NNB",))}
     for key in ("WVL", "SSZ"):
         if key not in hdr:
             raise parse_error(path, lineno, f"header has no {key} (needed to convert counts to um)")
-        if not (np.isfinite(hdr[key]) and hdr[key] > 0):
-            raise parse_error(path, lineno, f"{key}={hdr[key]!r} must be a finite number > 0")
     return hdr
 
 
@@ -334,21 +293,9 @@ def _no_data_mask(path, body, counts, nda):
 
 def _read_grid(path):
     path = Path(path)
-    lines = []
-    for n, s in numbered_lines(read_text(path, "CODE V INT")):
-        s = s.split("!", 1)[0].rstrip()  # '!' starts a comment anywhere on a line
-        if s.strip():
-            lines.append((n, s))
-    if len(lines) < 2:
-        raise parse_error(path, lines[-1][0] if lines else None, "file ends before the GRD header line")
-    title = lines[0][1].strip()
-    hdr_line, hdr_text = lines[1]
-    if title.split()[0].upper() == "GRD" and hdr_text.split()[0].upper() != "GRD":
-        raise parse_error(path, lines[0][0], "the title line is missing: a CODE V INT file starts with a "
-                                             "title line, then the 'GRD nx ny ...' header")
+    title, (hdr_line, hdr_text), body = split_int_file(path, "CODE V INT", "GRD nx ny")
     hdr = _parse_header(path, hdr_line, hdr_text)
     nx, ny = hdr["nx"], hdr["ny"]
-    body = lines[2:]
     counts = _read_counts(path, hdr_line, body, nx, ny)
     nda = hdr.get("NDA")
     nodata = _no_data_mask(path, body, counts, nda)

@@ -39,14 +39,14 @@ from typing import Mapping
 import numpy as np
 
 from optics.zernike import fringe_to_nm, nm_to_fringe
+from pipeline.io.codev_header import DATA_TYPES, parse_keywords, split_int_file
 from pipeline.io.codev_quantity import check_request, sag_factor
-from pipeline.io.common import atomic_write, numbered_lines, parse_error, read_text
-from pipeline.io.zernike import check_coefficients, convert_normalisation
+from pipeline.io.common import atomic_write, parse_error
+from pipeline.io.zernike import coefficients_for_file, convert_normalisation, parse_coefficients
 
 __all__ = ["write_codev_zernike", "read_codev_zernike", "MAX_FRINGE_TERMS"]
 
 MAX_FRINGE_TERMS = 37
-_TYPES = ("SUR", "WFR")
 _RADIUS_RE = re.compile(r"NRADIUS_MM\s+(\S+)")
 
 
@@ -84,17 +84,13 @@ def write_codev_zernike(
         Free text for the title line ('!' removed).
     """
     kind = str(kind).upper()
-    if kind not in _TYPES:
-        raise ValueError(f"kind={kind!r} is not a CODE V Zernike data type; use one of {_TYPES}")
-    if not (np.isfinite(radius_mm) and radius_mm > 0):
-        raise ValueError(f"radius_mm={radius_mm!r} must be a finite number > 0")
+    if kind not in DATA_TYPES:
+        raise ValueError(f"kind={kind!r} is not a CODE V Zernike data type; use one of {DATA_TYPES}")
     if not (np.isfinite(wavelength_um) and wavelength_um > 0):
         raise ValueError(f"wavelength_um={wavelength_um!r} must be a finite number > 0")
     if not (isinstance(n_terms, (int, np.integer)) and 1 <= n_terms <= MAX_FRINGE_TERMS):
         raise ValueError(f"n_terms={n_terms!r} must be an integer in 1..{MAX_FRINGE_TERMS}")
-    c = check_coefficients(coeffs, "fringe")
-    if coeffs_normalised:
-        c = convert_normalisation(c, to_normalised=False)
+    c = coefficients_for_file(coeffs, "fringe", radius_mm, coeffs_normalised, file_normalised=False)
     values = np.zeros(n_terms)
     for (n, m), v in c.items():
         j = nm_to_fringe(n, m)  # refuses terms outside the 37 Fringe terms
@@ -122,27 +118,7 @@ def _parse_header(path, lineno: int, line: str) -> dict:
         raise parse_error(path, lineno, f"'ZFR' must be followed by the number of terms, found {tok[1:2]}") from None
     if not 1 <= n <= MAX_FRINGE_TERMS:
         raise parse_error(path, lineno, f"ZFR {n}: number of Fringe terms must be in 1..{MAX_FRINGE_TERMS}")
-    hdr: dict = {"n": n, "type": None}
-    i = 2
-    while i < len(tok):
-        key = tok[i].upper()
-        if key in _TYPES:
-            if hdr["type"] is not None:
-                raise parse_error(path, lineno, f"two data types {hdr['type']!r} and {key!r}")
-            hdr["type"] = key
-            i += 1
-            continue
-        if key not in ("WVL", "SSZ"):
-            raise parse_error(path, lineno, f"unknown header keyword {tok[i]!r}; valid are {list(_TYPES)}, 'WVL', 'SSZ'")
-        try:
-            hdr[key] = float(tok[i + 1])
-        except (IndexError, ValueError):
-            raise parse_error(path, lineno, f"{key} needs a number, found {tok[i + 1:i + 2]}") from None
-        if not (np.isfinite(hdr[key]) and hdr[key] > 0):
-            raise parse_error(path, lineno, f"{key}={tok[i + 1]} must be a finite number > 0")
-        i += 2
-    if hdr["type"] is None:
-        raise parse_error(path, lineno, f"header has no data type; expected one of {list(_TYPES)}")
+    hdr = {"n": n, **parse_keywords(path, lineno, tok[2:], {"WVL": float, "SSZ": float})}
     if "WVL" not in hdr:
         raise parse_error(path, lineno, "header has no WVL (needed to convert coefficients to um)")
     hdr.setdefault("SSZ", 1.0)  # decks from other writers carry SSZ 1.0; absent means waves
@@ -184,31 +160,13 @@ def read_codev_zernike(
     """
     check_request(quantity, wfr_to_sag_factor)
     path = Path(path)
-    lines = []
-    for n, s in numbered_lines(read_text(path, "CODE V Zernike deck")):
-        s = s.split("!", 1)[0].rstrip()
-        if s.strip():
-            lines.append((n, s))
-    if len(lines) < 2:
-        raise parse_error(path, lines[-1][0] if lines else None, "file ends before the ZFR header line")
-    title = lines[0][1].strip()
-    if title.split()[0].upper() == "ZFR" and lines[1][1].split()[0].upper() != "ZFR":
-        raise parse_error(path, lines[0][0], "the title line is missing: a CODE V INT deck starts with a "
-                                             "title line, then the 'ZFR n ...' header")
-    hdr = _parse_header(path, lines[1][0], lines[1][1])
-    values: list[tuple[int, str]] = [(n, t) for n, s in lines[2:] for t in s.split()]
+    title, (hdr_line, hdr_text), body = split_int_file(path, "CODE V Zernike deck", "ZFR n")
+    hdr = _parse_header(path, hdr_line, hdr_text)
+    values: list[tuple[int, str]] = [(n, t) for n, s in body for t in s.split()]
     if len(values) != hdr["n"]:
-        where = values[hdr["n"]][0] if len(values) > hdr["n"] else lines[-1][0]
+        where = values[hdr["n"]][0] if len(values) > hdr["n"] else (body[-1][0] if body else hdr_line)
         raise parse_error(path, where, f"ZFR {hdr['n']} needs {hdr['n']} coefficients, found {len(values)}")
-    coeffs = {}
-    for j, (n, t) in enumerate(values, start=1):
-        try:
-            v = float(t)
-        except ValueError:
-            v = None
-        if v is None or not np.isfinite(v):
-            raise parse_error(path, n, f"Fringe Z{j} {fringe_to_nm(j)}: coefficient {t!r} is not a finite number")
-        coeffs[fringe_to_nm(j)] = v / hdr["SSZ"] * hdr["WVL"]
+    coeffs = parse_coefficients(path, values, fringe_to_nm, "Fringe", lambda v: v / hdr["SSZ"] * hdr["WVL"])
     if radius_mm is None:
         m = _RADIUS_RE.search(title)
         try:

@@ -44,6 +44,20 @@ def _create_tmp(path: Path, suffix: str) -> tuple[int, str]:
 
 
 @contextmanager
+def _moved_onto(tmp: str, path: Path) -> Iterator[None]:
+    """Move ``tmp`` onto ``path`` when the block succeeds; remove it when the block fails."""
+    try:
+        yield
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+@contextmanager
 def atomic_write(path: str | Path, mode: str = "w") -> Iterator:
     """Open a temporary file next to ``path``; on success move it onto ``path``.
 
@@ -61,17 +75,10 @@ def atomic_write(path: str | Path, mode: str = "w") -> Iterator:
     """
     path = Path(path)
     fd, tmp = _create_tmp(path, ".tmp")
-    try:
+    with _moved_onto(tmp, path):
         kw = {"encoding": "utf-8", "newline": "\n"} if "b" not in mode else {}
         with os.fdopen(fd, mode, **kw) as fh:
             yield fh
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
 
 
 @contextmanager
@@ -81,15 +88,8 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     path = Path(path)
     fd, tmp = _create_tmp(path, f".tmp{path.suffix}")
     os.close(fd)
-    try:
+    with _moved_onto(tmp, path):
         yield Path(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
 
 
 def parse_error(path: str | Path, line: int | None, message: str) -> ValueError:

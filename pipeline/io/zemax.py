@@ -62,7 +62,7 @@ import numpy as np
 from optics.sagmap import SagMap
 from optics.zernike import fringe_to_nm, nm_to_fringe, nm_to_noll, noll_to_nm
 from pipeline.io.common import atomic_write, numbered_lines, parse_error, read_text
-from pipeline.io.zernike import check_coefficients, convert_normalisation
+from pipeline.io.zernike import coefficients_for_file, convert_normalisation, parse_coefficients, parse_radius
 
 __all__ = ["write_zemax_grid_sag", "read_zemax_grid_sag", "nan_gradient", "ZEMAX_UNITS_MM",
            "write_zemax_zernike", "read_zemax_zernike", "ZEMAX_ZERNIKE"]
@@ -253,11 +253,8 @@ def write_zemax_zernike(
     """
     convention = _zernike_convention(convention)
     _, _, to_index, file_norm, max_terms = ZEMAX_ZERNIKE[convention]
-    if not (np.isfinite(radius_mm) and radius_mm > 0):
-        raise ValueError(f"radius_mm={radius_mm!r} must be a finite number > 0")
-    c = check_coefficients(coeffs, "noll" if convention == "standard" else "fringe")
-    if coeffs_normalised != file_norm:
-        c = convert_normalisation(c, to_normalised=file_norm)
+    c = coefficients_for_file(coeffs, "noll" if convention == "standard" else "fringe", radius_mm,
+                              coeffs_normalised, file_norm)
     index = {to_index(n, m): v for (n, m), v in c.items()}
     n_terms = max(index, default=1)
     if n_terms > max_terms:
@@ -304,25 +301,12 @@ def read_zemax_zernike(path: str | Path, convention: str, normalised: bool) -> t
         raise parse_error(path, n0, f"number of terms {t0!r} is not an integer") from None
     if not 1 <= n_terms <= max_terms:
         raise parse_error(path, n0, f"number of terms {n_terms} must be in 1..{max_terms} for {surface}")
-    try:
-        radius = float(t1)
-    except ValueError:
-        radius = float("nan")
-    if not (np.isfinite(radius) and radius > 0):
-        raise parse_error(path, n1, f"normalisation radius {t1!r} must be a finite number > 0 (mm)")
+    radius = parse_radius(path, n1, t1, "normalisation radius")
     body = values[2:]
     if len(body) != n_terms:
         where = body[n_terms][0] if len(body) > n_terms else values[-1][0]
         raise parse_error(path, where, f"{n_terms} terms declared, found {len(body)} coefficients")
-    coeffs = {}
-    for j, (n, t) in enumerate(body, start=1):
-        try:
-            v = float(t)
-        except ValueError:
-            v = float("nan")
-        if not np.isfinite(v):
-            raise parse_error(path, n, f"{convention} Z{j} {to_nm(j)}: coefficient {t!r} is not a finite number")
-        coeffs[to_nm(j)] = v * 1e3  # mm -> um
+    coeffs = parse_coefficients(path, body, to_nm, convention, lambda v: v * 1e3)  # mm -> um
     if normalised != file_norm:
         coeffs = convert_normalisation(coeffs, to_normalised=normalised)
     return coeffs, {"convention": convention, "surface_type": surface, "n_terms": n_terms,

@@ -34,7 +34,7 @@ from optics.zernike import fringe_to_nm, nm_to_fringe, nm_to_noll, noll_to_nm, n
 from pipeline.io.common import atomic_write, numbered_lines, parse_error, read_text
 
 __all__ = ["ZERNIKE_CONVENTIONS", "convert_normalisation", "write_zernike_list", "read_zernike_list",
-           "check_coefficients"]
+           "check_coefficients", "coefficients_for_file", "parse_coefficients", "parse_radius"]
 
 #: convention -> (index -> (n, m), (n, m) -> index, coefficients normalised in the file)
 ZERNIKE_CONVENTIONS = {
@@ -89,6 +89,81 @@ def convert_normalisation(coeffs: Mapping[tuple[int, int], float], to_normalised
     return out
 
 
+def coefficients_for_file(coeffs: Mapping[tuple[int, int], float], convention: str, radius_mm: float,
+                          coeffs_normalised: bool, file_normalised: bool) -> dict:
+    """What every Zernike writer does first: check the radius and the coefficients, and
+    re-express the coefficients in the file's normalisation.
+
+    Parameters
+    ----------
+    coeffs : mapping (n, m) -> float
+        Coefficients in µm.
+    convention : {"fringe", "noll"}
+        Index convention naming a bad term in messages.
+    radius_mm : float
+        Normalisation radius (mm); must be finite and > 0.
+    coeffs_normalised, file_normalised : bool
+        Whether ``coeffs`` / the file's coefficients multiply RMS-normalised terms.
+
+    Returns
+    -------
+    dict (n, m) -> float
+        Coefficients (µm) for the file's normalisation.
+    """
+    if not (np.isfinite(radius_mm) and radius_mm > 0):
+        raise ValueError(f"radius_mm={radius_mm!r} must be a finite number > 0")
+    c = check_coefficients(coeffs, convention)
+    if coeffs_normalised != file_normalised:
+        c = convert_normalisation(c, to_normalised=file_normalised)
+    return c
+
+
+def parse_coefficients(path, tokens: list[tuple[int, str]], to_nm, label: str, to_um) -> dict:
+    """Coefficients of a file that lists them in index order 1, 2, ... without (n, m).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file (named in messages).
+    tokens : list of (int, str)
+        Line number and text of each coefficient, term 1 first.
+    to_nm : callable
+        Index -> (n, m) of the file's convention.
+    label : str
+        The convention as messages name it (``"Fringe"``, ``"standard"``).
+    to_um : callable
+        File value -> µm.
+
+    Returns
+    -------
+    dict (n, m) -> float
+        Coefficients in µm; a non-numeric or non-finite one is refused naming its
+        line and term.
+    """
+    coeffs = {}
+    for j, (n, t) in enumerate(tokens, start=1):
+        try:
+            v = float(t)
+        except ValueError:
+            v = float("nan")
+        if not np.isfinite(v):
+            raise parse_error(path, n, f"{label} Z{j} {to_nm(j)}: coefficient {t!r} is not a finite number")
+        coeffs[to_nm(j)] = to_um(v)
+    return coeffs
+
+
+def parse_radius(path, lineno: int | None, text: str, what: str) -> float:
+    """A normalisation radius (mm) read from a file: a finite number > 0, or a
+    ``ValueError`` naming the file, the line and ``what`` the value is."""
+    try:
+        radius = float(text)
+    except ValueError:
+        radius = float("nan")
+    if not (np.isfinite(radius) and radius > 0):
+        raise parse_error(path, lineno, f"{what} {text!r} must be a finite number > 0 (mm)")
+    return radius
+
+
 def write_zernike_list(
     coeffs: Mapping[tuple[int, int], float],
     path: str | Path,
@@ -113,12 +188,8 @@ def write_zernike_list(
         convention differs.
     """
     convention = _check_convention(convention)
-    if not (np.isfinite(radius_mm) and radius_mm > 0):
-        raise ValueError(f"radius_mm={radius_mm!r} must be a finite number > 0")
     to_index, file_norm = ZERNIKE_CONVENTIONS[convention][1], ZERNIKE_CONVENTIONS[convention][2]
-    c = check_coefficients(coeffs, convention)
-    if coeffs_normalised != file_norm:
-        c = convert_normalisation(c, to_normalised=file_norm)
+    c = coefficients_for_file(coeffs, convention, radius_mm, coeffs_normalised, file_norm)
     rows = sorted((to_index(n, m), n, m, v) for (n, m), v in c.items())
     path = Path(path)
     with atomic_write(path) as fh:
@@ -185,13 +256,7 @@ def read_zernike_list(path: str | Path, normalised: bool) -> tuple[dict, dict]:
             except ValueError as exc:
                 raise parse_error(path, conv_line, str(exc)) from None
             to_nm, to_index, file_norm = ZERNIKE_CONVENTIONS[conv]
-            r_line, r_text = header["normalisation_radius_mm"]
-            try:
-                radius = float(r_text)
-            except ValueError:
-                radius = float("nan")
-            if not (np.isfinite(radius) and radius > 0):
-                raise parse_error(path, r_line, f"normalisation_radius_mm {r_text!r} must be a number > 0")
+            radius = parse_radius(path, *header["normalisation_radius_mm"], "normalisation_radius_mm")
             u_line, units = header["units"]
             if units.lower() not in ("um", "µm"):
                 raise parse_error(path, u_line, f"units {units!r} not supported; expected 'um'")
