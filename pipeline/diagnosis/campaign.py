@@ -395,6 +395,7 @@ def run_case(args) -> dict:
             "within_2sigma": rec["within_2sigma"] if rec else None,
             "uncertainties": d.finding(effect).uncertainties if in_lib and d.finding(effect) else None,
             "fitted": d.finding(effect).parameters if in_lib and d.finding(effect) else None,
+            "fitted_summary": d.finding(effect).summary if in_lib and d.finding(effect) else None,
             "sign_degenerate": list(d.finding(effect).sign_degenerate) if in_lib and d.finding(effect) else [],
             "companions": list(d.finding(effect).companions) if in_lib and d.finding(effect) else [],
             "top_companions": list(best.companions) if best else [],
