@@ -100,7 +100,10 @@ the best smaller one by ``companion_bic`` (each companion adopted must be suppor
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+
+from . import effect_draws
 
 __all__ = ["Parameter", "Effect", "LIBRARY", "PLATING_GRADIENT_REF_MM", "BOW_REF_RADIUS_MM", "COLLIMATOR_PUPIL_RADIUS_MM",
            "effect_parameters", "parameter_spec", "parameter_units", "applicable_effects", "NOMINAL_SLIT_UM",
@@ -166,6 +169,15 @@ class Effect:
     background : bool
         Present at some level on every real grating (a ``companion`` too): refitted beside
         every finding and never half of a pair (module docstring).
+    draw_truth : callable or None
+        The injection-recovery campaign's random truth, ``draw_truth(rng, kind) ->
+        {parameter: value}`` (template names for ``per_blank`` effects;
+        :mod:`.effect_draws`); None: the campaign does not inject the effect.
+    truth_stage : str
+        When a campaign map case draws the truth: "blank" (before the truth's model
+        discrepancy, which multiplies the deformation the effect reshapes) or "map" (after
+        it: the effect is added to, or moves, the measured map). Line-profile cases draw
+        every truth before the discrepancy.
     """
 
     name: str
@@ -177,6 +189,12 @@ class Effect:
     companion: bool = False
     requires: tuple[str, ...] = ()
     background: bool = False
+    draw_truth: Callable | None = None
+    truth_stage: str = "blank"
+
+    def __post_init__(self) -> None:
+        if self.truth_stage not in ("blank", "map"):
+            raise ValueError(f"Effect {self.name!r}: truth_stage={self.truth_stage!r} must be 'blank' or 'map'")
 
 
 _MAP_AND_IMAGE = ("surface", "psf_image")
@@ -188,15 +206,17 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
             Parameter("astig_45_um", 0.0, -1.0, 1.0, floor=0.02, unit="µm",
                       meaning="surface Zernike Z(2,-2), RMS-normalised over the map's aperture disc")),
            description="mount-induced surface astigmatism (Zernike (2,2) and (2,-2), RMS-normalised over the aperture)",
-           vector=True),
+           vector=True, draw_truth=effect_draws.astigmatism, truth_stage="map"),
     Effect("amplitude_scale", ("surface", "line_profile", "psf_image"),
            (Parameter("scale", 1.0, 0.3, 3.0, floor=0.05, unit="1",
                       meaning="deformation amplitude of blank <blank> relative to the simulation's"),), per_blank=True,
-           description="deformation amplitude differs (NiP thickness or polish; e.g. a re-polished blank)"),
+           description="deformation amplitude differs (NiP thickness or polish; e.g. a re-polished blank)",
+           draw_truth=effect_draws.amplitude_scale),
     Effect("temperature", ("surface", "line_profile", "psf_image"),
            (Parameter("temperature_offset_K", 0.0, -60.0, 80.0, floor=5.0, unit="K",
                       meaning="true cold temperature minus the stated one (all measurements)"),),
-           description="true cold temperature = stated + offset (exact rescaling by the mismatch strain)"),
+           description="true cold temperature = stated + offset (exact rescaling by the mismatch strain)",
+           draw_truth=effect_draws.temperature),
     Effect("registration", ("surface",),
            (Parameter("reg_dx_mm", 0.0, -10.0, 10.0, (-6.0, 0.0, 6.0), floor=0.5, unit="mm",
                       meaning="map shift d along x"),
@@ -204,14 +224,15 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
                       meaning="map shift d along y"),
             Parameter("reg_rot_deg", 0.0, -5.0, 5.0, floor=0.3, unit="deg",
                       meaning="map rotation R against the model about the map origin (feature at p appears at R p + d)")),
-           description="measured map shifted/rotated against the model (model feature at p appears at R p + d)"),
+           description="measured map shifted/rotated against the model (model feature at p appears at R p + d)",
+           draw_truth=effect_draws.registration, truth_stage="map"),
     Effect("pupil_shift", ("line_profile", "psf_image"),
            (Parameter("pupil_x_mm", 0.0, -10.0, 10.0, (-7.0, -3.5, 0.0, 3.5, 7.0), floor=1.0, unit="mm",
                       meaning="beam footprint offset on the grating along x (dispersion)"),
             Parameter("pupil_y_mm", 0.0, -10.0, 10.0, (0.0, 4.5), floor=3.0, unit="mm",
                       meaning="beam footprint offset on the grating along y (rulings)")),
            description="beam footprint offset on the grating (x dispersion, y ruling), common to all profiles",
-           vector=True),
+           vector=True, draw_truth=effect_draws.pupil_shift),
     Effect("collimator_wfe", ("line_profile", "psf_image"),
            (Parameter("coll_coma_um", 0.0, -0.4, 0.4, floor=0.04, unit="µm",
                       meaning="extra wavefront Zernike Z(3,1), RMS-normalised over the 110 mm pupil"),
@@ -220,11 +241,12 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
             Parameter("coll_astig45_um", 0.0, -0.4, 0.4, floor=0.06, unit="µm",
                       meaning="extra wavefront Zernike Z(2,-2), RMS-normalised over the 110 mm pupil")),
            description="extra low-order spectrograph WFE (RMS-normalised Zernike over the 110 mm pupil)",
-           vector=True),
+           vector=True, draw_truth=effect_draws.collimator_wfe),
     Effect("slit_width", ("line_profile",),
            (Parameter("slit_image_width_um", NOMINAL_SLIT_UM, 15.0, 45.0, floor=1.0, unit="µm",
                       meaning="geometric slit image width on the detector (J, H, K; HK scaled alike from 29 µm)"),),
-           description="geometric slit image width differs from 27 µm (29 µm for HK, scaled alike)"),
+           description="geometric slit image width differs from 27 µm (29 µm for HK, scaled alike)",
+           draw_truth=effect_draws.slit_width),
     Effect("plating_gradient", ("surface", "line_profile", "psf_image"),
            (Parameter("plating_grad_x", 0.0, -0.1, 0.1, floor=0.01, unit="1",
                       meaning="relative deformation change at x = +70 mm (blank coordinates)"),
@@ -258,7 +280,7 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
            description="the quilt's harmonic content differs from the simulation's: the y fundamental relative "
                        "to the x fundamental and the higher harmonics relative to both (the fundamentals' "
                        "amplitude stays amplitude_scale's)",
-           companion=True, background=True),
+           companion=True, background=True, draw_truth=effect_draws.quilt_shape),
 )}
 
 #: Half-width (mm) at which ``plating_grad_x/y`` are the relative amplitude change.

@@ -1,0 +1,79 @@
+"""The campaign's truth draws carried by the library effects (``Effect.draw_truth``)."""
+
+import numpy as np
+import pytest
+
+from optics.sagmap import SagMap
+from pipeline.diagnosis.campaign import CampaignConfig, make_case
+from pipeline.diagnosis.effects import LIBRARY
+from pipeline.diagnosis.synth import unmodelled_shape
+
+CASE_KINDS = ("surface", "line_profile")
+
+
+def _drawable():
+    """(effect, kind) pairs whose draw accepts the kind: the kinds it changes that a campaign case has."""
+    return [(e.name, k) for e in LIBRARY.values() if e.draw_truth is not None for k in CASE_KINDS if k in e.kinds]
+
+
+def _base_map():
+    ax = np.arange(-75.0, 75.01, 1.0)
+    X, Y = np.meshgrid(ax, ax)
+    return SagMap(ax, ax, 0.05 * np.cos(2 * np.pi * X / 21) + 0.04 * np.cos(2 * np.pi * Y / 18), "test base")
+
+
+@pytest.mark.parametrize("effect,kind", _drawable())
+def test_draws_are_the_effects_own_parameters_inside_their_priors(effect, kind):
+    e = LIBRARY[effect]
+    specs = {p.name: p for p in e.parameters}
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        drawn = e.draw_truth(rng, kind)
+        assert drawn and set(drawn) <= set(specs)
+        for name, v in drawn.items():
+            assert specs[name].lo <= v <= specs[name].hi, (name, v)
+
+
+def test_vector_draws_have_the_stated_magnitudes():
+    """RMS (Zernike vectors) and shift length as the draws' docstrings state them."""
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        a = LIBRARY["astigmatism"].draw_truth(rng, "surface")
+        assert 0.04 <= np.hypot(a["astig_0_um"], a["astig_45_um"]) <= 0.15
+        c = LIBRARY["collimator_wfe"].draw_truth(rng, "line_profile")
+        assert 0.15 <= np.linalg.norm([c["coll_coma_um"], c["coll_defocus_um"], c["coll_astig45_um"]]) <= 0.35 + 1e-12
+        r = LIBRARY["registration"].draw_truth(rng, "surface")
+        assert 1.5 <= np.hypot(r["reg_dx_mm"], r["reg_dy_mm"]) <= 5.0 and abs(r["reg_rot_deg"]) <= 1.5
+        t = LIBRARY["temperature"].draw_truth(rng, "line_profile")["temperature_offset_K"]
+        assert 35.0 <= t <= 75.0  # profiles: warmer than stated only
+
+
+def test_a_draw_refuses_a_kind_it_does_not_change():
+    with pytest.raises(ValueError, match="kind='line_profile'"):
+        LIBRARY["astigmatism"].draw_truth(np.random.default_rng(0), "line_profile")
+
+
+def test_make_case_injects_the_effects_draw_at_its_stage(tmp_path):
+    """A "blank"-stage truth is drawn first, a "map"-stage truth after the model
+    discrepancy; a per-blank parameter is named for the map's blank ("spare")."""
+    base = _base_map()
+    cfg = CampaignConfig(truth="model", n_cases=1)
+    _, truth = make_case("surface", "amplitude_scale", np.random.default_rng([1, 1]), base, tmp_path, cfg)
+    assert LIBRARY["amplitude_scale"].truth_stage == "blank"
+    assert truth == {"scale_spare": LIBRARY["amplitude_scale"].draw_truth(np.random.default_rng([1, 1]), "surface")["scale"]}
+
+    _, truth = make_case("surface", "astigmatism", np.random.default_rng([1, 0]), base, tmp_path, cfg)
+    assert LIBRARY["astigmatism"].truth_stage == "map"
+    rng = np.random.default_rng([1, 0])
+    unmodelled_shape(base, rng)  # the default discrepancy's draws come first
+    assert truth == LIBRARY["astigmatism"].draw_truth(rng, "surface")
+
+
+def test_make_case_refuses_an_effect_without_a_truth_draw(tmp_path):
+    assert LIBRARY["plating_gradient"].draw_truth is None
+    with pytest.raises(ValueError, match="plating_gradient"):
+        make_case("surface", "plating_gradient", np.random.default_rng(0), _base_map(), tmp_path,
+                  CampaignConfig(truth="model", n_cases=1))
+    with pytest.raises(ValueError, match="ool_nothing"):
+        make_case("surface", "ool_nothing", np.random.default_rng(0), _base_map(), tmp_path,
+                  CampaignConfig(truth="model", n_cases=1))
