@@ -5,7 +5,8 @@ import pytest
 
 from optics.sagmap import SagMap
 from pipeline.diagnosis.campaign import CampaignConfig, make_case
-from pipeline.diagnosis.effects import LIBRARY
+from pipeline.diagnosis.effect_draws import DRAWS
+from pipeline.diagnosis.effects import LIBRARY, effect_parameters
 from pipeline.diagnosis.synth import unmodelled_shape
 
 CASE_KINDS = ("surface", "line_profile")
@@ -25,10 +26,10 @@ def _base_map():
 @pytest.mark.parametrize("effect,kind", _drawable())
 def test_draws_are_the_effects_own_parameters_inside_their_priors(effect, kind):
     e = LIBRARY[effect]
-    specs = {p.name: p for p in e.parameters}
+    specs = {p.name: p for p in effect_parameters(e, ("J",))}
     rng = np.random.default_rng(3)
     for _ in range(200):
-        drawn = e.draw_truth(rng, kind)
+        drawn = e.draw_truth(rng, kind, "J")
         assert drawn and set(drawn) <= set(specs)
         for name, v in drawn.items():
             assert specs[name].lo <= v <= specs[name].hi, (name, v)
@@ -38,19 +39,24 @@ def test_vector_draws_have_the_stated_magnitudes():
     """RMS (Zernike vectors) and shift length as the draws' docstrings state them."""
     rng = np.random.default_rng(5)
     for _ in range(200):
-        a = LIBRARY["astigmatism"].draw_truth(rng, "surface")
+        a = LIBRARY["astigmatism"].draw_truth(rng, "surface", "spare")
         assert 0.04 <= np.hypot(a["astig_0_um"], a["astig_45_um"]) <= 0.15
-        c = LIBRARY["collimator_wfe"].draw_truth(rng, "line_profile")
+        c = LIBRARY["collimator_wfe"].draw_truth(rng, "line_profile", "J")
         assert 0.15 <= np.linalg.norm([c["coll_coma_um"], c["coll_defocus_um"], c["coll_astig45_um"]]) <= 0.35 + 1e-12
-        r = LIBRARY["registration"].draw_truth(rng, "surface")
+        r = LIBRARY["registration"].draw_truth(rng, "surface", "spare")
         assert 1.5 <= np.hypot(r["reg_dx_mm"], r["reg_dy_mm"]) <= 5.0 and abs(r["reg_rot_deg"]) <= 1.5
-        t = LIBRARY["temperature"].draw_truth(rng, "line_profile")["temperature_offset_K"]
+        t = LIBRARY["temperature"].draw_truth(rng, "line_profile", "J")["temperature_offset_K"]
         assert 35.0 <= t <= 75.0  # profiles: warmer than stated only
+
+
+def test_the_independent_truths_registry_is_the_librarys_draws():
+    """The independent truth (which does not import the library) draws through DRAWS."""
+    assert DRAWS == {n: e.draw_truth for n, e in LIBRARY.items() if e.draw_truth is not None}
 
 
 def test_a_draw_refuses_a_kind_it_does_not_change():
     with pytest.raises(ValueError, match="kind='line_profile'"):
-        LIBRARY["astigmatism"].draw_truth(np.random.default_rng(0), "line_profile")
+        LIBRARY["astigmatism"].draw_truth(np.random.default_rng(0), "line_profile", "J")
 
 
 def test_make_case_injects_the_effects_draw_at_its_stage(tmp_path):
@@ -59,14 +65,13 @@ def test_make_case_injects_the_effects_draw_at_its_stage(tmp_path):
     base = _base_map()
     cfg = CampaignConfig(truth="model", n_cases=1)
     _, truth = make_case("surface", "amplitude_scale", np.random.default_rng([1, 1]), base, tmp_path, cfg)
-    assert LIBRARY["amplitude_scale"].truth_stage == "blank"
-    assert truth == {"scale_spare": LIBRARY["amplitude_scale"].draw_truth(np.random.default_rng([1, 1]), "surface")["scale"]}
+    assert truth == LIBRARY["amplitude_scale"].draw_truth(np.random.default_rng([1, 1]), "surface", "spare")
+    assert set(truth) == {"scale_spare"}
 
     _, truth = make_case("surface", "astigmatism", np.random.default_rng([1, 0]), base, tmp_path, cfg)
-    assert LIBRARY["astigmatism"].truth_stage == "map"
     rng = np.random.default_rng([1, 0])
     unmodelled_shape(base, rng)  # the default discrepancy's draws come first
-    assert truth == LIBRARY["astigmatism"].draw_truth(rng, "surface")
+    assert truth == LIBRARY["astigmatism"].draw_truth(rng, "surface", "spare")
 
 
 def test_make_case_refuses_an_effect_without_a_truth_draw(tmp_path):

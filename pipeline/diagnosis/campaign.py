@@ -64,7 +64,7 @@ from pipeline.io.measured import write_psf_image_csv
 from pipeline.io.registry import write_sag_map
 
 from .effect_draws import signed_uniform
-from .effects import LIBRARY
+from .effects import LIBRARY, draw_campaign_truth
 from .engine import Criteria, diagnose
 from .manifest import NOMINAL_SIMULATION, Simulation
 from .nominal import case_sag_map, thermal_factor
@@ -233,16 +233,6 @@ OUT_OF_LIBRARY = {"surface": {"ool_coma": _ool_coma, "ool_bump": _ool_bump},
                   "line_profile": {"ool_ghost": _ool_ghost, "ool_distortion": _ool_distortion}}
 
 
-def _draw_library(kind: str, effect: str, rng: np.random.Generator, blank: str) -> dict:
-    """The library effect's campaign truth (``Effect.draw_truth``), per-blank names for ``blank``."""
-    e = LIBRARY[effect]
-    if e.draw_truth is None:
-        raise ValueError(f"make_case: effect={effect!r} has no campaign truth draw (Effect.draw_truth); "
-                         f"valid: {sorted(n for n, x in LIBRARY.items() if x.draw_truth is not None)}")
-    drawn = e.draw_truth(rng, kind)
-    return {f"{k}_{blank}" if e.per_blank else k: v for k, v in drawn.items()}
-
-
 def _reshaped_quilt(base: SagMap, truth: dict) -> SagMap:
     """``base`` with the truth's quilt shape (unchanged without ``quilt_shape`` parameters)."""
     if "quilt_harmonics_ratio" not in truth:
@@ -269,7 +259,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
     truth = {}
     if kind == "surface":
         if lib is not None and lib.truth_stage == "blank":
-            truth = _draw_library(kind, effect, rng, "spare")
+            truth = draw_campaign_truth(effect, kind, rng, "spare")
         scale = truth.get("scale_spare", 1.0)
         T = SURFACE_T_K + truth["temperature_offset_K"] if "temperature_offset_K" in truth else SURFACE_T_K
         base = _reshaped_quilt(base, truth)
@@ -278,7 +268,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         if lib is None:
             truth, extra = OUT_OF_LIBRARY[kind][effect](rng)
         elif lib.truth_stage == "map":
-            truth = _draw_library(kind, effect, rng, "spare")
+            truth = draw_campaign_truth(effect, kind, rng, "spare")
         if "astig_0_um" in truth:
             extra = lambda x, y: truth["astig_0_um"] * zernike_xy(2, 2, x, y, 68.5) + truth["astig_45_um"] * zernike_xy(2, -2, x, y, 68.5)
         if "reg_dx_mm" in truth:
@@ -294,7 +284,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
     if lib is None:
         truth, distortion = OUT_OF_LIBRARY[kind][effect](rng)
     else:
-        truth = _draw_library(kind, effect, rng, "J")
+        truth = draw_campaign_truth(effect, kind, rng, "J")
     scale = truth.get("scale_J", 1.0)
     if "temperature_offset_K" in truth:
         scale = thermal_factor(_COLD_K + truth["temperature_offset_K"], _COLD_K)

@@ -106,7 +106,7 @@ from dataclasses import dataclass
 from . import effect_draws
 
 __all__ = ["Parameter", "Effect", "LIBRARY", "PLATING_GRADIENT_REF_MM", "BOW_REF_RADIUS_MM", "COLLIMATOR_PUPIL_RADIUS_MM",
-           "effect_parameters", "parameter_spec", "parameter_units", "applicable_effects", "NOMINAL_SLIT_UM",
+           "draw_campaign_truth", "effect_parameters", "parameter_spec", "parameter_units", "applicable_effects", "NOMINAL_SLIT_UM",
            "SummaryContext", "physical_summary", "library_rows", "library_markdown"]
 
 NOMINAL_SLIT_UM = 27.0
@@ -170,9 +170,9 @@ class Effect:
         Present at some level on every real grating (a ``companion`` too): refitted beside
         every finding and never half of a pair (module docstring).
     draw_truth : callable or None
-        The injection-recovery campaign's random truth, ``draw_truth(rng, kind) ->
-        {parameter: value}`` (template names for ``per_blank`` effects;
-        :mod:`.effect_draws`); None: the campaign does not inject the effect.
+        The injection-recovery campaign's random truth, ``draw_truth(rng, kind, blank) ->
+        {parameter: value}`` for a case of measurement ``kind`` on grating blank ``blank``
+        (:mod:`.effect_draws`); None: the campaign does not inject the effect.
     truth_stage : str
         When a campaign map case draws the truth: "blank" (before the truth's model
         discrepancy, which multiplies the deformation the effect reshapes) or "map" (after
@@ -290,6 +290,18 @@ PLATING_GRADIENT_REF_MM = 70.0
 BOW_REF_RADIUS_MM = 70.0
 #: Radius (mm) of the collimator pupil over which ``collimator_wfe`` terms are RMS-normalised.
 COLLIMATOR_PUPIL_RADIUS_MM = 55.0
+
+
+def draw_campaign_truth(effect: str, kind: str, rng, blank: str) -> dict:
+    """The campaign's random truth of library ``effect`` for a case of measurement ``kind``
+    on grating blank ``blank`` (``Effect.draw_truth``)."""
+    if effect not in LIBRARY:
+        raise ValueError(f"draw_campaign_truth: effect={effect!r} is not in the library; valid: {sorted(LIBRARY)}")
+    e = LIBRARY[effect]
+    if e.draw_truth is None:
+        raise ValueError(f"draw_campaign_truth: effect={effect!r} has no campaign truth draw (Effect.draw_truth); "
+                         f"valid: {sorted(n for n, x in LIBRARY.items() if x.draw_truth is not None)}")
+    return e.draw_truth(rng, kind, blank)
 
 
 def effect_parameters(effect: Effect, blanks: tuple[str, ...], kinds=None) -> tuple[Parameter, ...]:
