@@ -178,6 +178,10 @@ class Effect:
         discrepancy, which multiplies the deformation the effect reshapes) or "map" (after
         it: the effect is added to, or moves, the measured map). Line-profile cases draw
         every truth before the discrepancy.
+    summary : callable or None
+        The finding's physically absolute summary for reports, ``summary(parameters,
+        ctx) -> dict`` with the effect's own fitted parameters and a
+        :class:`SummaryContext` (:func:`physical_summary`); None: none.
     """
 
     name: str
@@ -191,10 +195,96 @@ class Effect:
     background: bool = False
     draw_truth: Callable | None = None
     truth_stage: str = "blank"
+    summary: Callable | None = None
 
     def __post_init__(self) -> None:
         if self.truth_stage not in ("blank", "map"):
             raise ValueError(f"Effect {self.name!r}: truth_stage={self.truth_stage!r} must be 'blank' or 'map'")
+
+
+@dataclass(frozen=True)
+class SummaryContext:
+    """What the physical summaries of a finding need from the data and the simulation:
+    the simulation's cold temperature (K), the blanks seen, the surface maps' aperture
+    radii (mm, where the astigmatism is normalised), the nominal quilt's RMS
+    amplitudes (µm, :meth:`.quilt.QuiltComponents.amplitudes_um`; None: no quilt fit),
+    its parts' shares of the nominal's projection (:func:`.quilt.projection_weights`;
+    None: no quilt fit), and the warm temperature (K) and (substrate, film) that set the
+    thermal factor."""
+
+    cold_K: float
+    blanks: tuple = ()
+    surface_radii_mm: tuple = ()
+    quilt_rms_um: dict | None = None
+    quilt_weights: dict | None = None
+    warm_K: float = 293.0
+    materials: tuple = ("Al6061-T6", "NiP")
+
+
+def _norm(p: dict, names) -> float:
+    return math.sqrt(sum(p.get(n, 0.0) ** 2 for n in names))
+
+
+def _disc(radii) -> str:
+    r = sorted(set(round(float(v), 2) for v in radii))
+    return "disc r=" + "/".join(f"{v:g}" for v in r) + " mm (map aperture)" if r else "map aperture disc"
+
+
+def _summary_temperature(p, ctx):
+    dT = p["temperature_offset_K"]
+    return {"temperature_K": ctx.cold_K + dT, "temperature_offset_K": dT,
+            "temperature_note": "simulation cold_K + offset; each map's own stated temperature + offset"}
+
+
+def _summary_scale(p, ctx):
+    scales = {k: v for k, v in p.items() if k.startswith("scale_")}
+    return {"scale": next(iter(scales.values()))} if len(scales) == 1 else {}
+
+
+def _summary_quilt(p, ctx):
+    out = {"quilt_fund_xy_ratio": p.get("quilt_fund_xy_ratio", 1.0), "quilt_harmonics_ratio": p["quilt_harmonics_ratio"],
+           "quilt_cross_ratio": p.get("quilt_cross_ratio", 1.0), "quilt_figure_ratio": p.get("quilt_figure_ratio", 1.0)}
+    if ctx.quilt_rms_um:
+        q = ctx.quilt_rms_um
+        out.update({"fundamental_x_rms_um": q["fundamental_x"],
+                    "fundamental_y_rms_um": q["fundamental_y"] * p.get("quilt_fund_xy_ratio", 1.0),
+                    "harmonics_rms_um": q["harmonics"] * abs(p["quilt_harmonics_ratio"]),
+                    "cross_rms_um": q["cross"] * abs(p.get("quilt_cross_ratio", 1.0)),
+                    "quilt_note": f"RMS over a period at the simulation's {ctx.cold_K:g} K, before amplitude_scale "
+                                  "and temperature; fitted over the 82 x 72 mm centre"})
+    return out
+
+
+def _summary_astigmatism(p, ctx):
+    return {"rms_um": _norm(p, ("astig_0_um", "astig_45_um")), "aperture": _disc(ctx.surface_radii_mm),
+            "surface": "grating surface"}
+
+
+def _summary_registration(p, ctx):
+    return {"shift_mm": _norm(p, ("reg_dx_mm", "reg_dy_mm")), "rotation_deg": p["reg_rot_deg"]}
+
+
+def _summary_pupil(p, ctx):
+    return {"shift_mm": _norm(p, ("pupil_x_mm", "pupil_y_mm"))}
+
+
+def _summary_collimator(p, ctx):
+    return {"rms_um": _norm(p, ("coll_coma_um", "coll_defocus_um", "coll_astig45_um")),
+            "aperture": f"disc r={COLLIMATOR_PUPIL_RADIUS_MM:g} mm (collimator pupil)", "surface": "wavefront"}
+
+
+def _summary_slit(p, ctx):
+    return {"slit_image_width_um": p["slit_image_width_um"]}
+
+
+def _summary_plating(p, ctx):
+    return {"max_relative_change": _norm(p, ("plating_grad_x", "plating_grad_y")), "at_radius_mm": PLATING_GRADIENT_REF_MM}
+
+
+def _summary_bow(p, ctx):
+    return {"rms_um": _norm(p, ("bow_defocus_um", "bow_spherical_um")),
+            "aperture": f"disc r={BOW_REF_RADIUS_MM:g} mm (blank coordinates)",
+            "surface": "grating surface at the simulation's cold_K"}
 
 
 _MAP_AND_IMAGE = ("surface", "psf_image")
@@ -206,17 +296,17 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
             Parameter("astig_45_um", 0.0, -1.0, 1.0, floor=0.02, unit="µm",
                       meaning="surface Zernike Z(2,-2), RMS-normalised over the map's aperture disc")),
            description="mount-induced surface astigmatism (Zernike (2,2) and (2,-2), RMS-normalised over the aperture)",
-           vector=True, draw_truth=effect_draws.astigmatism, truth_stage="map"),
+           vector=True, draw_truth=effect_draws.astigmatism, truth_stage="map", summary=_summary_astigmatism),
     Effect("amplitude_scale", ("surface", "line_profile", "psf_image"),
            (Parameter("scale", 1.0, 0.3, 3.0, floor=0.05, unit="1",
                       meaning="deformation amplitude of blank <blank> relative to the simulation's"),), per_blank=True,
            description="deformation amplitude differs (NiP thickness or polish; e.g. a re-polished blank)",
-           draw_truth=effect_draws.amplitude_scale),
+           draw_truth=effect_draws.amplitude_scale, summary=_summary_scale),
     Effect("temperature", ("surface", "line_profile", "psf_image"),
            (Parameter("temperature_offset_K", 0.0, -60.0, 80.0, floor=5.0, unit="K",
                       meaning="true cold temperature minus the stated one (all measurements)"),),
            description="true cold temperature = stated + offset (exact rescaling by the mismatch strain)",
-           draw_truth=effect_draws.temperature),
+           draw_truth=effect_draws.temperature, summary=_summary_temperature),
     Effect("registration", ("surface",),
            (Parameter("reg_dx_mm", 0.0, -10.0, 10.0, (-6.0, 0.0, 6.0), floor=0.5, unit="mm",
                       meaning="map shift d along x"),
@@ -225,14 +315,14 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
             Parameter("reg_rot_deg", 0.0, -5.0, 5.0, floor=0.3, unit="deg",
                       meaning="map rotation R against the model about the map origin (feature at p appears at R p + d)")),
            description="measured map shifted/rotated against the model (model feature at p appears at R p + d)",
-           draw_truth=effect_draws.registration, truth_stage="map"),
+           draw_truth=effect_draws.registration, truth_stage="map", summary=_summary_registration),
     Effect("pupil_shift", ("line_profile", "psf_image"),
            (Parameter("pupil_x_mm", 0.0, -10.0, 10.0, (-7.0, -3.5, 0.0, 3.5, 7.0), floor=1.0, unit="mm",
                       meaning="beam footprint offset on the grating along x (dispersion)"),
             Parameter("pupil_y_mm", 0.0, -10.0, 10.0, (0.0, 4.5), floor=3.0, unit="mm",
                       meaning="beam footprint offset on the grating along y (rulings)")),
            description="beam footprint offset on the grating (x dispersion, y ruling), common to all profiles",
-           vector=True, draw_truth=effect_draws.pupil_shift),
+           vector=True, draw_truth=effect_draws.pupil_shift, summary=_summary_pupil),
     Effect("collimator_wfe", ("line_profile", "psf_image"),
            (Parameter("coll_coma_um", 0.0, -0.4, 0.4, floor=0.04, unit="µm",
                       meaning="extra wavefront Zernike Z(3,1), RMS-normalised over the 110 mm pupil"),
@@ -241,12 +331,12 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
             Parameter("coll_astig45_um", 0.0, -0.4, 0.4, floor=0.06, unit="µm",
                       meaning="extra wavefront Zernike Z(2,-2), RMS-normalised over the 110 mm pupil")),
            description="extra low-order spectrograph WFE (RMS-normalised Zernike over the 110 mm pupil)",
-           vector=True, draw_truth=effect_draws.collimator_wfe),
+           vector=True, draw_truth=effect_draws.collimator_wfe, summary=_summary_collimator),
     Effect("slit_width", ("line_profile",),
            (Parameter("slit_image_width_um", NOMINAL_SLIT_UM, 15.0, 45.0, floor=1.0, unit="µm",
                       meaning="geometric slit image width on the detector (J, H, K; HK scaled alike from 29 µm)"),),
            description="geometric slit image width differs from 27 µm (29 µm for HK, scaled alike)",
-           draw_truth=effect_draws.slit_width),
+           draw_truth=effect_draws.slit_width, summary=_summary_slit),
     Effect("plating_gradient", ("surface", "line_profile", "psf_image"),
            (Parameter("plating_grad_x", 0.0, -0.1, 0.1, floor=0.01, unit="1",
                       meaning="relative deformation change at x = +70 mm (blank coordinates)"),
@@ -254,7 +344,7 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
                       meaning="relative deformation change at y = +70 mm (blank coordinates)")),
            description="NiP thickness gradient across the blank: deformation x (1 + gx x/70 mm + gy y/70 mm) "
                        "(blank coordinates; gx, gy = relative amplitude change at the blank's half-width)",
-           vector=True, companion=True),
+           vector=True, companion=True, summary=_summary_plating),
     Effect("blank_bow", ("surface", "line_profile", "psf_image"),
            (Parameter("bow_defocus_um", 0.0, -0.2, 0.2, floor=0.01, unit="µm",
                       meaning="surface Zernike Z(2,0), RMS-normalised over a 70 mm radius disc, at cold_K"),
@@ -263,7 +353,7 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
            description="rotationally symmetric figure change of the cold blank: Zernike (2,0) and (4,0), "
                        "RMS-normalised over a 70 mm radius disc in blank coordinates, at the simulation's cold_K "
                        "(scaled with the deformation)",
-           vector=True, companion=True, requires=("surface",)),
+           vector=True, companion=True, requires=("surface",), summary=_summary_bow),
     Effect("quilt_shape", ("surface", "line_profile", "psf_image"),
            (Parameter("quilt_fund_xy_ratio", 1.0, 0.3, 3.0, (0.6, 1.0, 1.6), floor=0.05, unit="1",
                       meaning="y fundamental (18 mm) relative to the x fundamental (21 mm), over the nominal's "
@@ -280,7 +370,7 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
            description="the quilt's harmonic content differs from the simulation's: the y fundamental relative "
                        "to the x fundamental and the higher harmonics relative to both (the fundamentals' "
                        "amplitude stays amplitude_scale's)",
-           companion=True, background=True, draw_truth=effect_draws.quilt_shape),
+           companion=True, background=True, draw_truth=effect_draws.quilt_shape, summary=_summary_quilt),
 )}
 
 #: Half-width (mm) at which ``plating_grad_x/y`` are the relative amplitude change.
@@ -342,79 +432,6 @@ def applicable_effects(kinds: set[str], names: tuple[str, ...] | None = None) ->
     return tuple(e for e in chosen.values() if set(e.kinds) & kinds and set(e.requires) <= kinds)
 
 
-@dataclass(frozen=True)
-class SummaryContext:
-    """What the physical summaries of a finding need from the data and the simulation:
-    the simulation's cold temperature (K), the blanks seen, the surface maps' aperture
-    radii (mm, where the astigmatism is normalised), the nominal quilt's RMS
-    amplitudes (µm, :meth:`.quilt.QuiltComponents.amplitudes_um`; None: no quilt fit),
-    its parts' shares of the nominal's projection (:func:`.quilt.projection_weights`;
-    None: no quilt fit), and the warm temperature (K) and (substrate, film) that set the
-    thermal factor."""
-
-    cold_K: float
-    blanks: tuple = ()
-    surface_radii_mm: tuple = ()
-    quilt_rms_um: dict | None = None
-    quilt_weights: dict | None = None
-    warm_K: float = 293.0
-    materials: tuple = ("Al6061-T6", "NiP")
-
-
-def _norm(p: dict, names) -> float:
-    return math.sqrt(sum(p.get(n, 0.0) ** 2 for n in names))
-
-
-def _disc(radii) -> str:
-    r = sorted(set(round(float(v), 2) for v in radii))
-    return "disc r=" + "/".join(f"{v:g}" for v in r) + " mm (map aperture)" if r else "map aperture disc"
-
-
-def _summary_temperature(p, ctx):
-    dT = p["temperature_offset_K"]
-    return {"temperature_K": ctx.cold_K + dT, "temperature_offset_K": dT,
-            "temperature_note": "simulation cold_K + offset; each map's own stated temperature + offset"}
-
-
-def _summary_scale(p, ctx):
-    scales = {k: v for k, v in p.items() if k.startswith("scale_")}
-    return {"scale": next(iter(scales.values()))} if len(scales) == 1 else {}
-
-
-def _summary_quilt(p, ctx):
-    out = {"quilt_fund_xy_ratio": p.get("quilt_fund_xy_ratio", 1.0), "quilt_harmonics_ratio": p["quilt_harmonics_ratio"],
-           "quilt_cross_ratio": p.get("quilt_cross_ratio", 1.0), "quilt_figure_ratio": p.get("quilt_figure_ratio", 1.0)}
-    if ctx.quilt_rms_um:
-        q = ctx.quilt_rms_um
-        out.update({"fundamental_x_rms_um": q["fundamental_x"],
-                    "fundamental_y_rms_um": q["fundamental_y"] * p.get("quilt_fund_xy_ratio", 1.0),
-                    "harmonics_rms_um": q["harmonics"] * abs(p["quilt_harmonics_ratio"]),
-                    "cross_rms_um": q["cross"] * abs(p.get("quilt_cross_ratio", 1.0)),
-                    "quilt_note": f"RMS over a period at the simulation's {ctx.cold_K:g} K, before amplitude_scale "
-                                  "and temperature; fitted over the 82 x 72 mm centre"})
-    return out
-
-
-_SUMMARIES = {
-    "astigmatism": lambda p, ctx: {"rms_um": _norm(p, ("astig_0_um", "astig_45_um")),
-                                   "aperture": _disc(ctx.surface_radii_mm), "surface": "grating surface"},
-    "amplitude_scale": _summary_scale,
-    "temperature": _summary_temperature,
-    "registration": lambda p, ctx: {"shift_mm": _norm(p, ("reg_dx_mm", "reg_dy_mm")), "rotation_deg": p["reg_rot_deg"]},
-    "pupil_shift": lambda p, ctx: {"shift_mm": _norm(p, ("pupil_x_mm", "pupil_y_mm"))},
-    "collimator_wfe": lambda p, ctx: {"rms_um": _norm(p, ("coll_coma_um", "coll_defocus_um", "coll_astig45_um")),
-                                      "aperture": f"disc r={COLLIMATOR_PUPIL_RADIUS_MM:g} mm (collimator pupil)",
-                                      "surface": "wavefront"},
-    "slit_width": lambda p, ctx: {"slit_image_width_um": p["slit_image_width_um"]},
-    "plating_gradient": lambda p, ctx: {"max_relative_change": _norm(p, ("plating_grad_x", "plating_grad_y")),
-                                        "at_radius_mm": PLATING_GRADIENT_REF_MM},
-    "blank_bow": lambda p, ctx: {"rms_um": _norm(p, ("bow_defocus_um", "bow_spherical_um")),
-                                 "aperture": f"disc r={BOW_REF_RADIUS_MM:g} mm (blank coordinates)",
-                                 "surface": "grating surface at the simulation's cold_K"},
-    "quilt_shape": _summary_quilt,
-}
-
-
 def physical_summary(effects, parameters: dict, ctx: SummaryContext) -> dict:
     """Physically absolute summaries of a finding, per effect: ``{effect: {...}}`` (e.g.
     ``temperature_K`` beside the offset, ``scale`` where one blank is measured,
@@ -422,8 +439,8 @@ def physical_summary(effects, parameters: dict, ctx: SummaryContext) -> dict:
     out = {}
     for e in effects:
         own = {q.name: parameters[q.name] for q in effect_parameters(LIBRARY[e], ctx.blanks) if q.name in parameters}
-        if own:
-            out[e] = _SUMMARIES[e](own, ctx)
+        if own and LIBRARY[e].summary is not None:
+            out[e] = LIBRARY[e].summary(own, ctx)
     if ctx.quilt_weights and "quilt_shape" in out:
         _add_projection(out, parameters, ctx)
     return out

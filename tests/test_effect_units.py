@@ -1,4 +1,7 @@
-"""The campaign's truth draws carried by the library effects (``Effect.draw_truth``)."""
+"""What each library effect carries besides its parameters: the campaign's truth draw
+(``Effect.draw_truth``) and its physical summary for reports (``Effect.summary``)."""
+
+import math
 
 import numpy as np
 import pytest
@@ -6,7 +9,7 @@ import pytest
 from optics.sagmap import SagMap
 from pipeline.diagnosis.campaign import CampaignConfig, make_case
 from pipeline.diagnosis.effect_draws import DRAWS
-from pipeline.diagnosis.effects import LIBRARY, effect_parameters
+from pipeline.diagnosis.effects import LIBRARY, SummaryContext, effect_parameters, physical_summary
 from pipeline.diagnosis.synth import unmodelled_shape
 
 CASE_KINDS = ("surface", "line_profile")
@@ -82,3 +85,15 @@ def test_make_case_refuses_an_effect_without_a_truth_draw(tmp_path):
     with pytest.raises(ValueError, match="ool_nothing"):
         make_case("surface", "ool_nothing", np.random.default_rng(0), _base_map(), tmp_path,
                   CampaignConfig(truth="model", n_cases=1))
+
+
+@pytest.mark.parametrize("name", sorted(LIBRARY))
+def test_every_effect_carries_a_physical_summary(name):
+    """A non-empty summary; for the Zernike-type effects the RMS of orthonormal terms is
+    the root sum of squares of their coefficients."""
+    ctx = SummaryContext(cold_K=80.0, blanks=("J",), surface_radii_mm=(68.5,))
+    p = {q.name: q.hi for q in effect_parameters(LIBRARY[name], ctx.blanks)}
+    s = physical_summary((name,), p, ctx)[name]
+    assert s
+    if "rms_um" in s:
+        assert s["rms_um"] == pytest.approx(math.sqrt(sum(v * v for v in p.values())))
