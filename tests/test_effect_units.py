@@ -97,3 +97,25 @@ def test_every_effect_carries_a_physical_summary(name):
     assert s
     if "rms_um" in s:
         assert s["rms_um"] == pytest.approx(math.sqrt(sum(v * v for v in p.values())))
+
+
+@pytest.mark.parametrize("name", [n for n, e in LIBRARY.items() if e.rescales])
+def test_a_rescaling_effect_only_rescales_the_nominal_map(name):
+    """``Effect.rescales`` (never paired; not in the image models' memo key): away from its
+    null the map model is the nominal's times one factor."""
+    from pathlib import Path
+
+    from pipeline.diagnosis.forward import PROFILE_KEYS, SurfaceForward
+    from pipeline.diagnosis.manifest import Measurement, SurfaceData
+
+    base = _base_map()
+    X, Y = base.grid()
+    inside = X**2 + Y**2 <= 60.0**2
+    m = Measurement("map", "surface", Path("map.npz"), "spare", temperature_K=128.0, aperture_diameter_mm=120.0)
+    fwd = SurfaceForward(SurfaceData(m, X[inside], Y[inside], base.sag_um[inside]), base, 80.0)
+    p = {q.name: 0.5 * (q.null + q.hi) for q in effect_parameters(LIBRARY[name], ("spare",))}
+    nominal, changed = fwd.predict({}), fwd.predict(p)
+    k = float(changed @ nominal / (nominal @ nominal))
+    assert abs(k - 1.0) > 0.05
+    np.testing.assert_allclose(changed, k * nominal, rtol=1e-12, atol=1e-12)
+    assert not {q.name for q in LIBRARY[name].parameters} & set(PROFILE_KEYS)

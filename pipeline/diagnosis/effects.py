@@ -178,6 +178,11 @@ class Effect:
         discrepancy, which multiplies the deformation the effect reshapes) or "map" (after
         it: the effect is added to, or moves, the measured map). Line-profile cases draw
         every truth before the discrepancy.
+    rescales : bool
+        Acts only through the deformation's overall factor (an exact rescaling of the
+        nominal): it changes a spectrograph image only through that factor, and two such
+        effects in one fit are redundant (the per-blank scales absorb a common factor;
+        exactly, for one cold temperature per blank), so they are never paired.
     summary : callable or None
         The finding's physically absolute summary for reports, ``summary(parameters,
         ctx) -> dict`` with the effect's own fitted parameters and a
@@ -195,6 +200,7 @@ class Effect:
     background: bool = False
     draw_truth: Callable | None = None
     truth_stage: str = "blank"
+    rescales: bool = False
     summary: Callable | None = None
 
     def __post_init__(self) -> None:
@@ -301,12 +307,12 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
            (Parameter("scale", 1.0, 0.3, 3.0, floor=0.05, unit="1",
                       meaning="deformation amplitude of blank <blank> relative to the simulation's"),), per_blank=True,
            description="deformation amplitude differs (NiP thickness or polish; e.g. a re-polished blank)",
-           draw_truth=effect_draws.amplitude_scale, summary=_summary_scale),
+           rescales=True, draw_truth=effect_draws.amplitude_scale, summary=_summary_scale),
     Effect("temperature", ("surface", "line_profile", "psf_image"),
            (Parameter("temperature_offset_K", 0.0, -60.0, 80.0, floor=5.0, unit="K",
                       meaning="true cold temperature minus the stated one (all measurements)"),),
            description="true cold temperature = stated + offset (exact rescaling by the mismatch strain)",
-           draw_truth=effect_draws.temperature, summary=_summary_temperature),
+           rescales=True, draw_truth=effect_draws.temperature, summary=_summary_temperature),
     Effect("registration", ("surface",),
            (Parameter("reg_dx_mm", 0.0, -10.0, 10.0, (-6.0, 0.0, 6.0), floor=0.5, unit="mm",
                       meaning="map shift d along x"),
