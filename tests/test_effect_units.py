@@ -119,3 +119,16 @@ def test_a_rescaling_effect_only_rescales_the_nominal_map(name):
     assert abs(k - 1.0) > 0.05
     np.testing.assert_allclose(changed, k * nominal, rtol=1e-12, atol=1e-12)
     assert not {q.name for q in LIBRARY[name].parameters} & set(PROFILE_KEYS)
+
+
+def test_make_case_refuses_a_drawn_parameter_it_does_not_apply(tmp_path, monkeypatch):
+    """A new effect whose truth the model campaign does not know how to apply is refused,
+    not injected as nothing."""
+    from pipeline.diagnosis.effects import Effect, Parameter
+
+    fake = Effect("fake_tilt", ("surface",), (Parameter("fake_tilt_urad", 0.0, -5.0, 5.0, unit="µrad"),),
+                  draw_truth=lambda rng, kind, blank: {"fake_tilt_urad": rng.uniform(1.0, 2.0)})
+    monkeypatch.setitem(LIBRARY, "fake_tilt", fake)
+    with pytest.raises(ValueError, match="fake_tilt_urad"):
+        make_case("surface", "fake_tilt", np.random.default_rng(0), _base_map(), tmp_path,
+                  CampaignConfig(truth="model", n_cases=1))

@@ -72,7 +72,7 @@ from .synth import (quilt_shape_map, shape_discrepancy, synthetic_profile, synth
                     unmodelled_shape, write_profile_csv)
 
 __all__ = ["CASE_TYPES", "EXTRA_CASE_TYPES", "DISCREPANCIES", "DISCREPANCY_PRESENT", "TRUTHS", "PROFILE_SETS", "PSF_IMAGE_SPEC",
-           "OUT_OF_LIBRARY", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "run_case", "run_campaign",
+           "OUT_OF_LIBRARY", "APPLIED_PARAMETERS", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "run_case", "run_campaign",
            "write_campaign"]
 
 CASE_TYPES = (
@@ -233,6 +233,28 @@ OUT_OF_LIBRARY = {"surface": {"ool_coma": _ool_coma, "ool_bump": _ool_bump},
                   "line_profile": {"ool_ghost": _ool_ghost, "ool_distortion": _ool_distortion}}
 
 
+#: The library parameters :func:`make_case` applies to the truth's map, per case kind
+#: (line profiles also take every parameter of a spectrograph effect, one that changes no
+#: surface, into the optics).
+APPLIED_PARAMETERS = {
+    "surface": ("scale_spare", "temperature_offset_K", "quilt_fund_xy_ratio", "quilt_harmonics_ratio", "astig_0_um",
+                "astig_45_um", "reg_dx_mm", "reg_dy_mm", "reg_rot_deg"),
+    "line_profile": ("scale_J", "temperature_offset_K", "quilt_fund_xy_ratio", "quilt_harmonics_ratio"),
+}
+
+
+def _library_truth(effect: str, kind: str, rng: np.random.Generator, blank: str) -> dict:
+    """The effect's drawn truth; ValueError if :func:`make_case` would not apply a parameter
+    of it (the case would silently inject nothing)."""
+    truth = draw_campaign_truth(effect, kind, rng, blank)
+    spectrograph = kind == "line_profile" and "surface" not in LIBRARY[effect].kinds
+    unknown = [] if spectrograph else sorted(set(truth) - set(APPLIED_PARAMETERS[kind]))
+    if unknown:
+        raise ValueError(f"make_case: parameters {unknown} of effect={effect!r} are not applied to a {kind} truth; "
+                         f"applied: {list(APPLIED_PARAMETERS[kind])} (add how to apply them in make_case)")
+    return truth
+
+
 def _reshaped_quilt(base: SagMap, truth: dict) -> SagMap:
     """``base`` with the truth's quilt shape (unchanged without ``quilt_shape`` parameters)."""
     if "quilt_harmonics_ratio" not in truth:
@@ -259,7 +281,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
     truth = {}
     if kind == "surface":
         if lib is not None and lib.truth_stage == "blank":
-            truth = draw_campaign_truth(effect, kind, rng, "spare")
+            truth = _library_truth(effect, kind, rng, "spare")
         scale = truth.get("scale_spare", 1.0)
         T = SURFACE_T_K + truth["temperature_offset_K"] if "temperature_offset_K" in truth else SURFACE_T_K
         base = _reshaped_quilt(base, truth)
@@ -268,7 +290,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         if lib is None:
             truth, extra = OUT_OF_LIBRARY[kind][effect](rng)
         elif lib.truth_stage == "map":
-            truth = draw_campaign_truth(effect, kind, rng, "spare")
+            truth = _library_truth(effect, kind, rng, "spare")
         if "astig_0_um" in truth:
             extra = lambda x, y: truth["astig_0_um"] * zernike_xy(2, 2, x, y, 68.5) + truth["astig_45_um"] * zernike_xy(2, -2, x, y, 68.5)
         if "reg_dx_mm" in truth:
@@ -284,7 +306,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
     if lib is None:
         truth, distortion = OUT_OF_LIBRARY[kind][effect](rng)
     else:
-        truth = draw_campaign_truth(effect, kind, rng, "J")
+        truth = _library_truth(effect, kind, rng, "J")
     scale = truth.get("scale_J", 1.0)
     if "temperature_offset_K" in truth:
         scale = thermal_factor(_COLD_K + truth["temperature_offset_K"], _COLD_K)
