@@ -63,7 +63,8 @@ from optics.zernike import zernike_xy
 from pipeline.io.measured import write_psf_image_csv
 from pipeline.io.registry import write_sag_map
 
-from .effects import LIBRARY
+from .effect_draws import signed_uniform
+from .effects import LIBRARY, draw_campaign_truth
 from .engine import Criteria, diagnose
 from .manifest import NOMINAL_SIMULATION, Simulation
 from .nominal import case_sag_map, thermal_factor
@@ -71,7 +72,7 @@ from .synth import (quilt_shape_map, shape_discrepancy, synthetic_profile, synth
                     unmodelled_shape, write_profile_csv)
 
 __all__ = ["CASE_TYPES", "EXTRA_CASE_TYPES", "DISCREPANCIES", "DISCREPANCY_PRESENT", "TRUTHS", "PROFILE_SETS", "PSF_IMAGE_SPEC",
-           "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "run_case", "run_campaign",
+           "OUT_OF_LIBRARY", "APPLIED_PARAMETERS", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "run_case", "run_campaign",
            "write_campaign"]
 
 CASE_TYPES = (
@@ -201,80 +202,117 @@ def parse_types(text: str | None, truth: str = "model") -> tuple | None:
 _COLD_K = NOMINAL_SIMULATION["cold_K"]
 
 
-def _signed(rng, lo, hi):
-    return float(rng.choice([-1.0, 1.0]) * rng.uniform(lo, hi))
+def _ool_coma(rng):
+    a, th = rng.uniform(0.04, 0.15), rng.uniform(0, 2 * np.pi)
+    return {"coma_um": a, "angle_rad": th}, \
+        lambda x, y: a * (math.cos(th) * zernike_xy(3, 1, x, y, 68.5) + math.sin(th) * zernike_xy(3, -1, x, y, 68.5))
+
+
+def _ool_bump(rng):
+    h, w = signed_uniform(rng, 0.1, 0.3), rng.uniform(12.0, 30.0)
+    r, th = rng.uniform(0, 45.0), rng.uniform(0, 2 * np.pi)
+    x0, y0 = r * math.cos(th), r * math.sin(th)
+    return ({"height_um": h, "sigma_mm": w, "x0_mm": x0, "y0_mm": y0},
+            lambda x, y: h * np.exp(-((x - x0) ** 2 + (y - y0) ** 2) / (2 * w * w)))
+
+
+def _ool_ghost(rng):
+    h, u0 = rng.uniform(0.03, 0.08), signed_uniform(rng, 45.0, 90.0)
+    return {"ghost_rel": h, "ghost_offset_um": u0}, lambda u, y: y + h * y.max() * np.exp(-0.5 * ((u - u0) / 4.0) ** 2)
+
+
+def _ool_distortion(rng):
+    a = signed_uniform(rng, 0.1, 0.25)
+    return {"tilt_rel": a}, lambda u, y: y * (1.0 + a * np.tanh(u / 30.0))
+
+
+#: Out-of-library case types of the model truth: ``draw(rng) -> (truth, change)`` with the
+#: change a surface ``extra_um(x, y)`` added to the map (drawn after the model
+#: discrepancy) or a profile ``distortion(u, y) -> y`` (drawn before it).
+OUT_OF_LIBRARY = {"surface": {"ool_coma": _ool_coma, "ool_bump": _ool_bump},
+                  "line_profile": {"ool_ghost": _ool_ghost, "ool_distortion": _ool_distortion}}
+
+
+#: The library parameters :func:`make_case` applies to the truth's map, per case kind
+#: (line profiles also take every parameter of a spectrograph effect, one that changes no
+#: surface, into the optics).
+APPLIED_PARAMETERS = {
+    "surface": ("scale_spare", "temperature_offset_K", "quilt_fund_xy_ratio", "quilt_harmonics_ratio", "astig_0_um",
+                "astig_45_um", "reg_dx_mm", "reg_dy_mm", "reg_rot_deg"),
+    "line_profile": ("scale_J", "temperature_offset_K", "quilt_fund_xy_ratio", "quilt_harmonics_ratio"),
+}
+
+
+def _library_truth(effect: str, kind: str, rng: np.random.Generator, blank: str) -> dict:
+    """The effect's drawn truth; ValueError if :func:`make_case` would not apply a parameter
+    of it (the case would silently inject nothing)."""
+    truth = draw_campaign_truth(effect, kind, rng, blank)
+    spectrograph = kind == "line_profile" and "surface" not in LIBRARY[effect].kinds
+    unknown = [] if spectrograph else sorted(set(truth) - set(APPLIED_PARAMETERS[kind]))
+    if unknown:
+        raise ValueError(f"make_case: parameters {unknown} of effect={effect!r} are not applied to a {kind} truth; "
+                         f"applied: {list(APPLIED_PARAMETERS[kind])} (add how to apply them in make_case)")
+    return truth
+
+
+def _reshaped_quilt(base: SagMap, truth: dict) -> SagMap:
+    """``base`` with the truth's quilt shape (unchanged without ``quilt_shape`` parameters)."""
+    if "quilt_harmonics_ratio" not in truth:
+        return base
+    return quilt_shape_map(base, truth.get("quilt_fund_xy_ratio", 1.0), truth["quilt_harmonics_ratio"])
 
 
 def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, out: Path,
               cfg: CampaignConfig) -> tuple[dict, dict]:
-    """Write one synthetic case into ``out``; returns (manifest dict, injected truth)."""
+    """Write one synthetic case into ``out``; returns (manifest dict, injected truth).
+
+    A library effect's truth is its ``Effect.draw_truth``; it is applied through its
+    parameters: amplitude scale, temperature offset and quilt shape change the blank's
+    deformation before the model discrepancy, astigmatism and registration change the
+    measured map after it, and the spectrograph effects (those that do not change a
+    surface) are handed to the profile and PSF-image synthesis."""
+    if kind not in OUT_OF_LIBRARY:
+        raise ValueError(f"make_case: kind={kind!r} is not one of {list(OUT_OF_LIBRARY)}")
+    if effect not in LIBRARY and effect not in OUT_OF_LIBRARY[kind]:
+        raise ValueError(f"make_case: effect={effect!r} is not a {kind} case type; valid: library effects and "
+                         f"{sorted(OUT_OF_LIBRARY[kind])}")
     sim = {**NOMINAL_SIMULATION, "mesh": cfg.nominal_mesh}
+    lib = LIBRARY.get(effect)
     truth = {}
     if kind == "surface":
-        scale, T = 1.0, SURFACE_T_K
-        if effect == "amplitude_scale":
-            scale = float(rng.choice([rng.uniform(0.6, 0.85), rng.uniform(1.2, 1.6)]))
-            truth = {"scale_spare": scale}
-        elif effect == "temperature":
-            dT = _signed(rng, 20.0, 50.0)
-            T, truth = SURFACE_T_K + dT, {"temperature_offset_K": dT}
-        elif effect == "quilt_shape":
-            truth = {"quilt_fund_xy_ratio": float(rng.choice([rng.uniform(0.7, 0.85), rng.uniform(1.2, 1.4)])),
-                     "quilt_harmonics_ratio": float(rng.choice([rng.uniform(0.0, 0.4), rng.uniform(1.6, 2.5)]))}
-            base = quilt_shape_map(base, truth["quilt_fund_xy_ratio"], truth["quilt_harmonics_ratio"])
+        if lib is not None and lib.truth_stage == "blank":
+            truth = _library_truth(effect, kind, rng, "spare")
+        scale = truth.get("scale_spare", 1.0)
+        T = SURFACE_T_K + truth["temperature_offset_K"] if "temperature_offset_K" in truth else SURFACE_T_K
+        base = _reshaped_quilt(base, truth)
         t = DISCREPANCIES[cfg.discrepancy](base.scaled(scale * thermal_factor(T, _COLD_K)), rng)
         extra = None
-        if effect == "astigmatism":
-            a, th = rng.uniform(0.04, 0.15), rng.uniform(0, 2 * np.pi)
-            truth = {"astig_0_um": a * math.cos(th), "astig_45_um": a * math.sin(th)}
+        if lib is None:
+            truth, extra = OUT_OF_LIBRARY[kind][effect](rng)
+        elif lib.truth_stage == "map":
+            truth = _library_truth(effect, kind, rng, "spare")
+        if "astig_0_um" in truth:
             extra = lambda x, y: truth["astig_0_um"] * zernike_xy(2, 2, x, y, 68.5) + truth["astig_45_um"] * zernike_xy(2, -2, x, y, 68.5)
-        elif effect == "registration":
-            r, th = rng.uniform(1.5, 5.0), rng.uniform(0, 2 * np.pi)
-            truth = {"reg_dx_mm": r * math.cos(th), "reg_dy_mm": r * math.sin(th), "reg_rot_deg": rng.uniform(-1.5, 1.5)}
+        if "reg_dx_mm" in truth:
             X, Y = t.grid()
             c, s = math.cos(math.radians(truth["reg_rot_deg"])), math.sin(math.radians(truth["reg_rot_deg"]))
             xr, yr = X - truth["reg_dx_mm"], Y - truth["reg_dy_mm"]
             t = t.with_sag(t.sample(c * xr + s * yr, -s * xr + c * yr))
-        elif effect == "ool_coma":
-            a, th = rng.uniform(0.04, 0.15), rng.uniform(0, 2 * np.pi)
-            truth = {"coma_um": a, "angle_rad": th}
-            extra = lambda x, y: a * (math.cos(th) * zernike_xy(3, 1, x, y, 68.5) + math.sin(th) * zernike_xy(3, -1, x, y, 68.5))
-        elif effect == "ool_bump":
-            h, w = _signed(rng, 0.1, 0.3), rng.uniform(12.0, 30.0)
-            r, th = rng.uniform(0, 45.0), rng.uniform(0, 2 * np.pi)
-            x0, y0 = r * math.cos(th), r * math.sin(th)
-            truth = {"height_um": h, "sigma_mm": w, "x0_mm": x0, "y0_mm": y0}
-            extra = lambda x, y: h * np.exp(-((x - x0) ** 2 + (y - y0) ** 2) / (2 * w * w))
         m = synthetic_surface(t, rng, noise_um=cfg.noise_um, extra_um=extra)
         write_sag_map(m, out / "map.npz")
         meas = [{"kind": "surface", "file": "map.npz", "temperature_K": SURFACE_T_K, "aperture_diameter_mm": 137.0}]
         return {"simulation": sim, "measurement": meas}, truth
-    scale, params, distortion = 1.0, {}, None
-    if effect == "amplitude_scale":
-        scale = float(rng.choice([rng.uniform(0.6, 0.85), rng.uniform(1.2, 1.6)]))
-        truth = {"scale_J": scale}
-    elif effect == "temperature":
-        dT = rng.uniform(35.0, 75.0)
-        scale, truth = thermal_factor(_COLD_K + dT, _COLD_K), {"temperature_offset_K": dT}
-    elif effect == "pupil_shift":
-        params = truth = {"pupil_x_mm": _signed(rng, 3.0, 8.0), "pupil_y_mm": rng.uniform(-3.0, 3.0)}
-    elif effect == "collimator_wfe":
-        v = rng.normal(size=3)
-        v *= rng.uniform(0.15, 0.35) / np.linalg.norm(v)
-        params = truth = {"coll_coma_um": v[0], "coll_defocus_um": v[1], "coll_astig45_um": v[2]}
-    elif effect == "slit_width":
-        params = truth = {"slit_image_width_um": float(rng.choice([rng.uniform(19.0, 23.0), rng.uniform(31.0, 38.0)]))}
-    elif effect == "ool_ghost":
-        h, u0 = rng.uniform(0.03, 0.08), _signed(rng, 45.0, 90.0)
-        truth = {"ghost_rel": h, "ghost_offset_um": u0}
-        distortion = lambda u, y: y + h * y.max() * np.exp(-0.5 * ((u - u0) / 4.0) ** 2)
-    elif effect == "ool_distortion":
-        a = _signed(rng, 0.1, 0.25)
-        truth = {"tilt_rel": a}
-        distortion = lambda u, y: y * (1.0 + a * np.tanh(u / 30.0))
-    elif effect == "quilt_shape":  # profiles do not see the y fundamental: only the harmonics
-        truth = {"quilt_harmonics_ratio": float(rng.choice([rng.uniform(0.0, 0.4), rng.uniform(1.6, 2.5)]))}
-        base = quilt_shape_map(base, 1.0, truth["quilt_harmonics_ratio"])
+    distortion = None
+    if lib is None:
+        truth, distortion = OUT_OF_LIBRARY[kind][effect](rng)
+    else:
+        truth = _library_truth(effect, kind, rng, "J")
+    scale = truth.get("scale_J", 1.0)
+    if "temperature_offset_K" in truth:
+        scale = thermal_factor(_COLD_K + truth["temperature_offset_K"], _COLD_K)
+    # Spectrograph effects act in the optics; the others are in the truth's map.
+    params = truth if lib is not None and "surface" not in lib.kinds else {}
+    base = _reshaped_quilt(base, truth)
     t = DISCREPANCIES[cfg.discrepancy](base.scaled(scale), rng)
     meas = []
     for i, (g, wl, order, ps) in enumerate(cfg.profile_specs):

@@ -100,10 +100,13 @@ the best smaller one by ``companion_bic`` (each companion adopted must be suppor
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
+from . import effect_draws
+
 __all__ = ["Parameter", "Effect", "LIBRARY", "PLATING_GRADIENT_REF_MM", "BOW_REF_RADIUS_MM", "COLLIMATOR_PUPIL_RADIUS_MM",
-           "effect_parameters", "parameter_spec", "parameter_units", "applicable_effects", "NOMINAL_SLIT_UM",
+           "draw_campaign_truth", "effect_parameters", "parameter_spec", "parameter_units", "applicable_effects", "NOMINAL_SLIT_UM",
            "SummaryContext", "physical_summary", "library_rows", "library_markdown"]
 
 NOMINAL_SLIT_UM = 27.0
@@ -166,6 +169,24 @@ class Effect:
     background : bool
         Present at some level on every real grating (a ``companion`` too): refitted beside
         every finding and never half of a pair (module docstring).
+    draw_truth : callable or None
+        The injection-recovery campaign's random truth, ``draw_truth(rng, kind, blank) ->
+        {parameter: value}`` for a case of measurement ``kind`` on grating blank ``blank``
+        (:mod:`.effect_draws`); None: the campaign does not inject the effect.
+    truth_stage : str
+        When a campaign map case draws the truth: "blank" (before the truth's model
+        discrepancy, which multiplies the deformation the effect reshapes) or "map" (after
+        it: the effect is added to, or moves, the measured map). Line-profile cases draw
+        every truth before the discrepancy.
+    rescales : bool
+        Acts only through the deformation's overall factor (an exact rescaling of the
+        nominal): it changes a spectrograph image only through that factor, and two such
+        effects in one fit are redundant (the per-blank scales absorb a common factor;
+        exactly, for one cold temperature per blank), so they are never paired.
+    summary : callable or None
+        The finding's physically absolute summary for reports, ``summary(parameters,
+        ctx) -> dict`` with the effect's own fitted parameters and a
+        :class:`SummaryContext` (:func:`physical_summary`); None: none.
     """
 
     name: str
@@ -177,135 +198,14 @@ class Effect:
     companion: bool = False
     requires: tuple[str, ...] = ()
     background: bool = False
+    draw_truth: Callable | None = None
+    truth_stage: str = "blank"
+    rescales: bool = False
+    summary: Callable | None = None
 
-
-_MAP_AND_IMAGE = ("surface", "psf_image")
-
-LIBRARY: dict[str, Effect] = {e.name: e for e in (
-    Effect("astigmatism", ("surface",),
-           (Parameter("astig_0_um", 0.0, -1.0, 1.0, floor=0.02, unit="µm",
-                      meaning="surface Zernike Z(2,2), RMS-normalised over the map's aperture disc"),
-            Parameter("astig_45_um", 0.0, -1.0, 1.0, floor=0.02, unit="µm",
-                      meaning="surface Zernike Z(2,-2), RMS-normalised over the map's aperture disc")),
-           description="mount-induced surface astigmatism (Zernike (2,2) and (2,-2), RMS-normalised over the aperture)",
-           vector=True),
-    Effect("amplitude_scale", ("surface", "line_profile", "psf_image"),
-           (Parameter("scale", 1.0, 0.3, 3.0, floor=0.05, unit="1",
-                      meaning="deformation amplitude of blank <blank> relative to the simulation's"),), per_blank=True,
-           description="deformation amplitude differs (NiP thickness or polish; e.g. a re-polished blank)"),
-    Effect("temperature", ("surface", "line_profile", "psf_image"),
-           (Parameter("temperature_offset_K", 0.0, -60.0, 80.0, floor=5.0, unit="K",
-                      meaning="true cold temperature minus the stated one (all measurements)"),),
-           description="true cold temperature = stated + offset (exact rescaling by the mismatch strain)"),
-    Effect("registration", ("surface",),
-           (Parameter("reg_dx_mm", 0.0, -10.0, 10.0, (-6.0, 0.0, 6.0), floor=0.5, unit="mm",
-                      meaning="map shift d along x"),
-            Parameter("reg_dy_mm", 0.0, -10.0, 10.0, (-5.0, 0.0, 5.0), floor=0.5, unit="mm",
-                      meaning="map shift d along y"),
-            Parameter("reg_rot_deg", 0.0, -5.0, 5.0, floor=0.3, unit="deg",
-                      meaning="map rotation R against the model about the map origin (feature at p appears at R p + d)")),
-           description="measured map shifted/rotated against the model (model feature at p appears at R p + d)"),
-    Effect("pupil_shift", ("line_profile", "psf_image"),
-           (Parameter("pupil_x_mm", 0.0, -10.0, 10.0, (-7.0, -3.5, 0.0, 3.5, 7.0), floor=1.0, unit="mm",
-                      meaning="beam footprint offset on the grating along x (dispersion)"),
-            Parameter("pupil_y_mm", 0.0, -10.0, 10.0, (0.0, 4.5), floor=3.0, unit="mm",
-                      meaning="beam footprint offset on the grating along y (rulings)")),
-           description="beam footprint offset on the grating (x dispersion, y ruling), common to all profiles",
-           vector=True),
-    Effect("collimator_wfe", ("line_profile", "psf_image"),
-           (Parameter("coll_coma_um", 0.0, -0.4, 0.4, floor=0.04, unit="µm",
-                      meaning="extra wavefront Zernike Z(3,1), RMS-normalised over the 110 mm pupil"),
-            Parameter("coll_defocus_um", 0.0, -0.4, 0.4, floor=0.04, unit="µm",
-                      meaning="extra wavefront Zernike Z(2,0), RMS-normalised over the 110 mm pupil"),
-            Parameter("coll_astig45_um", 0.0, -0.4, 0.4, floor=0.06, unit="µm",
-                      meaning="extra wavefront Zernike Z(2,-2), RMS-normalised over the 110 mm pupil")),
-           description="extra low-order spectrograph WFE (RMS-normalised Zernike over the 110 mm pupil)",
-           vector=True),
-    Effect("slit_width", ("line_profile",),
-           (Parameter("slit_image_width_um", NOMINAL_SLIT_UM, 15.0, 45.0, floor=1.0, unit="µm",
-                      meaning="geometric slit image width on the detector (J, H, K; HK scaled alike from 29 µm)"),),
-           description="geometric slit image width differs from 27 µm (29 µm for HK, scaled alike)"),
-    Effect("plating_gradient", ("surface", "line_profile", "psf_image"),
-           (Parameter("plating_grad_x", 0.0, -0.1, 0.1, floor=0.01, unit="1",
-                      meaning="relative deformation change at x = +70 mm (blank coordinates)"),
-            Parameter("plating_grad_y", 0.0, -0.1, 0.1, floor=0.01, unit="1",
-                      meaning="relative deformation change at y = +70 mm (blank coordinates)")),
-           description="NiP thickness gradient across the blank: deformation x (1 + gx x/70 mm + gy y/70 mm) "
-                       "(blank coordinates; gx, gy = relative amplitude change at the blank's half-width)",
-           vector=True, companion=True),
-    Effect("blank_bow", ("surface", "line_profile", "psf_image"),
-           (Parameter("bow_defocus_um", 0.0, -0.2, 0.2, floor=0.01, unit="µm",
-                      meaning="surface Zernike Z(2,0), RMS-normalised over a 70 mm radius disc, at cold_K"),
-            Parameter("bow_spherical_um", 0.0, -0.2, 0.2, floor=0.01, unit="µm",
-                      meaning="surface Zernike Z(4,0), RMS-normalised over a 70 mm radius disc, at cold_K")),
-           description="rotationally symmetric figure change of the cold blank: Zernike (2,0) and (4,0), "
-                       "RMS-normalised over a 70 mm radius disc in blank coordinates, at the simulation's cold_K "
-                       "(scaled with the deformation)",
-           vector=True, companion=True, requires=("surface",)),
-    Effect("quilt_shape", ("surface", "line_profile", "psf_image"),
-           (Parameter("quilt_fund_xy_ratio", 1.0, 0.3, 3.0, (0.6, 1.0, 1.6), floor=0.05, unit="1",
-                      meaning="y fundamental (18 mm) relative to the x fundamental (21 mm), over the nominal's "
-                              "ratio (x fundamental held)", kinds=_MAP_AND_IMAGE),
-            Parameter("quilt_harmonics_ratio", 1.0, -1.0, 3.0, (0.0, 1.0, 2.0), floor=0.2, unit="1",
-                      meaning="quilt harmonics other than the (1, ±1) cross terms relative to the fundamentals, "
-                              "over the nominal's ratio (0: none)"),
-            Parameter("quilt_cross_ratio", 1.0, -1.0, 3.0, floor=0.2, unit="1",
-                      meaning="the quilt's (1, ±1) egg-crate cross terms relative to the fundamentals, over the "
-                              "nominal's ratio (0: a sum-form quilt)"),
-            Parameter("quilt_figure_ratio", 1.0, -1.0, 3.0, floor=0.2, unit="1",
-                      meaning="the smooth figure that is not quilt (edge roll-off, bending) relative to the "
-                              "fundamentals, over the nominal's ratio")),
-           description="the quilt's harmonic content differs from the simulation's: the y fundamental relative "
-                       "to the x fundamental and the higher harmonics relative to both (the fundamentals' "
-                       "amplitude stays amplitude_scale's)",
-           companion=True, background=True),
-)}
-
-#: Half-width (mm) at which ``plating_grad_x/y`` are the relative amplitude change.
-PLATING_GRADIENT_REF_MM = 70.0
-#: Radius (mm, blank coordinates) of the disc over which the ``blank_bow`` Zernike terms
-#: are RMS-normalised: half the blank's 140 mm height, independent of any measurement.
-BOW_REF_RADIUS_MM = 70.0
-#: Radius (mm) of the collimator pupil over which ``collimator_wfe`` terms are RMS-normalised.
-COLLIMATOR_PUPIL_RADIUS_MM = 55.0
-
-
-def effect_parameters(effect: Effect, blanks: tuple[str, ...], kinds=None) -> tuple[Parameter, ...]:
-    """The concrete parameters of ``effect`` for data seeing ``blanks``; with ``kinds`` (the
-    measurement kinds in the data), only the parameters that change one of them."""
-    params = effect.parameters
-    if kinds is not None:
-        params = tuple(p for p in params if set(p.kinds or effect.kinds) & set(kinds))
-    if not effect.per_blank:
-        return params
-    from dataclasses import replace
-
-    return tuple(replace(p, name=f"{p.name}_{b}") for p in params for b in blanks)
-
-
-def parameter_spec(name: str) -> Parameter:
-    """The library parameter called ``name`` (a per-blank copy ``scale_<blank>`` resolves to
-    its template ``scale``)."""
-    for e in LIBRARY.values():
-        for p in e.parameters:
-            if name == p.name or (e.per_blank and name.startswith(p.name + "_")):
-                return p
-    raise ValueError(f"parameter {name!r} is not in the effect library; valid: "
-                     f"{[p.name for e in LIBRARY.values() for p in e.parameters]}")
-
-
-def parameter_units(names) -> dict:
-    """``{parameter name: unit}`` for library parameter names (per-blank copies included)."""
-    return {n: parameter_spec(n).unit for n in names}
-
-
-def applicable_effects(kinds: set[str], names: tuple[str, ...] | None = None) -> tuple[Effect, ...]:
-    """Library effects that change at least one of the measurement ``kinds`` present."""
-    unknown = set(names or ()) - set(LIBRARY)
-    if unknown:
-        raise ValueError(f"effects {sorted(unknown)} are unknown; valid: {sorted(LIBRARY)}")
-    chosen = LIBRARY if names is None else {n: LIBRARY[n] for n in names}
-    return tuple(e for e in chosen.values() if set(e.kinds) & kinds and set(e.requires) <= kinds)
+    def __post_init__(self) -> None:
+        if self.truth_stage not in ("blank", "map"):
+            raise ValueError(f"Effect {self.name!r}: truth_stage={self.truth_stage!r} must be 'blank' or 'map'")
 
 
 @dataclass(frozen=True)
@@ -361,24 +261,181 @@ def _summary_quilt(p, ctx):
     return out
 
 
-_SUMMARIES = {
-    "astigmatism": lambda p, ctx: {"rms_um": _norm(p, ("astig_0_um", "astig_45_um")),
-                                   "aperture": _disc(ctx.surface_radii_mm), "surface": "grating surface"},
-    "amplitude_scale": _summary_scale,
-    "temperature": _summary_temperature,
-    "registration": lambda p, ctx: {"shift_mm": _norm(p, ("reg_dx_mm", "reg_dy_mm")), "rotation_deg": p["reg_rot_deg"]},
-    "pupil_shift": lambda p, ctx: {"shift_mm": _norm(p, ("pupil_x_mm", "pupil_y_mm"))},
-    "collimator_wfe": lambda p, ctx: {"rms_um": _norm(p, ("coll_coma_um", "coll_defocus_um", "coll_astig45_um")),
-                                      "aperture": f"disc r={COLLIMATOR_PUPIL_RADIUS_MM:g} mm (collimator pupil)",
-                                      "surface": "wavefront"},
-    "slit_width": lambda p, ctx: {"slit_image_width_um": p["slit_image_width_um"]},
-    "plating_gradient": lambda p, ctx: {"max_relative_change": _norm(p, ("plating_grad_x", "plating_grad_y")),
-                                        "at_radius_mm": PLATING_GRADIENT_REF_MM},
-    "blank_bow": lambda p, ctx: {"rms_um": _norm(p, ("bow_defocus_um", "bow_spherical_um")),
-                                 "aperture": f"disc r={BOW_REF_RADIUS_MM:g} mm (blank coordinates)",
-                                 "surface": "grating surface at the simulation's cold_K"},
-    "quilt_shape": _summary_quilt,
-}
+def _summary_astigmatism(p, ctx):
+    return {"rms_um": _norm(p, ("astig_0_um", "astig_45_um")), "aperture": _disc(ctx.surface_radii_mm),
+            "surface": "grating surface"}
+
+
+def _summary_registration(p, ctx):
+    return {"shift_mm": _norm(p, ("reg_dx_mm", "reg_dy_mm")), "rotation_deg": p["reg_rot_deg"]}
+
+
+def _summary_pupil(p, ctx):
+    return {"shift_mm": _norm(p, ("pupil_x_mm", "pupil_y_mm"))}
+
+
+def _summary_collimator(p, ctx):
+    return {"rms_um": _norm(p, ("coll_coma_um", "coll_defocus_um", "coll_astig45_um")),
+            "aperture": f"disc r={COLLIMATOR_PUPIL_RADIUS_MM:g} mm (collimator pupil)", "surface": "wavefront"}
+
+
+def _summary_slit(p, ctx):
+    return {"slit_image_width_um": p["slit_image_width_um"]}
+
+
+def _summary_plating(p, ctx):
+    return {"max_relative_change": _norm(p, ("plating_grad_x", "plating_grad_y")), "at_radius_mm": PLATING_GRADIENT_REF_MM}
+
+
+def _summary_bow(p, ctx):
+    return {"rms_um": _norm(p, ("bow_defocus_um", "bow_spherical_um")),
+            "aperture": f"disc r={BOW_REF_RADIUS_MM:g} mm (blank coordinates)",
+            "surface": "grating surface at the simulation's cold_K"}
+
+
+_MAP_AND_IMAGE = ("surface", "psf_image")
+
+LIBRARY: dict[str, Effect] = {e.name: e for e in (
+    Effect("astigmatism", ("surface",),
+           (Parameter("astig_0_um", 0.0, -1.0, 1.0, floor=0.02, unit="µm",
+                      meaning="surface Zernike Z(2,2), RMS-normalised over the map's aperture disc"),
+            Parameter("astig_45_um", 0.0, -1.0, 1.0, floor=0.02, unit="µm",
+                      meaning="surface Zernike Z(2,-2), RMS-normalised over the map's aperture disc")),
+           description="mount-induced surface astigmatism (Zernike (2,2) and (2,-2), RMS-normalised over the aperture)",
+           vector=True, draw_truth=effect_draws.astigmatism, truth_stage="map", summary=_summary_astigmatism),
+    Effect("amplitude_scale", ("surface", "line_profile", "psf_image"),
+           (Parameter("scale", 1.0, 0.3, 3.0, floor=0.05, unit="1",
+                      meaning="deformation amplitude of blank <blank> relative to the simulation's"),), per_blank=True,
+           description="deformation amplitude differs (NiP thickness or polish; e.g. a re-polished blank)",
+           rescales=True, draw_truth=effect_draws.amplitude_scale, summary=_summary_scale),
+    Effect("temperature", ("surface", "line_profile", "psf_image"),
+           (Parameter("temperature_offset_K", 0.0, -60.0, 80.0, floor=5.0, unit="K",
+                      meaning="true cold temperature minus the stated one (all measurements)"),),
+           description="true cold temperature = stated + offset (exact rescaling by the mismatch strain)",
+           rescales=True, draw_truth=effect_draws.temperature, summary=_summary_temperature),
+    Effect("registration", ("surface",),
+           (Parameter("reg_dx_mm", 0.0, -10.0, 10.0, (-6.0, 0.0, 6.0), floor=0.5, unit="mm",
+                      meaning="map shift d along x"),
+            Parameter("reg_dy_mm", 0.0, -10.0, 10.0, (-5.0, 0.0, 5.0), floor=0.5, unit="mm",
+                      meaning="map shift d along y"),
+            Parameter("reg_rot_deg", 0.0, -5.0, 5.0, floor=0.3, unit="deg",
+                      meaning="map rotation R against the model about the map origin (feature at p appears at R p + d)")),
+           description="measured map shifted/rotated against the model (model feature at p appears at R p + d)",
+           draw_truth=effect_draws.registration, truth_stage="map", summary=_summary_registration),
+    Effect("pupil_shift", ("line_profile", "psf_image"),
+           (Parameter("pupil_x_mm", 0.0, -10.0, 10.0, (-7.0, -3.5, 0.0, 3.5, 7.0), floor=1.0, unit="mm",
+                      meaning="beam footprint offset on the grating along x (dispersion)"),
+            Parameter("pupil_y_mm", 0.0, -10.0, 10.0, (0.0, 4.5), floor=3.0, unit="mm",
+                      meaning="beam footprint offset on the grating along y (rulings)")),
+           description="beam footprint offset on the grating (x dispersion, y ruling), common to all profiles",
+           vector=True, draw_truth=effect_draws.pupil_shift, summary=_summary_pupil),
+    Effect("collimator_wfe", ("line_profile", "psf_image"),
+           (Parameter("coll_coma_um", 0.0, -0.4, 0.4, floor=0.04, unit="µm",
+                      meaning="extra wavefront Zernike Z(3,1), RMS-normalised over the 110 mm pupil"),
+            Parameter("coll_defocus_um", 0.0, -0.4, 0.4, floor=0.04, unit="µm",
+                      meaning="extra wavefront Zernike Z(2,0), RMS-normalised over the 110 mm pupil"),
+            Parameter("coll_astig45_um", 0.0, -0.4, 0.4, floor=0.06, unit="µm",
+                      meaning="extra wavefront Zernike Z(2,-2), RMS-normalised over the 110 mm pupil")),
+           description="extra low-order spectrograph WFE (RMS-normalised Zernike over the 110 mm pupil)",
+           vector=True, draw_truth=effect_draws.collimator_wfe, summary=_summary_collimator),
+    Effect("slit_width", ("line_profile",),
+           (Parameter("slit_image_width_um", NOMINAL_SLIT_UM, 15.0, 45.0, floor=1.0, unit="µm",
+                      meaning="geometric slit image width on the detector (J, H, K; HK scaled alike from 29 µm)"),),
+           description="geometric slit image width differs from 27 µm (29 µm for HK, scaled alike)",
+           draw_truth=effect_draws.slit_width, summary=_summary_slit),
+    Effect("plating_gradient", ("surface", "line_profile", "psf_image"),
+           (Parameter("plating_grad_x", 0.0, -0.1, 0.1, floor=0.01, unit="1",
+                      meaning="relative deformation change at x = +70 mm (blank coordinates)"),
+            Parameter("plating_grad_y", 0.0, -0.1, 0.1, floor=0.01, unit="1",
+                      meaning="relative deformation change at y = +70 mm (blank coordinates)")),
+           description="NiP thickness gradient across the blank: deformation x (1 + gx x/70 mm + gy y/70 mm) "
+                       "(blank coordinates; gx, gy = relative amplitude change at the blank's half-width)",
+           vector=True, companion=True, summary=_summary_plating),
+    Effect("blank_bow", ("surface", "line_profile", "psf_image"),
+           (Parameter("bow_defocus_um", 0.0, -0.2, 0.2, floor=0.01, unit="µm",
+                      meaning="surface Zernike Z(2,0), RMS-normalised over a 70 mm radius disc, at cold_K"),
+            Parameter("bow_spherical_um", 0.0, -0.2, 0.2, floor=0.01, unit="µm",
+                      meaning="surface Zernike Z(4,0), RMS-normalised over a 70 mm radius disc, at cold_K")),
+           description="rotationally symmetric figure change of the cold blank: Zernike (2,0) and (4,0), "
+                       "RMS-normalised over a 70 mm radius disc in blank coordinates, at the simulation's cold_K "
+                       "(scaled with the deformation)",
+           vector=True, companion=True, requires=("surface",), summary=_summary_bow),
+    Effect("quilt_shape", ("surface", "line_profile", "psf_image"),
+           (Parameter("quilt_fund_xy_ratio", 1.0, 0.3, 3.0, (0.6, 1.0, 1.6), floor=0.05, unit="1",
+                      meaning="y fundamental (18 mm) relative to the x fundamental (21 mm), over the nominal's "
+                              "ratio (x fundamental held)", kinds=_MAP_AND_IMAGE),
+            Parameter("quilt_harmonics_ratio", 1.0, -1.0, 3.0, (0.0, 1.0, 2.0), floor=0.2, unit="1",
+                      meaning="quilt harmonics other than the (1, ±1) cross terms relative to the fundamentals, "
+                              "over the nominal's ratio (0: none)"),
+            Parameter("quilt_cross_ratio", 1.0, -1.0, 3.0, floor=0.2, unit="1",
+                      meaning="the quilt's (1, ±1) egg-crate cross terms relative to the fundamentals, over the "
+                              "nominal's ratio (0: a sum-form quilt)"),
+            Parameter("quilt_figure_ratio", 1.0, -1.0, 3.0, floor=0.2, unit="1",
+                      meaning="the smooth figure that is not quilt (edge roll-off, bending) relative to the "
+                              "fundamentals, over the nominal's ratio")),
+           description="the quilt's harmonic content differs from the simulation's: the y fundamental relative "
+                       "to the x fundamental and the higher harmonics relative to both (the fundamentals' "
+                       "amplitude stays amplitude_scale's)",
+           companion=True, background=True, draw_truth=effect_draws.quilt_shape, summary=_summary_quilt),
+)}
+
+#: Half-width (mm) at which ``plating_grad_x/y`` are the relative amplitude change.
+PLATING_GRADIENT_REF_MM = 70.0
+#: Radius (mm, blank coordinates) of the disc over which the ``blank_bow`` Zernike terms
+#: are RMS-normalised: half the blank's 140 mm height, independent of any measurement.
+BOW_REF_RADIUS_MM = 70.0
+#: Radius (mm) of the collimator pupil over which ``collimator_wfe`` terms are RMS-normalised.
+COLLIMATOR_PUPIL_RADIUS_MM = 55.0
+
+
+def draw_campaign_truth(effect: str, kind: str, rng, blank: str) -> dict:
+    """The campaign's random truth of library ``effect`` for a case of measurement ``kind``
+    on grating blank ``blank`` (``Effect.draw_truth``)."""
+    if effect not in LIBRARY:
+        raise ValueError(f"draw_campaign_truth: effect={effect!r} is not in the library; valid: {sorted(LIBRARY)}")
+    e = LIBRARY[effect]
+    if e.draw_truth is None:
+        raise ValueError(f"draw_campaign_truth: effect={effect!r} has no campaign truth draw (Effect.draw_truth); "
+                         f"valid: {sorted(n for n, x in LIBRARY.items() if x.draw_truth is not None)}")
+    return e.draw_truth(rng, kind, blank)
+
+
+def effect_parameters(effect: Effect, blanks: tuple[str, ...], kinds=None) -> tuple[Parameter, ...]:
+    """The concrete parameters of ``effect`` for data seeing ``blanks``; with ``kinds`` (the
+    measurement kinds in the data), only the parameters that change one of them."""
+    params = effect.parameters
+    if kinds is not None:
+        params = tuple(p for p in params if set(p.kinds or effect.kinds) & set(kinds))
+    if not effect.per_blank:
+        return params
+    from dataclasses import replace
+
+    return tuple(replace(p, name=f"{p.name}_{b}") for p in params for b in blanks)
+
+
+def parameter_spec(name: str) -> Parameter:
+    """The library parameter called ``name`` (a per-blank copy ``scale_<blank>`` resolves to
+    its template ``scale``)."""
+    for e in LIBRARY.values():
+        for p in e.parameters:
+            if name == p.name or (e.per_blank and name.startswith(p.name + "_")):
+                return p
+    raise ValueError(f"parameter {name!r} is not in the effect library; valid: "
+                     f"{[p.name for e in LIBRARY.values() for p in e.parameters]}")
+
+
+def parameter_units(names) -> dict:
+    """``{parameter name: unit}`` for library parameter names (per-blank copies included)."""
+    return {n: parameter_spec(n).unit for n in names}
+
+
+def applicable_effects(kinds: set[str], names: tuple[str, ...] | None = None) -> tuple[Effect, ...]:
+    """Library effects that change at least one of the measurement ``kinds`` present."""
+    unknown = set(names or ()) - set(LIBRARY)
+    if unknown:
+        raise ValueError(f"effects {sorted(unknown)} are unknown; valid: {sorted(LIBRARY)}")
+    chosen = LIBRARY if names is None else {n: LIBRARY[n] for n in names}
+    return tuple(e for e in chosen.values() if set(e.kinds) & kinds and set(e.requires) <= kinds)
 
 
 def physical_summary(effects, parameters: dict, ctx: SummaryContext) -> dict:
@@ -388,8 +445,8 @@ def physical_summary(effects, parameters: dict, ctx: SummaryContext) -> dict:
     out = {}
     for e in effects:
         own = {q.name: parameters[q.name] for q in effect_parameters(LIBRARY[e], ctx.blanks) if q.name in parameters}
-        if own:
-            out[e] = _SUMMARIES[e](own, ctx)
+        if own and LIBRARY[e].summary is not None:
+            out[e] = LIBRARY[e].summary(own, ctx)
     if ctx.quilt_weights and "quilt_shape" in out:
         _add_projection(out, parameters, ctx)
     return out

@@ -29,7 +29,7 @@ from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
 
-from .effects import BOW_REF_RADIUS_MM, NOMINAL_SLIT_UM, PLATING_GRADIENT_REF_MM, parameter_spec
+from .effects import BOW_REF_RADIUS_MM, LIBRARY, NOMINAL_SLIT_UM, PLATING_GRADIENT_REF_MM, parameter_spec
 from .manifest import ProfileData, SurfaceData
 from .noise import estimate_noise
 from .nominal import DEFAULT_MATERIALS, thermal_factor
@@ -192,10 +192,10 @@ class SurfaceForward:
 
 
 #: Parameters that change the spectrograph image (profiles and PSF images) beyond the
-#: deformation's overall factor: the memo key of the image models.
-PROFILE_KEYS = ("pupil_x_mm", "pupil_y_mm", "coll_coma_um", "coll_defocus_um", "coll_astig45_um", "slit_image_width_um",
-                "plating_grad_x", "plating_grad_y", "bow_defocus_um", "bow_spherical_um", "quilt_fund_xy_ratio",
-                "quilt_harmonics_ratio", "quilt_cross_ratio", "quilt_figure_ratio")
+#: deformation's overall factor: the memo key of the image models. Every parameter of a
+#: library effect that changes a profile or an image and is not a rescaling (``Effect.rescales``).
+PROFILE_KEYS = tuple(p.name for e in LIBRARY.values() if set(e.kinds) & {"line_profile", "psf_image"} and not e.rescales
+                     for p in e.parameters)
 
 
 def collimator_terms(p: dict) -> dict:

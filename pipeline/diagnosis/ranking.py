@@ -179,9 +179,10 @@ def mismatch_errors(chosen: Finding, alternatives: list, own) -> dict:
 
 
 def _same_rescaling(names, prob) -> bool:
-    """temperature + amplitude_scale is redundant: the per-blank scales absorb any common
-    temperature factor (exactly, for one cold temperature per blank)."""
-    return {"temperature", "amplitude_scale"} <= set(names)
+    """Two rescaling effects (``Effect.rescales``: temperature + amplitude_scale) are
+    redundant: the per-blank scales absorb any common temperature factor (exactly, for one
+    cold temperature per blank)."""
+    return sum(LIBRARY[n].rescales for n in names) >= 2
 
 
 def _rank_key(f: Finding, c: Criteria) -> float:

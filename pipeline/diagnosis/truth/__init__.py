@@ -34,7 +34,9 @@ Shared (deliberately, as data or physics the diagnosis is meant to assume):
 * the instrument's default collimator wavefront (the numbers of
   :data:`optics.pupil.DEFAULT_COLLIMATOR_ZERNIKE_UM`), the effects' parameter
   conventions (so the injected values mean what the library's do), and the manifest
-  and file formats the diagnosis reads.
+  and file formats the diagnosis reads;
+* the random magnitudes of the library effects' truths (:data:`pipeline.diagnosis.effect_draws.DRAWS`,
+  random numbers only), so that both truths inject the same effects at the same sizes.
 """
 
 from .abbe import AbbeSettings, abbe_line_profile

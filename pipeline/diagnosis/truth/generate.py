@@ -16,6 +16,7 @@ from scipy.ndimage import gaussian_filter
 
 from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
 
+from ..effect_draws import DRAWS
 from ..manifest import NOMINAL_SIMULATION
 from ..nominal import thermal_factor
 from .abbe import GRATINGS, RELATIVE_NA, AbbeSettings, abbe_line_profile, zernike_noll
@@ -46,10 +47,6 @@ SURFACE_T_K = 128.0
 APERTURE_MM = 137.0
 #: The instrument's collimator wavefront (shared data: the model's default collimator).
 COLLIMATOR_UM = dict(DEFAULT_COLLIMATOR_ZERNIKE_UM)
-
-
-def _signed(rng, lo, hi):
-    return float(rng.choice([-1.0, 1.0]) * rng.uniform(lo, hi))
 
 
 def check_families(families) -> tuple:
@@ -132,55 +129,43 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
     truth: dict = {}
     if kind == "surface":
         scale, T, extra, reg = 1.0, SURFACE_T_K, None, None
-        if effect == "amplitude_scale":
-            scale = float(rng.choice([rng.uniform(0.6, 0.85), rng.uniform(1.2, 1.6)]))
-            truth = {"scale_spare": scale}
-        elif effect == "temperature":
-            dT = _signed(rng, 20.0, 50.0)
-            T, truth = SURFACE_T_K + dT, {"temperature_offset_K": dT}
-        elif effect == "astigmatism":
-            a, th = rng.uniform(0.04, 0.15), rng.uniform(0, 2 * np.pi)
-            truth = {"astig_0_um": a * math.cos(th), "astig_45_um": a * math.sin(th)}
-            R = 0.5 * APERTURE_MM
-
-            def extra(x, y):
-                rho, t = np.hypot(x, y) / R, np.arctan2(y, x)
-                return truth["astig_0_um"] * zernike_noll(2, 2, rho, t) + truth["astig_45_um"] * zernike_noll(2, -2, rho, t)
-        elif effect == "registration":
-            r, th = rng.uniform(1.5, 5.0), rng.uniform(0, 2 * np.pi)
-            truth = {"reg_dx_mm": r * math.cos(th), "reg_dy_mm": r * math.sin(th), "reg_rot_deg": rng.uniform(-1.5, 1.5)}
-            reg = (truth["reg_dx_mm"], truth["reg_dy_mm"], truth["reg_rot_deg"])
-        elif effect in SURFACE_OOL:
+        if (kind, effect) not in CASE_TYPES:
+            raise ValueError(f"make_case: surface effect={effect!r} is not a case type of the independent truth")
+        if effect in SURFACE_OOL:
             truth, extra = draw_surface_ool(effect, rng)
         else:
-            raise ValueError(f"make_case: surface effect={effect!r} is not a case type of the independent truth")
+            truth = DRAWS[effect](rng, kind, "spare")
+            scale = truth.get("scale_spare", 1.0)
+            if "temperature_offset_K" in truth:
+                T = SURFACE_T_K + truth["temperature_offset_K"]
+            if "astig_0_um" in truth:
+                R = 0.5 * APERTURE_MM
+
+                def extra(x, y):
+                    rho, t = np.hypot(x, y) / R, np.arctan2(y, x)
+                    return truth["astig_0_um"] * zernike_noll(2, 2, rho, t) + truth["astig_45_um"] * zernike_noll(2, -2, rho, t)
+            if "reg_dx_mm" in truth:
+                reg = (truth["reg_dx_mm"], truth["reg_dy_mm"], truth["reg_rot_deg"])
         x, y, z = measured_map(g, scale * thermal_factor(T, _COLD_K), rng, extra, reg, cfg.noise_um)
         np.savez(out / "map.npz", x_mm=x, y_mm=y, sag_um=z)
         meas = [{"kind": "surface", "file": "map.npz", "temperature_K": SURFACE_T_K, "aperture_diameter_mm": APERTURE_MM}]
         return {"simulation": sim, "measurement": meas}, {**truth, "_present": ["quilt_shape"], "_truth": meta}
     scale, shift, coll, slit, distortion, camera, artefact = 1.0, (0.0, 0.0), dict(COLLIMATOR_UM), None, None, None, None
-    if effect == "amplitude_scale":
-        scale = float(rng.choice([rng.uniform(0.6, 0.85), rng.uniform(1.2, 1.6)]))
-        truth = {"scale_J": scale}
-    elif effect == "temperature":
-        dT = rng.uniform(35.0, 75.0)
-        scale, truth = thermal_factor(_COLD_K + dT, _COLD_K), {"temperature_offset_K": dT}
-    elif effect == "pupil_shift":
-        truth = {"pupil_x_mm": _signed(rng, 3.0, 8.0), "pupil_y_mm": rng.uniform(-3.0, 3.0)}
-        shift = (truth["pupil_x_mm"], truth["pupil_y_mm"])
-    elif effect == "collimator_wfe":
-        v = rng.normal(size=3)
-        v *= rng.uniform(0.15, 0.35) / np.linalg.norm(v)
-        truth = {"coll_coma_um": v[0], "coll_defocus_um": v[1], "coll_astig45_um": v[2]}
-        for key, nm in (("coll_coma_um", (3, 1)), ("coll_defocus_um", (2, 0)), ("coll_astig45_um", (2, -2))):
-            coll[nm] = coll.get(nm, 0.0) + truth[key]
-    elif effect == "slit_width":
-        truth = {"slit_image_width_um": float(rng.choice([rng.uniform(19.0, 23.0), rng.uniform(31.0, 38.0)]))}
-        slit = truth["slit_image_width_um"]
-    elif effect in PROFILE_OOL:
+    if (kind, effect) not in CASE_TYPES:
+        raise ValueError(f"make_case: line_profile effect={effect!r} is not a case type of the independent truth")
+    if effect in PROFILE_OOL:
         truth, distortion, camera, artefact = draw_profile_ool(effect, rng)
     else:
-        raise ValueError(f"make_case: line_profile effect={effect!r} is not a case type of the independent truth")
+        truth = DRAWS[effect](rng, kind, "J")
+        scale = truth.get("scale_J", 1.0)
+        if "temperature_offset_K" in truth:
+            scale = thermal_factor(_COLD_K + truth["temperature_offset_K"], _COLD_K)
+        if "pupil_x_mm" in truth:
+            shift = (truth["pupil_x_mm"], truth["pupil_y_mm"])
+        for key, nm in (("coll_coma_um", (3, 1)), ("coll_defocus_um", (2, 0)), ("coll_astig45_um", (2, -2))):
+            if key in truth:
+                coll[nm] = coll.get(nm, 0.0) + truth[key]
+        slit = truth.get("slit_image_width_um")
     sag = sag_function(g.scaled(scale))
     meas = []
     for i, (gr, wl, order, ps) in enumerate(cfg.profile_specs):
