@@ -2,7 +2,7 @@
 (:mod:`pipeline.diagnosis.truth.abbe`) against the project's line profiles
 (:func:`optics.lineprofile.line_profile`, converged settings): L1 difference of the
 unit-area detected J 1.25 µm profiles (order -2, default collimator) and the budget of
-both codes' discretisation errors (``tests/test_truth.py::_cross_check``). Prints a
+both codes' discretisation errors (``tests/test_truth.py::abbe_cross_check``). Prints a
 Markdown table.
 
     .venv/bin/python benchmarks/bench_truth_crosscheck.py [--cache-dir DIR]
@@ -18,7 +18,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from pipeline.diagnosis.nominal import fea_sag_map  # noqa: E402
-from test_truth import _cross_check  # noqa: E402
+from test_truth import abbe_cross_check  # noqa: E402
 
 
 def main(argv=None):
@@ -33,7 +33,7 @@ def main(argv=None):
             if m is None and shift != (0.0, 0.0):
                 continue
             t = time.perf_counter()
-            diff, tol, _ = _cross_check(mas, m, shift)
+            diff, tol, _ = abbe_cross_check(mas, m, shift)
             print(f"| {label} | {mas} mas | {shift} | {100 * diff:.3f} % | {100 * tol:.3f} % | "
                   f"{time.perf_counter() - t:.0f} |", flush=True)
 

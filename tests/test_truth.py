@@ -37,7 +37,7 @@ def _sagf(m):
     return sag_function(type("G", (), {"x_mm": m.x_mm, "y_mm": m.y_mm, "sag_um": m.sag_um})())
 
 
-def _cross_check(mas, sag_map, shift=(0.0, 0.0)):
+def abbe_cross_check(mas, sag_map, shift=(0.0, 0.0)):
     """(difference, tolerance) of the Abbe sum against the project's converged profile.
 
     Tolerance: each code's discretisation error, estimated from its own refinement
@@ -100,7 +100,7 @@ def test_surface_tilt_moves_line_by_geometric_reflection():
 def test_abbe_sum_agrees_with_project_perfect_grating():
     """Perfect J grating, 1.25 µm, 100 mas, default collimator. Measured: 0.040 % L1
     against a budget of 0.084 % (benchmarks/results_truth.md)."""
-    diff, tol, _ = _cross_check(100, None)
+    diff, tol, _ = abbe_cross_check(100, None)
     assert diff <= tol, (diff, tol)
 
 
@@ -109,7 +109,7 @@ def test_abbe_sum_agrees_with_project_on_quilt_and_fixes_the_grating_sign():
     codes agree within the budget, and the opposite sign of the grating phase (surface
     pushed away from the light) disagrees by far more: the sign is a real check."""
     q = quilt_sag_map(0.6, "product", spacing_mm=0.5)
-    diff, tol, base = _cross_check(25, q, shift=(3.0, 2.0))
+    diff, tol, base = abbe_cross_check(25, q, shift=(3.0, 2.0))
     assert diff <= tol, (diff, tol)
     flipped = abbe_line_profile("J", 1.25, -2, 0.1, lambda x, y: -_sagf(q)(x, y), pupil_shift_mm=(3.0, 2.0),
                                 collimator_um=COLL)
@@ -126,7 +126,7 @@ def test_abbe_sum_agrees_with_project_on_fea_map():
 
     m = solve(200, 0.75, mesh=MeshSpec(size_mm=5.0, size_bulk_mm=10.0)).sag.sag_map(0.5)
     for mas, shift in ((250, (0.0, 0.0)), (25, (3.0, 2.0))):
-        diff, tol, _ = _cross_check(mas, m, shift)
+        diff, tol, _ = abbe_cross_check(mas, m, shift)
         assert diff <= tol, (mas, diff, tol)
 
 
