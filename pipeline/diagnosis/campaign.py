@@ -419,7 +419,7 @@ def run_case(args) -> dict:
                     "correct": False, "recovery_error": None, "recovery_error_vector": None,
                     "within_2sigma": None, "seconds": time.perf_counter() - t0}
     best = d.best
-    in_lib = effect in LIBRARY
+    own = d.finding(effect) if effect in LIBRARY else None  # the injected effect's own fit
     rec = recovery_errors(d, effect, truth)
     correct, false_companions = score_case(d.verdict, best, effect, present)
     return {"index": index, "kind": kind, "effect": effect, "truth": truth, "truth_info": truth_info,
@@ -431,11 +431,11 @@ def run_case(args) -> dict:
             "correct": correct, "recovery_error": rec["per_parameter"] if rec else None,
             "recovery_error_vector": rec["vector"] if rec else None,
             "within_2sigma": rec["within_2sigma"] if rec else None,
-            "uncertainties": d.finding(effect).uncertainties if in_lib and d.finding(effect) else None,
-            "fitted": d.finding(effect).parameters if in_lib and d.finding(effect) else None,
-            "fitted_summary": d.finding(effect).summary if in_lib and d.finding(effect) else None,
-            "sign_degenerate": list(d.finding(effect).sign_degenerate) if in_lib and d.finding(effect) else [],
-            "companions": list(d.finding(effect).companions) if in_lib and d.finding(effect) else [],
+            "uncertainties": own.uncertainties if own else None,
+            "fitted": own.parameters if own else None,
+            "fitted_summary": own.summary if own else None,
+            "sign_degenerate": list(own.sign_degenerate) if own else [],
+            "companions": list(own.companions) if own else [],
             "top_companions": list(best.companions) if best else [],
             "top_absorbs": best.absorbs if best else {},
             "top_excess_explained": best.excess_explained if best else None,
