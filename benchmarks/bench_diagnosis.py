@@ -71,7 +71,7 @@ def main(argv=None):
     cfg = CampaignConfig(n_cases=a.cases, seed=a.seed, workers=a.workers, profile_specs=PROFILE_SETS[a.profiles],
                          profile_map_K=a.profile_map_K, psf_image=PSF_IMAGE_SPEC if a.psf_image else None,
                          only_types=parse_types(a.types, a.truth), discrepancy=a.discrepancy, criteria=criteria,
-                         truth=a.truth, truth_families=tuple(f.strip() for f in a.truth_families.split(",")))
+                         truth=a.truth, truth_families=a.truth_families)
     res = run_campaign(cfg, cache_dir=a.cache_dir, progress=a.progress)
     res["profile_set"] = a.profiles
     out["campaign"] = res

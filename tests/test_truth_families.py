@@ -136,7 +136,8 @@ def test_family_selection_and_default_draw_order():
     for fam in ("pocket_jitter", "sharp_ribs"):
         assert {truth_grating(nom, fea, np.random.default_rng(s), (fam,)).family for s in range(2)} == {fam}
     assert check_families("sharp_ribs") == ("sharp_ribs",) and set(GRATING_FAMILIES) >= set(FAMILIES)
-    for bad in (("nope",), (), ("sum_mix", "sum_mix")):
+    assert check_families("pocket_jitter, sharp_ribs") == ("pocket_jitter", "sharp_ribs")  # as typed on a command line
+    for bad in (("nope",), (), ("sum_mix", "sum_mix"), "sum_mix,,sharp_ribs"):
         with pytest.raises(ValueError, match="truth_families="):
             check_families(bad)
 

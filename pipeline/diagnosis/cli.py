@@ -39,7 +39,7 @@ def _run(args) -> int:
                              profile_specs=PROFILE_SETS[args.profiles], profile_map_K=args.profile_map_K,
                              psf_image=PSF_IMAGE_SPEC if args.psf_image else None,
                              only_types=parse_types(args.types, args.truth), discrepancy=args.discrepancy,
-                             truth=args.truth, truth_families=tuple(f.strip() for f in args.truth_families.split(",")))
+                             truth=args.truth, truth_families=args.truth_families)
         cfg = replace(cfg, criteria=_criteria(args, cfg.criteria))
         ensure_writable_dir(args.out, "--out")  # before the campaign, not after it
         warn_if_long(campaign_seconds(args.cases, args.workers, args.profile_map_K is not None, args.psf_image),

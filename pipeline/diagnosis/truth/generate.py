@@ -50,8 +50,9 @@ COLLIMATOR_UM = dict(DEFAULT_COLLIMATOR_ZERNIKE_UM)
 
 
 def check_families(families) -> tuple:
-    """``families`` as a tuple of :data:`GRATING_FAMILIES` names; ValueError otherwise."""
-    fams = (families,) if isinstance(families, str) else tuple(families)
+    """``families`` (names, or one comma-separated string as typed on a command line) as a
+    tuple of :data:`GRATING_FAMILIES` names; ValueError otherwise."""
+    fams = tuple(f.strip() for f in families.split(",")) if isinstance(families, str) else tuple(families)
     bad = [f for f in fams if f not in GRATING_FAMILIES]
     if not fams or bad or len(set(fams)) != len(fams):
         raise ValueError(f"truth_families={fams!r} must be distinct names from {list(GRATING_FAMILIES)} (at least one)")
