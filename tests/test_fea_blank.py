@@ -73,7 +73,7 @@ def test_symmetric_parts_agree_with_the_full_model(eighth, symmetry):
     assert np.sqrt(np.nanmean(dc**2)) < 0.02 * ref.sag.pv_um("center")
 
 
-@pytest.mark.slow  # several FEA solves compared (15-25 s each on 2 cores): the full tier
+@pytest.mark.slow  # several FEA solves compared, among the slowest tests of the fast tier: the full tier
 def test_asymmetric_polish_uses_a_quarter_model_and_tilts_nothing():
     r = solve(200, 0.5, polish_back=1.0, mesh=COARSE)
     assert "sym_z" not in r.info["symmetry_planes"]
@@ -81,7 +81,7 @@ def test_asymmetric_polish_uses_a_quarter_model_and_tilts_nothing():
     assert r.sag.pv_um("center") != pytest.approx(sym.sag.pv_um("center"), rel=1e-3)
 
 
-@pytest.mark.slow  # several FEA solves compared (15-25 s each on 2 cores): the full tier
+@pytest.mark.slow  # several FEA solves compared, among the slowest tests of the fast tier: the full tier
 def test_off_midplane_holes_use_a_quarter_model():
     r = solve(200, 0.75, blank=Blank(hole_axis_z_mm=1.0), mesh=COARSE)
     assert r.info["symmetry_planes"] == ["sym_x", "sym_y"]

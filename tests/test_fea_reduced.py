@@ -36,7 +36,7 @@ def test_thickness_polynomial_is_exact(model):
         assert np.abs(1e-3 * powers(t_mm) @ poly.load_coeffs - load).max() <= 1e-9 * np.abs(load).max()
 
 
-@pytest.mark.slow  # several FEA solves compared (15-25 s each on 2 cores): the full tier
+@pytest.mark.slow  # several FEA solves compared, among the slowest tests of the fast tier: the full tier
 def test_iterative_shared_solve_equals_direct(model):
     """CG with a shared factor and reduced-basis start gives the direct solve's answer."""
     cases = [Coating.symmetric(200, 0.75, "all"), Coating.symmetric(100, 1.0, "holes"),
@@ -140,7 +140,7 @@ def test_batched_statistics_equal_per_case(model):
             assert m[k] == pytest.approx(v, rel=1e-10, abs=1e-14), k
 
 
-@pytest.mark.slow  # several FEA solves compared (15-25 s each on 2 cores): the full tier
+@pytest.mark.slow  # several FEA solves compared, among the slowest tests of the fast tier: the full tier
 def test_solve_many_lockstep_equals_one_by_one(model):
     """Block CG over several cases (one factor, block substitutions) = solve() per case."""
     cases = [Coating.symmetric(200, 0.75, "all"), Coating.symmetric(100, 1.0, "holes"),
@@ -164,7 +164,7 @@ def test_solve_many_lockstep_equals_one_by_one(model):
         assert g.sag.pv_um("center") == pytest.approx(r.sag.pv_um("center"), rel=1e-5)
 
 
-@pytest.mark.slow  # several FEA solves compared (15-25 s each on 2 cores): the full tier
+@pytest.mark.slow  # several FEA solves compared, among the slowest tests of the fast tier: the full tier
 def test_sweep_runner_solves_planned_cases_in_blocks(tmp_path):
     """An inline sweep plans its cases: the FEA runner solves them as one lockstep block,
     with the answers of one-by-one solves."""
