@@ -309,16 +309,17 @@ class SharedFactor:
         self._backend: str | None = None
 
     def held(self, backend: str) -> SPDFactor | None:
-        """The factor kept for ``backend`` (as the caller names it), or None; a factor
-        kept for another back-end is released."""
-        if self._factor is not None and self._backend != backend:
+        """The factor kept for ``backend``, or None; a factor kept for another back-end is
+        released. Names are compared resolved (``"auto"`` is the back-end it picks), so a
+        caller naming ``"auto"`` reuses a factor kept as ``"pardiso"``."""
+        if self._factor is not None and self._backend != resolve_backend(backend):
             self.release()
         return self._factor
 
     def factorise(self, K: sp.spmatrix, backend: str, coords_mm=None, free=None) -> SPDFactor:
         """Factorise ``K`` and keep the factor for the following systems (see :class:`SPDFactor`)."""
         self.release()
-        self._factor, self._backend = SPDFactor(K, backend, coords_mm, free), backend
+        self._factor, self._backend = SPDFactor(K, backend, coords_mm, free), resolve_backend(backend)
         return self._factor
 
     def release(self) -> None:

@@ -75,3 +75,16 @@ def test_shared_factor_is_reused_then_released_for_a_far_case():
     strict.solve(K, None, F[:, 0], backend="pardiso", rtol=1e-10)
     strict.solve(K, lambda v: 0.5 * (E @ v), F[:, 0], backend="pardiso", rtol=1e-10)
     assert strict.held("pardiso") is None  # a shared-factor case with > 0 iterations released it
+
+
+@pytest.mark.skipif("pardiso" not in available_backends(), reason="needs pypardiso")
+def test_shared_factor_kept_as_pardiso_serves_a_caller_naming_auto():
+    """"auto" resolves to pardiso when it is installed: the same back-end, so the kept factor
+    is reused instead of refactorising."""
+    K, W, c, F = _system(n=200, k=1)
+    shared = SharedFactor(refactor_after_iterations=14)
+    shared.solve(K, None, F[:, 0], backend="pardiso", rtol=1e-10)
+    assert shared.held("auto") is not None
+    info = {}
+    shared.solve(K, None, F[:, 0], backend="auto", rtol=1e-10, info=info)
+    assert info["preconditioner"] == "shared"
