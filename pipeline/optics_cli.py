@@ -17,6 +17,7 @@ __all__ = ["register", "main", "load_sag_map"]
 
 from pipeline.io.registry import load_sag_map  # noqa: E402  (.npz/.nc/.int/.dat/.csv)
 from pipeline.io.common import atomic_path, atomic_write, ensure_writable_dir  # noqa: E402
+from pipeline.io.measured import write_line_profile_csv  # noqa: E402
 
 
 #: Largest analytic quilt P/V (µm) the line-profile and PSF pupils sample without aliasing:
@@ -74,9 +75,7 @@ def _run_lsf(a) -> int:
     res = line_profile(a.grating, a.wavelength_um, a.pixel_scale_mas, sag, **kw)
     perfect = line_profile(a.grating, a.wavelength_um, a.pixel_scale_mas, None, **kw)
     d = res.detected
-    with atomic_write(out / "lsf.csv") as fh:
-        np.savetxt(fh, np.column_stack([d.offset_um, d.intensity]), delimiter=",",
-                   header="offset_um,intensity", comments="", fmt="%.6g")
+    write_line_profile_csv(out / "lsf.csv", d.offset_um, d.intensity)
     report = {"info": res.info, "metrics": profile_metrics(d), "perfect_metrics": profile_metrics(perfect.detected),
               "partially_coherent_metrics": profile_metrics(res.partially_coherent)}
     with atomic_write(out / "metrics.json") as fh:

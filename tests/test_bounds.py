@@ -11,19 +11,31 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import pipeline.study.cases as cases_module
 import pipeline.study.config as config_module
+import pipeline.study.profile_specs as profile_specs_module
+import pipeline.study.study_config as study_config_module
 from cli_checks import never, one_error_line
 from pipeline.bounds import (LONG_RUN_S, MAX_CAMPAIGN_CASES, MAX_FEA_CASES, MAX_PROFILE_JOBS, SECONDS,
                              campaign_seconds, warn_if_long)
 from pipeline.cli import main
-from pipeline.study.config import ConfigError, FEAGroup, StudyConfig, loads_study_config
+from pipeline.study.cases import CaseSelector, FEAGroup
+from pipeline.study.config import loads_study_config
+from pipeline.study.schema import ConfigError
+from pipeline.study.study_config import StudyConfig
 from pipeline.diagnosis.campaign import CampaignConfig
 from pipeline.diagnosis.manifest import parse_manifest
 
 
 # ------------------------------------------------------------------ bounded work
+def _lower_cap(monkeypatch, name, value, *modules):
+    """Lower one cap of pipeline/bounds.py in every study module that enforces it."""
+    for module in modules:
+        monkeypatch.setattr(module, name, value)
+
+
 def test_study_case_cap_refused_before_any_case_is_validated(monkeypatch):
-    monkeypatch.setattr(config_module, "_check_case", never)
+    monkeypatch.setattr(cases_module, "_check_case", never)
     text = "[fea]\nt0_um = {start = 0.1, stop = 2000, num = %d}\n" % (MAX_FEA_CASES + 1)
     with pytest.raises(ConfigError, match=rf"fea: {MAX_FEA_CASES + 1} FEA cases is outside the valid range "
                                           rf"1\.\.{MAX_FEA_CASES}"):
@@ -31,7 +43,7 @@ def test_study_case_cap_refused_before_any_case_is_validated(monkeypatch):
 
 
 def test_case_cap_counts_every_table_of_the_study(monkeypatch):
-    monkeypatch.setattr(config_module, "MAX_FEA_CASES", 5)
+    _lower_cap(monkeypatch, "MAX_FEA_CASES", 5, config_module, cases_module, study_config_module)
     text = ("[fea]\nmesh_size_mm = 5\nmesh_bulk_mm = 5\n[[fea.cases]]\nt0_um = [100, 150, 200]\n"
             "[[fea.cases]]\nname = 'b'\nt0_um = [120, 170, 220]\n")
     with pytest.raises(ConfigError, match=r"fea\.cases\[1\]: 6 FEA cases up to this table .* 1\.\.5"):
@@ -51,7 +63,7 @@ def test_profile_cap_refused_before_the_grating_equation_runs():
 
 
 def test_profile_cap_counts_the_whole_study(monkeypatch):
-    monkeypatch.setattr(config_module, "MAX_PROFILE_JOBS", 10)
+    _lower_cap(monkeypatch, "MAX_PROFILE_JOBS", 10, profile_specs_module, study_config_module)
     # 2 tables x 3 pixel scales x (perfect + 1 case) = 12 profiles
     table = "[[profiles]]\ngrating = 'J'\ndeformation = ['perfect', {t0_um = 200}]\n"
     text = "[fea]\nmesh_size_mm = 5\nmesh_bulk_mm = 5\n" + table + table.replace("'J'", "'K'")
@@ -69,13 +81,13 @@ def _selector_study(n):
 def test_config_check_is_linear_in_the_number_of_cases(monkeypatch):
     """A selector per case: value lookups grow as the cases (a scan per selector grew as n^2)."""
     calls = {"n": 0}
-    token = config_module._token
+    token = study_config_module.canonical_token
 
     def counting(v):
         calls["n"] += 1
         return token(v)
 
-    monkeypatch.setattr(config_module, "_token", counting)
+    monkeypatch.setattr(study_config_module, "canonical_token", counting)
     counts = []
     for n in (150, 300):
         calls["n"] = 0
@@ -87,7 +99,7 @@ def test_config_check_is_linear_in_the_number_of_cases(monkeypatch):
     cfg = loads_study_config(_selector_study(20) + "[[fea.cases]]\nname = 'a'\n[[fea.cases]]\nname = 'hot'\n"
                              "cold_K = 120\n")
     for sel in [{"t0_um": 100.5}, {"group": "hot"}, {"group": "hot", "t0_um": 101.0}, {"cold_K": 80}]:
-        s = config_module.CaseSelector(sel)
+        s = CaseSelector(sel)
         assert cfg.select(s) == [c for c in cfg.cases() if s.matches(c)]
 
 

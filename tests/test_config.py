@@ -8,18 +8,17 @@ import tomllib
 
 import pytest
 
+from pipeline.study.cases import FEAGroup
 from pipeline.study.config import (
-    ConfigError,
-    FEAGroup,
-    ProfileSpec,
-    StudyConfig,
     example_config_text,
     list_presets,
     load_study_config,
     loads_study_config,
     preset_path,
 )
-from pipeline.study.schema import FEA_KEYS, PROFILE_KEYS
+from pipeline.study.profile_specs import ProfileSpec
+from pipeline.study.schema import FEA_KEYS, PROFILE_KEYS, ConfigError
+from pipeline.study.study_config import StudyConfig
 from pipeline.study.run import default_study
 
 

@@ -107,7 +107,8 @@ def test_psf_npz_is_not_left_half_written(tmp_path, monkeypatch, capsys):
 
 def test_cold_above_warm_is_refused_unless_heating_is_asked_for():
     from fea.model import ThermalLoad
-    from pipeline.study.config import ConfigError, loads_study_config
+    from pipeline.study.config import loads_study_config
+    from pipeline.study.schema import ConfigError
 
     with pytest.raises(ValueError, match=r"cold_K=300 K must be below warm_K=293 K"):
         ThermalLoad(warm_K=293.0, cold_K=300.0)

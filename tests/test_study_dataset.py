@@ -143,7 +143,7 @@ def test_exports_round_trip_through_interchange(study):
 def test_exports_switched_off(tmp_path, study):
     from dataclasses import replace
 
-    from pipeline.study.config import OutputOptions
+    from pipeline.study.figure_specs import OutputOptions
     from pipeline.study.run import run_study
 
     out, _ = study

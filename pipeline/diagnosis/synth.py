@@ -19,6 +19,7 @@ import numpy as np
 from optics.lineprofile import LsfSettings
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
+from pipeline.io.measured import write_line_profile_csv
 
 from .forward import blank_shape_um, profile_curve, quilt_parts
 from .quilt import quilt_components
@@ -134,11 +135,8 @@ def synthetic_profile(grating: str, wavelength_um: float, order: int, pixel_scal
 
 
 def write_profile_csv(path, offset_um: np.ndarray, intensity: np.ndarray) -> None:
-    """CSV ``offset_um,intensity`` (header line, then one sample per line)."""
-    with open(path, "w") as fh:
-        fh.write("offset_um,intensity\n")
-        for a, b in zip(offset_um, intensity):
-            fh.write(f"{a:.3f},{b:.6g}\n")
+    """CSV ``offset_um,intensity``: :func:`pipeline.io.measured.write_line_profile_csv`."""
+    write_line_profile_csv(path, offset_um, intensity)
 
 
 def synthetic_psf_image(grating: str, wavelength_um: float, order: int, truth: SagMap, rng: np.random.Generator, *,

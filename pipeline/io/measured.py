@@ -13,7 +13,7 @@ import numpy as np
 
 from pipeline.io.common import atomic_write, parse_error, read_csv_columns
 
-__all__ = ["read_line_profile", "read_psf_image", "write_psf_image_csv"]
+__all__ = ["read_line_profile", "read_psf_image", "write_line_profile_csv", "write_psf_image_csv"]
 
 
 def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -61,6 +61,49 @@ def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndar
         raise parse_error(path, None, f"no flux: the total flux (integral of intensity over offset_um) "
                           f"is {flux:g}, must be > 0")
     return x, (y / flux if normalise else y)
+
+
+def write_line_profile_csv(path: str | Path, offset_um, intensity) -> None:
+    """Write a line profile as the CSV :func:`read_line_profile` reads, atomically.
+
+    Both columns are written in Python's shortest round-trip form (``repr`` of the
+    float), so the file reads back to the very same floats: sub-pixel sample phases a
+    hair apart stay distinct, and no rounding of the writer's enters a fit.
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination ``.csv``; replaced only once the whole file is written.
+    offset_um : array_like, shape (n,)
+        Sample offsets along the dispersion (µm), any order, all distinct.
+    intensity : array_like, shape (n,)
+        Intensity at each offset (any unit: counts or unit area).
+
+    Raises
+    ------
+    ValueError
+        Naming the parameter: not 1-D arrays of one length, no samples, a non-finite
+        value, or a duplicate offset (two samples at one offset are one sample twice).
+    """
+    x = np.asarray(offset_um, dtype=float)
+    y = np.asarray(intensity, dtype=float)
+    if x.ndim != 1 or y.shape != x.shape:
+        raise ValueError(f"offset_um and intensity must be 1-D arrays of one length; got shapes {x.shape} "
+                         f"and {y.shape}")
+    if x.size == 0:
+        raise ValueError("offset_um is empty; a line profile needs at least one sample")
+    for name, v in (("offset_um", x), ("intensity", y)):
+        bad = np.flatnonzero(~np.isfinite(v))
+        if bad.size:
+            raise ValueError(f"{name}[{bad[0]}] = {float(v[bad[0]])!r}; every value must be a finite number")
+    xs = np.sort(x)
+    dup = np.flatnonzero(np.diff(xs) == 0)
+    if dup.size:
+        raise ValueError(f"offset_um has duplicate samples ({float(xs[dup[0]])!r} appears more than once); "
+                         "each offset must be distinct")
+    with atomic_write(Path(path)) as fh:
+        fh.write("offset_um,intensity\n")
+        fh.writelines(f"{a!r},{b!r}\n" for a, b in zip(x.tolist(), y.tolist()))
 
 
 def _load_npz_columns(path: Path, names: tuple[str, ...]) -> np.ndarray:

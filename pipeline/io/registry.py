@@ -35,7 +35,7 @@ from optics.sagmap import SagMap
 from pipeline.io.codev import GridUnknownError, read_codev_int, write_codev_int
 from pipeline.io.codev_zfr import read_codev_zernike, write_codev_zernike
 from pipeline.io.fe import read_fe_result
-from pipeline.io.measured import read_line_profile, read_psf_image, write_psf_image_csv
+from pipeline.io.measured import read_line_profile, read_psf_image, write_line_profile_csv, write_psf_image_csv
 from pipeline.io.plain import (read_sag_csv, read_sag_netcdf, read_sag_npz, write_sag_csv, write_sag_netcdf,
                                write_sag_npz)
 from pipeline.io.zemax import read_zemax_grid_sag, read_zemax_zernike, write_zemax_grid_sag, write_zemax_zernike
@@ -100,8 +100,8 @@ FORMATS: tuple[Format, ...] = (
            write_codev_zernike, "37 terms, unnormalised, waves"),
     Format("zernike list", (".dat",), "Zemax Zernike Standard / Fringe Sag extra data", read_zemax_zernike,
            write_zemax_zernike, "Extra Data Editor order, mm"),
-    Format("line profile", (".csv",), "measured line profile offset_um,intensity", read_line_profile, None,
-           "counts, pedestal, negative noise, any grid accepted"),
+    Format("line profile", (".csv",), "measured line profile offset_um,intensity", read_line_profile,
+           write_line_profile_csv, "counts, pedestal, negative noise, any grid accepted; written exact"),
     Format("psf image", (".csv", ".npz"), "measured point-source image x_um,y_um,intensity", read_psf_image,
            write_psf_image_csv, "counts, pedestal, negative noise, any grid accepted"),
     Format("fe result", (".vtu", ".vtk", ".xdmf", ".exo", ".e", ".msh", ".inp", ".bdf", ".nas"),

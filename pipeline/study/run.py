@@ -1,7 +1,7 @@
 """End-to-end studies: FEA cases → sag maps → line profiles → tables, figures, report.
 
 ``run_study(out_dir, config=None)`` (CLI: ``cryograting run [CONFIG.toml]``) runs a
-:class:`pipeline.study.config.StudyConfig`; without one it runs :func:`default_study`, the
+:class:`pipeline.study.study_config.StudyConfig`; without one it runs :func:`default_study`, the
 paper's study: the 15 FEA cases of Tables 1 and 2; detected line profiles of J, H, K at
 band centre and edges in 250/100/25 mas for a perfect grating and the 200 µm / 75 %
 deformation (J also 200 µm / 50 %); the 1.25 µm line on the J, H and K gratings in
@@ -40,18 +40,8 @@ from optics.metrics import profile_metrics
 from optics.sagmap import SagMap
 from pipeline.bounds import GEOMETRY_KEYS, SECONDS, fea_case_seconds, warn_if_long
 from pipeline.io.common import atomic_path, atomic_write, ensure_writable_dir
-from pipeline.study.config import (
-    CaseSelector,
-    CompareFigure,
-    FEAGroup,
-    OutputOptions,
-    ProfileFigure,
-    ProfileSpec,
-    PsfFigure,
-    SagMapFigure,
-    StudyConfig,
-    load_study_config,
-)
+from pipeline.study.cases import CaseSelector, FEAGroup
+from pipeline.study.config import load_study_config
 from pipeline.study.dataset import (
     REPORT_QUILT,
     REPORT_ZERNIKES,
@@ -61,8 +51,11 @@ from pipeline.study.dataset import (
     write_exports,
     write_study_netcdf,
 )
+from pipeline.study.figure_specs import CompareFigure, OutputOptions, ProfileFigure, PsfFigure, SagMapFigure
 from pipeline.study.plots import plot_line_profiles, plot_multigrating, plot_psfs, plot_sag_maps
+from pipeline.study.profile_specs import ProfileSpec
 from pipeline.study.render3d import start_study_render, study_renders
+from pipeline.study.study_config import StudyConfig
 from pipeline.sweeps.fea_cases import (
     SAG_GRID_X_MM,
     SAG_GRID_Y_MM,

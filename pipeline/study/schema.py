@@ -22,6 +22,7 @@ from fea.case import PARAMETERS
 from pipeline.sweeps.sweep import parse_range
 
 __all__ = [
+    "CAP_HINT",
     "FEA_KEYS",
     "PROFILE_KEYS",
     "ConfigError",
@@ -30,6 +31,9 @@ __all__ = [
     "closest",
     "parse_axis",
 ]
+
+#: The hint of every "too many cases / profiles" error: what usually blows a study up.
+CAP_HINT = "check the ranges (a step too small, a list repeated?)"
 
 
 class ConfigError(ValueError):

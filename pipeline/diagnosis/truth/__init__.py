@@ -34,7 +34,9 @@ Shared (deliberately, as data or physics the diagnosis is meant to assume):
 * the instrument's default collimator wavefront (the numbers of
   :data:`optics.pupil.DEFAULT_COLLIMATOR_ZERNIKE_UM`), the effects' parameter
   conventions (so the injected values mean what the library's do), and the manifest
-  and file formats the diagnosis reads;
+  and file formats the diagnosis reads, with their writers in :mod:`pipeline.io` (file
+  I/O, not model: a line profile goes out through
+  :func:`pipeline.io.measured.write_line_profile_csv`);
 * the random magnitudes of the library effects' truths (:data:`pipeline.diagnosis.effect_draws.DRAWS`,
   random numbers only), so that both truths inject the same effects at the same sizes.
 """

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
+from pipeline.io.measured import write_line_profile_csv
 
 from ..effect_draws import DRAWS
 from ..manifest import NOMINAL_SIMULATION
@@ -100,16 +101,11 @@ def measured_map(g: GratingTruth, factor: float, rng: np.random.Generator, extra
 
 
 def write_profile(path: Path, offset_um, counts) -> None:
-    """Line-profile CSV (``offset_um,intensity``). Offsets are written in Python's
-    shortest round-trip form, so distinct samples stay distinct however close their
-    sub-pixel phases; ValueError if two offsets are equal."""
-    x = np.asarray(offset_um, float)
-    if np.unique(x).size != x.size:
-        raise ValueError("write_profile: offset_um has duplicate samples")
-    with open(path, "w") as fh:
-        fh.write("offset_um,intensity\n")
-        for a, b in zip(x, counts):
-            fh.write(f"{float(a)!r},{b:.3f}\n")
+    """Line-profile CSV (``offset_um,intensity``) by the file format's own writer
+    (:func:`pipeline.io.measured.write_line_profile_csv`: a shared file format, not model
+    code). Offsets are written in shortest round-trip form, so distinct samples stay
+    distinct however close their sub-pixel phases; ValueError if two offsets are equal."""
+    write_line_profile_csv(path, offset_um, counts)
 
 
 def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, out: Path, cfg,
