@@ -40,7 +40,7 @@ from fea import case as fea_case  # (this module's FEACase is a study's case, no
 from fea.errors import ParameterError
 from optics.grating import SPIFFI, get_grating
 from pipeline.bounds import MAX_FEA_CASES, MAX_PROFILE_JOBS, product_count
-from pipeline.store import canonical_token
+from fea.store import canonical_token
 from pipeline.study.schema import (
     FEA_KEYS,
     PROFILE_KEYS,
