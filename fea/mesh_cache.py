@@ -4,13 +4,13 @@ Shared by :mod:`fea.mesh` (the blank) and :mod:`fea.verification.cell` (the veri
 slice).  Two questions live here because both are about *getting a
 ``MeshTet2`` into memory*: from a live gmsh model, or from a verified file.
 
-Cache layout (see ``meshes/README.md``)::
+Cache layout (see ``meshes/README.md``): each mesh is one :mod:`fea.store` entry::
 
     <cache_dir>/<kind>-<sha256[:20]>.npz   doflocs, t, b_<boundary>, s_<subdomain>
-    <cache_dir>/<kind>-<sha256[:20]>.json  recipe, gmsh version, date, npz sha256
+    <cache_dir>/<kind>-<sha256[:20]>.json  the store's sidecar: recipe, key, sha256, counts, date
 
-The key is the sha256 of the canonical JSON of the recipe (every geometry and
-mesh parameter, the gmsh version and :data:`FORMAT_VERSION`).
+The key is the sha256 of the sorted, compact JSON of the recipe (every geometry and
+mesh parameter, the gmsh version and :data:`FORMAT_VERSION`), :func:`recipe_key`.
 """
 
 from __future__ import annotations
@@ -21,14 +21,14 @@ import hashlib
 import io
 import json
 import os
-import tempfile
 import uuid
-import warnings
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 from skfem import MeshTet1, MeshTet2
+
+from . import store
 
 __all__ = ["FORMAT_VERSION", "default_cache_dir", "recipe_key",
            "cached_mesh", "gmsh_session", "tet2_from_gmsh"]
@@ -181,91 +181,99 @@ def tet2_from_gmsh(gmsh, surface_groups: dict, volume_groups: dict) -> MeshTet2:
 
 
 # --- cache -----------------------------------------------------------------
-def _sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+def _entry(cache_dir: Path, kind: str, recipe: dict) -> store.Entry:
+    """The store entry ``<kind>-<key[:20]>.npz`` + ``.json`` of ``recipe``."""
+    return store.entry(cache_dir, f"fea.mesh_cache/{kind}", recipe, prefix=f"{kind}-",
+                       format_version=FORMAT_VERSION, key=recipe_key(recipe), key_chars=20)
 
 
-@contextlib.contextmanager
-def atomic_file(path: Path):
-    """Binary file handle whose content replaces ``path`` only when the block succeeds
-    (temporary file beside it, fsync, rename); on error no file is left behind."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".",
-                               suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            yield fh
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-
-
-def _atomic_write(path: Path, data: bytes) -> None:
-    with atomic_file(path) as fh:
-        fh.write(data)
-
-
-def _store(mesh: MeshTet2, npz: Path, sidecar: Path, recipe: dict,
-           key: str) -> None:
+def _arrays(mesh: MeshTet2) -> dict:
     arrays = {"doflocs": mesh.doflocs, "t": mesh.t}
-    arrays.update({"b_" + k: np.asarray(v) for k, v in
-                   (mesh.boundaries or {}).items()})
-    arrays.update({"s_" + k: np.asarray(v) for k, v in
-                   (mesh.subdomains or {}).items()})
+    arrays.update({"b_" + k: np.asarray(v) for k, v in (mesh.boundaries or {}).items()})
+    arrays.update({"s_" + k: np.asarray(v) for k, v in (mesh.subdomains or {}).items()})
+    return arrays
+
+
+def _store(mesh: MeshTet2, e: store.Entry) -> None:
     buf = io.BytesIO()
-    np.savez_compressed(buf, **arrays)
-    _atomic_write(npz, buf.getvalue())
-    meta = {
-        "key": key,
-        "recipe": recipe,
-        "created_utc": datetime.datetime.now(datetime.timezone.utc)
-        .isoformat(timespec="seconds"),
-        "npz_sha256": _sha256_file(npz),
-        "n_vertices": int(mesh.nvertices),
-        "n_elements": int(mesh.nelements),
-        "n_dofs_vector_p2": int(3 * mesh.doflocs.shape[1]),
-    }
-    # the sidecar is written last: it marks the npz as complete
-    _atomic_write(sidecar, (json.dumps(meta, indent=1, sort_keys=True)
-                            + "\n").encode())
+    np.savez_compressed(buf, **_arrays(mesh))
+    data = buf.getvalue()
+    # npz_sha256 repeats the store's sha256 under the name a plain mesh-cache sidecar
+    # uses, so readers of that layout sharing the directory keep finding the mesh
+    store.write_bytes(e, data, {"created_utc": _now_utc(), "npz_sha256": hashlib.sha256(data).hexdigest(),
+                                **_counts(mesh)})
 
 
-def _load(npz: Path, sidecar: Path, key: str) -> MeshTet2:
-    """Load and verify; raise ValueError with the reason on any mismatch."""
-    meta = json.loads(sidecar.read_text())
-    if meta.get("key") != key:
-        raise ValueError("sidecar key does not match the recipe")
-    if _sha256_file(npz) != meta.get("npz_sha256"):
-        raise ValueError("npz checksum mismatch (corrupt or truncated)")
-    with np.load(npz) as data:
-        arrays = {k: data[k] for k in data.files}
-    doflocs, t = arrays["doflocs"], arrays["t"]
+def _now_utc() -> str:
+    return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
+
+
+def _counts(mesh: MeshTet2) -> dict:
+    return {"n_vertices": int(mesh.nvertices), "n_elements": int(mesh.nelements),
+            "n_dofs_vector_p2": int(3 * mesh.doflocs.shape[1])}
+
+
+def _mesh(data: bytes, name: str) -> MeshTet2:
+    """The mesh in verified ``.npz`` bytes; :class:`fea.store.CacheMiss` when inconsistent."""
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+        doflocs, t = arrays["doflocs"], arrays["t"]
+    except Exception as exc:  # zipfile.BadZipFile, KeyError, ValueError, ...
+        raise store.CacheMiss(f"{name} unreadable: {type(exc).__name__}: {exc}") from None
     if doflocs.ndim != 2 or doflocs.shape[0] != 3 or t.ndim != 2 \
             or t.shape[0] != 4 or not np.all(np.isfinite(doflocs)):
-        raise ValueError("array shapes are inconsistent")
+        raise store.CacheMiss(f"{name}: array shapes are inconsistent")
     if t.min() < 0 or t.max() >= doflocs.shape[1]:
-        raise ValueError("connectivity indexes missing nodes")
+        raise store.CacheMiss(f"{name}: connectivity indexes missing nodes")
     boundaries = {k[2:]: v for k, v in arrays.items() if k.startswith("b_")}
     subdomains = {k[2:]: v for k, v in arrays.items() if k.startswith("s_")}
-    mesh = MeshTet2(doflocs, t, _boundaries=boundaries,
-                    _subdomains=subdomains)
+    mesh = MeshTet2(doflocs, t, _boundaries=boundaries, _subdomains=subdomains)
     if doflocs.shape[1] != mesh.nvertices + mesh.nedges:
-        raise ValueError("node count does not match the P2 dof count")
+        raise store.CacheMiss(f"{name}: node count does not match the P2 dof count")
     for v in boundaries.values():
         if v.size and (v.min() < 0 or v.max() >= mesh.nfacets):
-            raise ValueError("boundary facet index out of range")
+            raise store.CacheMiss(f"{name}: boundary facet index out of range")
     for v in subdomains.values():
         if v.size and (v.min() < 0 or v.max() >= mesh.nelements):
-            raise ValueError("subdomain element index out of range")
-    if meta.get("n_elements") != mesh.nelements:
-        raise ValueError("element count differs from the sidecar")
+            raise store.CacheMiss(f"{name}: subdomain element index out of range")
+    return mesh
+
+
+def _plain_sidecar(e: store.Entry) -> tuple[bytes, dict] | None:
+    """The payload and sidecar of ``e`` when the sidecar is a plain mesh-cache one (``key``, ``recipe``,
+    ``npz_sha256``, no store fields) that matches the key and the payload; else None.
+
+    Such an entry is a complete mesh (its sidecar was also written last, atomically), so
+    it is taken over by writing the store's sidecar instead of running gmsh again.
+    """
+    try:
+        side = json.loads(e.sidecar.read_bytes())
+        # the key is the sha256 of the recipe, so an equal key means an equal recipe
+        if not isinstance(side, dict) or "store" in side or side.get("key") != e.key:
+            return None
+        data = e.payload.read_bytes()
+    except (OSError, ValueError):
+        return None
+    return (data, side) if hashlib.sha256(data).hexdigest() == side.get("npz_sha256") else None
+
+
+def _load(e: store.Entry) -> MeshTet2:
+    """The verified mesh of ``e``; FileNotFoundError (plain miss) or CacheMiss (damaged)."""
+    try:
+        data, side = store.read_bytes(e)
+    except store.CacheMiss:
+        plain = _plain_sidecar(e)
+        if plain is None:
+            raise
+        data, side = plain
+        mesh = _mesh(data, e.payload.name)
+        store.commit(e, {"created_utc": side.get("created_utc") or _now_utc(),
+                         "npz_sha256": side["npz_sha256"], **_counts(mesh)}, data=data)
+        return mesh
+    mesh = _mesh(data, e.payload.name)
+    if side.get("n_elements") != mesh.nelements:
+        raise store.CacheMiss(f"{e.payload.name}: element count differs from the sidecar")
     return mesh
 
 
@@ -273,24 +281,21 @@ def cached_mesh(kind: str, recipe: dict, build: Callable[[], MeshTet2],
                 cache_dir: Path | None = None) -> MeshTet2:
     """Return the mesh for ``recipe`` from ``cache_dir``, building if needed.
 
-    A missing, corrupt, truncated or stale file is rebuilt (with a
-    ``UserWarning`` for the damaged cases), never used.
+    The mesh is a :mod:`fea.store` entry named ``<kind>-<recipe_key[:20]>`` (namespace
+    ``fea.mesh_cache/<kind>``, parameters the recipe). A missing, corrupt, truncated or
+    stale file is rebuilt (with a :class:`fea.store.CacheWarning` for the damaged cases),
+    never used.
     """
     cache_dir = Path(cache_dir) if cache_dir is not None \
         else default_cache_dir()
     cache_dir.mkdir(parents=True, exist_ok=True)
-    key = recipe_key(recipe)
-    stem = f"{kind}-{key[:20]}"
-    npz, sidecar = cache_dir / f"{stem}.npz", cache_dir / f"{stem}.json"
-    if npz.exists() and sidecar.exists():
-        try:
-            return _load(npz, sidecar, key)
-        except Exception as exc:  # any damage means: rebuild
-            warnings.warn(f"mesh cache entry {npz} is unusable ({exc}); "
-                          "rebuilding it", stacklevel=3)
-    elif npz.exists() or sidecar.exists():
-        warnings.warn(f"mesh cache entry {stem} is incomplete; rebuilding it",
-                      stacklevel=3)
+    e = _entry(cache_dir, kind, recipe)
+    try:
+        return _load(e)
+    except FileNotFoundError:
+        pass
+    except store.CacheMiss as exc:
+        store.warn_rebuild(e, exc, "mesh cache entry")
     mesh = build()
-    _store(mesh, npz, sidecar, recipe, key)
+    _store(mesh, e)
     return mesh

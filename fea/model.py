@@ -32,7 +32,7 @@ from .materials import AL6061_T6, NIP_HIGH_P, Material, get_material
 from .errors import ParameterError
 from .free_dofs import FreeStiffness
 from .mesh_cache import default_cache_dir
-from .operator_cache import load_film_ops, operator_key, save_film_ops
+from .operator_cache import load_film_ops, operator_entry, save_film_ops
 from .reduced import FilmPolynomial, ReducedBasis
 from .surface import FrontSag, FrontSampler
 
@@ -152,8 +152,9 @@ class PreparedBlank:
                                  f"(available: {sorted(self.mesh.boundaries)})")
             facets = self.mesh.boundaries[group]
             E_MPa = film.youngs_modulus_Pa * 1e-6
-            disk_key = operator_key(self.mesh, facets, E_MPa, film.poisson_ratio, self.plane_fixed)
-            ops = load_film_ops(self.operator_cache, disk_key) if self.operator_cache else None
+            entry = (operator_entry(self.operator_cache, self.mesh, facets, E_MPa, film.poisson_ratio,
+                                    self.plane_fixed) if self.operator_cache is not None else None)
+            ops = load_film_ops(entry) if entry is not None else None
             if ops is None:
                 ops = film_operators(self.mesh, facets, E_MPa, film.poisson_ratio, self.coords_mm)
                 # On a symmetry plane the surface normal lies in the plane and u_k ≡ 0 there, so
@@ -162,8 +163,8 @@ class PreparedBlank:
                 keep = np.ones(self.ndof)
                 keep[self.plane_fixed] = 0.0
                 ops = replace(ops, R=(sp.diags(keep) @ ops.R).tocsr())
-                if self.operator_cache:
-                    save_film_ops(self.operator_cache, disk_key, ops)
+                if entry is not None:
+                    save_film_ops(entry, ops)
             self._film_ops[key] = ops
         return self._film_ops[key]
 

@@ -2,24 +2,31 @@
 
 Why: assembling the thickness-independent film operators of the five coatable surface
 groups takes ~12 s at the default mesh, and every new process (each CLI call, each
-sweep worker, each test worker) paid it again; loading them takes well under a second.
+sweep worker, each test worker) paid it again; loading them, with the store's sha256 check
+of the ~690 MB, takes ~2 s on 2 busy cores.
 
-A file holds one :class:`fea.assembly.FilmOperators` (one surface group, one film
-material, after the symmetry-plane treatment of :meth:`fea.model.PreparedBlank.film_ops`)::
+An entry holds one :class:`fea.assembly.FilmOperators` (one surface group, one film
+material, after the symmetry-plane treatment of :meth:`fea.model.PreparedBlank.film_ops`)
+and is a :mod:`fea.store` entry (payload, then checksummed sidecar, both atomic)::
 
-    <cache_dir>/filmops-<sha256[:24]>.npz
+    <cache_dir>/filmops-<sha256[:24]>.npz    the arrays, and the key itself as ``key``
+    <cache_dir>/filmops-<sha256[:24]>.json   the store's sidecar
 
-The key hashes the mesh arrays themselves (node positions, connectivity, the group's
-facets), the film's elastic constants, the constrained DOFs, :data:`fea.MODEL_VERSION`
-and :data:`FORMAT_VERSION`: a file can only be found for exactly the operators it holds.
-Corruption is caught by the zip CRC of every member (``numpy.load`` reads whole members);
-an unreadable or inconsistent file is ignored and rebuilt, never used.
+The key (:func:`operator_key`) hashes the mesh arrays themselves (node positions,
+connectivity, the group's facets), the film's elastic constants, the constrained DOFs,
+:data:`fea.MODEL_VERSION` and :data:`FORMAT_VERSION`: a file can only be found for
+exactly the operators it holds. The store checks the sidecar and the payload's sha256;
+a missing, corrupt, truncated or inconsistent entry is rebuilt with a
+:class:`fea.store.CacheWarning`, never used. A payload without a sidecar whose own
+``key`` member matches and whose arrays read back whole (zip CRC of every member) is a
+complete entry written without the store's sidecar; the sidecar is added to it instead
+of assembling again.
 """
 
 from __future__ import annotations
 
 import hashlib
-import os
+import io
 import warnings
 import zipfile
 from pathlib import Path
@@ -27,14 +34,15 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from . import MODEL_VERSION
+from . import MODEL_VERSION, store
 from .assembly import FilmOperators, shared_csr
-from .mesh_cache import atomic_file
 
-__all__ = ["FORMAT_VERSION", "operator_key", "load_film_ops", "save_film_ops"]
+__all__ = ["FORMAT_VERSION", "NAMESPACE", "operator_key", "operator_entry", "load_film_ops", "save_film_ops"]
 
 #: Bump when the stored arrays or their meaning change; old files then miss.
 FORMAT_VERSION = 1
+#: Store namespace of the film operators.
+NAMESPACE = "fea.operator_cache/film-operators"
 
 _PATTERNED = ("A00", "A00k", "A0C", "A0Ck", "ACC", "ACCk")
 _VECTORS = ("f0", "f0k", "fC", "fCk", "gL0", "gL0k", "gLC", "gLCk")
@@ -53,42 +61,49 @@ def operator_key(mesh, facets: np.ndarray, youngs_modulus_MPa: float, poisson_ra
     return h.hexdigest()
 
 
-def _path(cache_dir: Path, key: str) -> Path:
-    return Path(cache_dir) / f"filmops-{key[:24]}.npz"
+def operator_entry(cache_dir: Path, mesh, facets: np.ndarray, youngs_modulus_MPa: float,
+                   poisson_ratio: float, fixed_dofs: np.ndarray) -> store.Entry:
+    """The store entry of one group's film operators on ``mesh`` (key: :func:`operator_key`).
+
+    Its parameters name what a reader can check by eye (film constants, model version,
+    sizes); the key also covers the arrays.
+    """
+    key = operator_key(mesh, facets, youngs_modulus_MPa, poisson_ratio, fixed_dofs)
+    params = {"youngs_modulus_MPa": float(youngs_modulus_MPa), "poisson_ratio": float(poisson_ratio),
+              "model_version": MODEL_VERSION, "mesh_type": type(mesh).__name__,
+              "n_nodes": int(mesh.doflocs.shape[1]), "n_facets": int(np.size(facets)),
+              "n_fixed_dofs": int(np.size(fixed_dofs))}
+    return store.entry(cache_dir, NAMESPACE, params, prefix="filmops-", format_version=FORMAT_VERSION,
+                       key=key, key_chars=24)
 
 
-def save_film_ops(cache_dir: Path, key: str, ops: FilmOperators) -> Path | None:
-    """Store ``ops`` atomically; returns the path, or None when it cannot be cached
-    (operators without one shared pattern, or an unwritable directory: a warning)."""
+def save_film_ops(e: store.Entry, ops: FilmOperators) -> Path | None:
+    """Store ``ops`` as the entry ``e``; returns the payload path, or None when it cannot be
+    cached (operators without one shared pattern, or an unwritable directory: a warning)."""
     if not ops.shares_pattern():
         return None
-    arrays = {"key": np.array(key), "indices": ops.A00.indices, "indptr": ops.A00.indptr,
+    arrays = {"key": np.array(e.key), "indices": ops.A00.indices, "indptr": ops.A00.indptr,
               "shape": np.array(ops.A00.shape), "R_data": ops.R.data, "R_indices": ops.R.indices,
               "R_indptr": ops.R.indptr,
               "scalars": np.array([ops.youngs_modulus_MPa, ops.poisson_ratio, ops.b_n])}
     arrays.update({name: getattr(ops, name).data for name in _PATTERNED})
     arrays.update({name: np.broadcast_to(np.asarray(getattr(ops, name), float), ops.f0.shape)
                    for name in _VECTORS})
-    path = _path(cache_dir, key)
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_file(path) as fh:
-            np.savez(fh, **arrays)
-        os.chmod(path, 0o666 & ~_umask())
-    except OSError as exc:
-        warnings.warn(f"film operators not cached in {path.parent}: {exc}", stacklevel=2)
+        store.write_bytes(e, buf.getvalue())
+    except (OSError, ValueError) as exc:  # ValueError: the atomic writer's unwritable directory
+        warnings.warn(f"film operators not cached in {e.payload.parent}: {exc}", stacklevel=2)
         return None
-    return path
+    return e.payload
 
 
-def load_film_ops(cache_dir: Path, key: str) -> FilmOperators | None:
-    """The stored operators for ``key``, or None when absent, stale or unreadable."""
-    path = _path(cache_dir, key)
-    if not path.is_file():
-        return None
+def _ops(data: bytes, e: store.Entry) -> FilmOperators:
+    """The operators in verified payload bytes; CacheMiss when unreadable or inconsistent."""
     try:
-        with np.load(path, allow_pickle=False) as z:
-            if str(z["key"]) != key:
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+            if str(z["key"]) != e.key:
                 raise ValueError("stored key differs")
             shape = tuple(int(s) for s in z["shape"])
             indices, indptr = z["indices"], z["indptr"]
@@ -99,13 +114,37 @@ def load_film_ops(cache_dir: Path, key: str) -> FilmOperators | None:
             vecs = {name: z[name] for name in _VECTORS}
             E, nu, b_n = (float(v) for v in z["scalars"])
     except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError) as exc:
-        warnings.warn(f"ignoring unreadable film-operator cache {path.name} ({exc}); rebuilding",
-                      stacklevel=2)
-        return None
+        raise store.CacheMiss(f"{e.payload.name} unreadable: {type(exc).__name__}: {exc}") from None
     return FilmOperators(R=R, youngs_modulus_MPa=E, poisson_ratio=nu, b_n=b_n, **mats, **vecs)
 
 
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
+def load_film_ops(e: store.Entry) -> FilmOperators | None:
+    """The stored operators of ``e``, or None when absent; a damaged entry is None with a
+    :class:`fea.store.CacheWarning` (the caller assembles and stores them again)."""
+    try:
+        data, _ = store.read_bytes(e)
+        return _ops(data, e)
+    except FileNotFoundError:
+        return None
+    except store.CacheMiss as exc:
+        ops = _without_sidecar(e)
+        if ops is None:
+            store.warn_rebuild(e, exc, "film-operator cache")
+        return ops
+
+
+def _without_sidecar(e: store.Entry) -> FilmOperators | None:
+    """The operators of a payload that has no sidecar but is whole and holds ``e.key``
+    (its sidecar is then written), else None."""
+    if e.sidecar.exists() or not e.payload.is_file():
+        return None
+    try:
+        data = e.payload.read_bytes()
+        ops = _ops(data, e)
+    except (OSError, store.CacheMiss):
+        return None
+    try:
+        store.commit(e, data=data)
+    except (OSError, ValueError):  # a read-only cache: the operators are still good
+        pass
+    return ops

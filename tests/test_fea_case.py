@@ -207,7 +207,7 @@ def test_nominal_map_cache_key_of_the_paper_case_names_only_its_physics(tmp_path
     in the keyed store under the key written out by hand is found without solving anything."""
     import numpy as np
 
-    from pipeline import store
+    from fea import store
 
     from fea import MODEL_VERSION
     from fea.calibration import STRESS_SCALE

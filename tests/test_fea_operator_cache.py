@@ -1,5 +1,9 @@
-"""On-disk film-operator cache: a second process gets identical operators, a corrupt or
-foreign file is rebuilt, never used."""
+"""On-disk film-operator cache (a :mod:`fea.store` entry): a second process gets identical
+operators; a corrupt, cut or foreign file is rebuilt, never used; a whole payload that
+only lacks the store's sidecar is taken over."""
+import json
+import warnings
+
 import numpy as np
 import pytest
 
@@ -7,6 +11,7 @@ from fea.coating import Coating
 from fea.mesh import MeshSpec, blank_mesh
 from fea.geometry import Blank
 from fea.model import PreparedBlank
+from fea.store import CacheWarning
 
 COARSE = MeshSpec(size_mm=5.0, size_bulk_mm=10.0)
 
@@ -39,10 +44,54 @@ def test_corrupt_cache_file_is_rebuilt(mesh, tmp_path):
     raw[len(raw) // 2] ^= 0xFF  # flip a byte inside one stored array
     path.write_bytes(bytes(raw))
     model = PreparedBlank(mesh, operator_cache=tmp_path)
-    with pytest.warns(UserWarning, match="unreadable film-operator cache"):
+    with pytest.warns(CacheWarning, match=f"rebuilding film-operator cache .*{path.name}.*checksum"):
         ops = model.film_ops("front")
     ref = PreparedBlank(mesh, operator_cache=None).film_ops("front")
     assert abs(ops.A00 - ref.A00).max() == 0
+
+
+def _same_ops(a, b):
+    for name in ("A00", "A0C", "ACCk", "R"):
+        assert abs(getattr(a, name) - getattr(b, name)).max() == 0, name
+    np.testing.assert_array_equal(a.gLC, b.gLC)
+
+
+def test_truncated_cache_file_is_rebuilt(mesh, tmp_path):
+    PreparedBlank(mesh, operator_cache=tmp_path).film_ops("front")
+    (path,) = tmp_path.glob("filmops-*.npz")
+    path.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    with pytest.warns(CacheWarning, match="truncated"):
+        ops = PreparedBlank(mesh, operator_cache=tmp_path).film_ops("front")
+    _same_ops(ops, PreparedBlank(mesh, operator_cache=None).film_ops("front"))
+    with warnings.catch_warnings():  # the rebuilt entry is whole again
+        warnings.simplefilter("error")
+        _same_ops(PreparedBlank(mesh, operator_cache=tmp_path).film_ops("front"), ops)
+
+
+def test_payload_without_sidecar_is_taken_over_when_it_holds_the_key(mesh, tmp_path):
+    PreparedBlank(mesh, operator_cache=tmp_path).film_ops("front")
+    (path,) = tmp_path.glob("filmops-*.npz")
+    sidecar = path.with_suffix(".json")
+    sidecar.unlink()  # a whole payload with its own key member, but no store sidecar
+    payload = path.read_bytes()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ops = PreparedBlank(mesh, operator_cache=tmp_path).film_ops("front")
+    _same_ops(ops, PreparedBlank(mesh, operator_cache=None).film_ops("front"))
+    assert sidecar.is_file() and path.read_bytes() == payload  # sidecar added, payload kept
+
+
+def test_another_keys_payload_without_sidecar_is_rebuilt(mesh, tmp_path):
+    PreparedBlank(mesh, operator_cache=tmp_path).film_ops("front")
+    PreparedBlank(mesh, operator_cache=tmp_path).film_ops("holes_x")
+    front, holes = (next(p for p in tmp_path.glob("filmops-*.npz")
+                         if json.loads(p.with_suffix(".json").read_text())["params"]["n_facets"] == n)
+                    for n in (mesh.boundaries["front"].size, mesh.boundaries["holes_x"].size))
+    front.with_suffix(".json").unlink()
+    front.write_bytes(holes.read_bytes())  # the other group's file under this name, no sidecar
+    with pytest.warns(CacheWarning, match="has no sidecar"):
+        ops = PreparedBlank(mesh, operator_cache=tmp_path).film_ops("front")
+    _same_ops(ops, PreparedBlank(mesh, operator_cache=None).film_ops("front"))
 
 
 def test_other_film_material_does_not_hit(mesh, tmp_path):

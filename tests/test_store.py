@@ -17,8 +17,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from pipeline import store
-from pipeline.store import CacheMiss, CacheWarning
+from fea import store
+from fea.store import CacheMiss, CacheWarning
 from pipeline.sweeps.sweep import grid, run_sweep
 
 
@@ -130,6 +130,59 @@ def test_a_payload_that_is_not_an_npz_is_a_cache_miss(tmp_path):
     store.write_bytes(e, b"not a zip file")  # checksum fine, content unreadable
     with pytest.raises(CacheMiss, match="unreadable"):
         store.load_arrays(e)
+
+
+def test_a_caller_key_names_the_files_and_is_checked(tmp_path):
+    key_a, key_b = "ab" * 32, "cd" * 32  # the same namespace and params under two caller keys
+    a = store.entry(tmp_path, "ns", {"x": 1}, prefix="k-", key=key_a, key_chars=20)
+    b = store.entry(tmp_path / "b", "ns", {"x": 1}, prefix="k-", key=key_b, key_chars=20)
+    assert a.key == key_a and a.payload.name == "k-" + "ab" * 10 + ".npz" and a.sidecar.name == "k-" + "ab" * 10 + ".json"
+    store.save_arrays(a, {"v": np.array([1.0])})
+    store.save_arrays(b, {"v": np.array([2.0])})
+    assert json.loads(a.sidecar.read_text())["key"] == key_a  # the whole key, not the file name's part
+    assert store.load_arrays(a)[0]["v"].tolist() == [1.0]
+    a.sidecar.write_bytes(b.sidecar.read_bytes())
+    with pytest.raises(CacheMiss, match="belongs to key cdcd"):
+        store.load_arrays(a)
+    with pytest.raises(ValueError, match="key='XY'"):
+        store.entry(tmp_path, "ns", {"x": 1}, key="XY")
+    with pytest.raises(ValueError, match="key_chars=0"):
+        store.entry(tmp_path, "ns", {"x": 1}, key_chars=0)
+
+
+def _write_same_key_many_times(directory, value, n):
+    e = store.entry(directory, "ns", {"x": 1})
+    for _ in range(n):
+        store.save_arrays(e, {"v": np.full(5000, float(value))}, {"writer": value})
+
+
+def test_two_processes_writing_one_key_never_give_a_mixed_entry(tmp_path):
+    """Each writer's payload and sidecar are whole (atomic renames); a reader between a
+    payload of one and the sidecar of the other gets a CacheMiss, never the wrong arrays."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("fork")
+    writers = [ctx.Process(target=_write_same_key_many_times, args=(tmp_path, v, 200)) for v in (1, 2)]
+    for w in writers:
+        w.start()
+    e = store.entry(tmp_path, "ns", {"x": 1})
+    loads = misses = 0
+    while any(w.is_alive() for w in writers) or loads + misses == 0:
+        try:
+            arrays, side = store.load_arrays(e)
+        except FileNotFoundError:
+            continue
+        except CacheMiss:
+            misses += 1
+            continue
+        loads += 1
+        assert np.all(arrays["v"] == side["writer"])  # the arrays are the ones its sidecar describes
+    for w in writers:
+        w.join()
+        assert w.exitcode == 0
+    arrays, side = store.load_arrays(e)
+    assert side["writer"] in (1, 2) and np.all(arrays["v"] == side["writer"])
+    assert loads > 0 and sorted(p.name for p in tmp_path.iterdir()) == [e.sidecar.name, e.payload.name]
 
 
 # ----------------------------------------------------------------- sweep cases

@@ -13,7 +13,7 @@ import warnings
 from pathlib import Path
 
 from optics.sagmap import SagMap
-from pipeline import store
+from fea import store
 
 from .manifest import MESH_SPECS, Simulation
 
@@ -61,7 +61,7 @@ def fea_sag_map(t0_um: float, polish: float, coverage: str, cold_K: float, mesh:
         used for the *truths* of synthetic data so that they come from a different
         discretisation than the default-mesh nominal they are diagnosed against).
     cache_dir : path, optional
-        Directory for ``fea-<key>.npz`` and its sidecar (:mod:`pipeline.store`); None
+        Directory for ``fea-<key>.npz`` and its sidecar (:mod:`fea.store`); None
         disables the disk cache. A damaged or mismatched file is rebuilt with a warning.
     """
     sim = Simulation.from_params(dict(t0_um=t0_um, polish=polish, coverage=coverage, cold_K=cold_K,

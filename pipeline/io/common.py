@@ -1,8 +1,9 @@
 """Small helpers shared by the interchange readers and writers.
 
-* :func:`atomic_write` — every writer goes through it, so a crash or a full disk never
-  leaves a half-written file under the final name (tmp file in the same directory,
-  then ``os.replace``, which is atomic on POSIX and Windows).
+* :func:`atomic_write`, :func:`atomic_path` — every writer goes through them, so a crash
+  or a full disk never leaves a half-written file under the final name (tmp file in the
+  same directory, then ``os.replace``); they live in :mod:`fea.atomic`, which the FEA
+  layer's caches use too.
 * :func:`parse_error` — one wording for malformed files: file, line number, what was
   found and what is valid.
 * :func:`numbered_lines` — text lines with 1-based line numbers for those messages.
@@ -16,80 +17,15 @@ import codecs
 import csv
 import io
 import os
-import secrets
 import uuid
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
+from fea.atomic import atomic_path, atomic_write
+
 __all__ = ["atomic_write", "atomic_path", "parse_error", "numbered_lines", "read_text",
            "decode_text", "read_csv_columns"]
-
-
-def _create_tmp(path: Path, suffix: str) -> tuple[int, str]:
-    """Exclusive new file next to ``path``. Unlike ``mkstemp`` (mode 0600) it is created
-    with 0666 & ~umask, so the final file gets the permissions a plain ``open`` gives."""
-    directory = path.parent
-    for _ in range(100):
-        tmp = directory / f".{path.name}.{secrets.token_hex(4)}{suffix}"
-        try:
-            return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666), str(tmp)
-        except FileExistsError:
-            continue
-        except OSError as exc:
-            raise ValueError(f"cannot write {path}: {exc.strerror or exc} (directory {directory})") from None
-    raise ValueError(f"cannot write {path}: no free temporary name in {directory}")  # pragma: no cover
-
-
-@contextmanager
-def _moved_onto(tmp: str, path: Path) -> Iterator[None]:
-    """Move ``tmp`` onto ``path`` when the block succeeds; remove it when the block fails."""
-    try:
-        yield
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-
-
-@contextmanager
-def atomic_write(path: str | Path, mode: str = "w") -> Iterator:
-    """Open a temporary file next to ``path``; on success move it onto ``path``.
-
-    Parameters
-    ----------
-    path : str or Path
-        Final destination.
-    mode : {"w", "wb"}
-        Text (UTF-8, ``\\n`` newlines) or binary.
-
-    Raises
-    ------
-    ValueError
-        If the directory does not exist or is not writable (names the path and reason).
-    """
-    path = Path(path)
-    fd, tmp = _create_tmp(path, ".tmp")
-    with _moved_onto(tmp, path):
-        kw = {"encoding": "utf-8", "newline": "\n"} if "b" not in mode else {}
-        with os.fdopen(fd, mode, **kw) as fh:
-            yield fh
-
-
-@contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Like :func:`atomic_write` for libraries that want a file *name* (xarray):
-    yields a temporary path with the same suffix, moved onto ``path`` on success."""
-    path = Path(path)
-    fd, tmp = _create_tmp(path, f".tmp{path.suffix}")
-    os.close(fd)
-    with _moved_onto(tmp, path):
-        yield Path(tmp)
 
 
 def parse_error(path: str | Path, line: int | None, message: str) -> ValueError:

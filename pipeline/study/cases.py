@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from fea import case as fea_case  # (this module's FEACase is a study's case, not the model's)
 from fea.errors import ParameterError
 from pipeline.bounds import MAX_FEA_CASES, product_count
-from pipeline.store import canonical_token
+from fea.store import canonical_token
 from pipeline.study.schema import CAP_HINT, FEA_KEYS, ConfigError, closest, parse_axis
 
 __all__ = ["CaseSelector", "FEACase", "FEAGroup", "expand_cases", "resolve_case"]

@@ -5,7 +5,7 @@ VTK can crash the interpreter (not raise) on a machine where no OpenGL back-end 
 installed), so :func:`start_study_render` solves and renders the study's figures
 (:data:`STUDY_RENDERS`) in a child process (``python -m pipeline.study.render3d``): a
 machine without OpenGL gets a warning and a notice figure, never a crashed run.
-Finished renders are entries of the keyed store (:mod:`pipeline.store`) and are reused
+Finished renders are entries of the keyed store (:mod:`fea.store`) and are reused
 on re-run. The scene itself: :mod:`pipeline.study.render_scene`; the surface:
 :mod:`pipeline.study.render_geometry`.
 
@@ -31,10 +31,10 @@ import time
 from pathlib import Path
 from types import SimpleNamespace
 
+from fea import store
 from fea.case import FEACase, model_namespace
 from fea.mesh import blank_mesh
 from fea.model import PreparedBlank
-from pipeline import store
 from pipeline.study.plots import plt, save
 from pipeline.study.render_scene import configure_offscreen_env, probe, render_comparison, render_deformed_blank
 from pipeline.sweeps.fea_cases import field_path, load_field
@@ -51,7 +51,7 @@ STUDY_RENDERS = {
         [("holes", 200.0, 1.0), ("surfaces", 200.0, 1.0)],
         ["NiP 200 µm only in the holes", "NiP 200 µm only on the outer surfaces"]),
 }
-#: payload format of a render entry (:mod:`pipeline.store`); bump when a render changes look
+#: payload format of a render entry (:mod:`fea.store`); bump when a render changes look
 _RENDER_VERSION = 1
 #: key of the child's answer that lists renders redone because their files did not verify
 _REBUILT = "rebuilt"

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field, replace
 
 from optics.grating import SPIFFI, get_grating
 from pipeline.bounds import MAX_FEA_CASES, MAX_PROFILE_JOBS, product_count
-from pipeline.store import canonical_token
+from fea.store import canonical_token
 from pipeline.study.cases import CaseSelector, FEACase, FEAGroup, expand_cases
 from pipeline.study.figure_specs import CompareFigure, OutputOptions, ProfileFigure, PsfFigure, SagMapFigure
 from pipeline.study.profile_specs import ProfileJob, ProfileSpec

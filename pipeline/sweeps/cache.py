@@ -1,6 +1,6 @@
 """Sweep cases in the keyed result store: result validation and the case files.
 
-One case is one :mod:`pipeline.store` entry in ``<out_dir>/cases/``:
+One case is one :mod:`fea.store` entry in ``<out_dir>/cases/``:
 
 ``<key>.npz``
     every output as an array (scalars as 0-d arrays), loaded with
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.store import (
+from fea.store import (
     CacheMiss,
     canonical_json,
     canonical_token,

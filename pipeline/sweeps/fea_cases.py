@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fea import store
 from fea.calibration import STRESS_SCALE, paper_cases
 from fea.case import PARAMETERS, FEACase, model_namespace
 from fea.front_figure import front_figure_outputs
@@ -25,7 +26,6 @@ from fea.geometry import Blank
 from fea.mesh import MeshSpec, blank_mesh
 from fea.model import FEAResult, PreparedBlank
 from optics.sagmap import SagMap
-from pipeline import store
 from pipeline.bounds import MAX_FEA_CASES, check_count, product_count
 from pipeline.io.common import atomic_write
 from pipeline.sweeps.sweep import Case, grid, run_sweep
@@ -57,7 +57,7 @@ def quilt_direction_um(sag, blank: Blank) -> float:
 
 
 def field_path(fields_dir, params: dict):
-    """The :mod:`pipeline.store` entry of the displacement field of the case ``params``
+    """The :mod:`fea.store` entry of the displacement field of the case ``params``
     (key: params + model version; ``.payload`` is the ``.npz``)."""
     norm = {k: (v if isinstance(v, (str, int, float, bool)) or v is None else str(v)) for k, v in params.items()}
     return store.entry(fields_dir, f"field-{model_namespace()}", norm)

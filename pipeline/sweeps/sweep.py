@@ -9,7 +9,7 @@ of the case. Each case's outputs are cached under ``out_dir/cases/<key>.npz`` (+
 ``.json``), keyed by ``namespace`` and the canonical params (see
 :meth:`Case.key`). Change ``namespace`` when the case function changes meaning: the
 cache never compares code or library versions, only namespace and params; each
-case file is verified against its key and checksum on load (:mod:`pipeline.store`),
+case file is verified against its key and checksum on load (:mod:`fea.store`),
 and one that is not what it claims to be is recomputed with a :class:`CacheWarning`.
 """
 
@@ -32,7 +32,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from pipeline.io.common import atomic_path, atomic_write, ensure_writable_dir
-from pipeline.store import CacheWarning
+from fea.store import CacheWarning
 from pipeline.sweeps.cache import (
     COORD_PREFIX,
     CacheMiss,
