@@ -30,7 +30,7 @@ def test_no_module_imports_a_layer_above_its_own(package, above):
     assert offenders == []
 
 
-@pytest.mark.parametrize("module", ["fea.store", "fea.mesh_cache", "fea.operator_cache", "pipeline.store",
+@pytest.mark.parametrize("module", ["fea.store", "fea.mesh_cache", "fea.operator_cache",
                                     "pipeline.io.common"])
 def test_each_cache_module_imports_first_in_a_fresh_interpreter(module):
     """An import circle shows only when its module is the first one imported."""
