@@ -1,4 +1,4 @@
-"""Identifiability of signs and the pair search's slots.
+"""Identifiability of signs, and the pair search's slots.
 
 Signs: line profiles integrate along the slit and the pupil is mirror-symmetric in eta,
 so for a y-symmetric grating the mirror eta -> -eta changes only the sign of the total
@@ -16,7 +16,9 @@ from optics.sagmap import quilt_sag_map
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.campaign import recovery_errors
 from pipeline.diagnosis.effects import parameter_spec
+from pipeline.diagnosis.finding import Finding
 from pipeline.diagnosis.forward import profile_curve
+from pipeline.diagnosis.ranking import pair_singles
 
 from test_diagnosis import _FakeDiagnosis, _FakeFinding
 from test_diagnosis_psf import _case
@@ -69,3 +71,22 @@ def test_campaign_scores_an_undetermined_sign_by_the_total_magnitude():
     assert flagged["per_parameter"] == pytest.approx(0.01 / 0.30) and flagged["within_2sigma"]
     assert silent["per_parameter"] == pytest.approx(abs(fit["coll_astig45_um"] + 0.30) / 0.30)
     assert not silent["within_2sigma"]
+
+
+def _single(effect, score, significant=True):
+    return Finding(effect, (effect,), {}, {}, score, score, 1.0, 1.0, 0.0, 0.0, significant=significant)
+
+
+def test_pair_slots_keep_one_rescaling_effect():
+    """temperature and amplitude_scale rescale the same deformation (their pair is never
+    fitted): with both among the three best singles, only the better one takes a slot and
+    the next effect gets the third, so a real pair can be formed. Background-only and
+    not-significant singles take none."""
+    findings = [_single("temperature", -120.0), _single("amplitude_scale", -119.0), _single("pupil_shift", -90.0),
+                _single("collimator_wfe", -80.0), _single("slit_width", -200.0, significant=False),
+                _single("quilt_shape", -300.0)]
+    chosen = [f.effect for f in pair_singles(findings, 3)]
+    assert chosen == ["temperature", "pupil_shift", "collimator_wfe"]
+    assert [f.effect for f in pair_singles(findings, 1)] == ["temperature"]
+    findings[1] = _single("amplitude_scale", -130.0)  # the better rescaling one is kept, whichever it is
+    assert [f.effect for f in pair_singles(findings, 3)] == ["amplitude_scale", "pupil_shift", "collimator_wfe"]
