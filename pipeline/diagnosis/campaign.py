@@ -64,7 +64,7 @@ from pipeline.io.measured import write_psf_image_csv
 from pipeline.io.registry import write_sag_map
 
 from .effect_draws import signed_uniform
-from .effects import LIBRARY, draw_campaign_truth
+from .effects import LIBRARY, draw_campaign_truth, parameter_spec
 from .engine import Criteria, diagnose
 from .manifest import NOMINAL_SIMULATION, Simulation
 from .nominal import case_sag_map, thermal_factor
@@ -348,7 +348,8 @@ def recovery_errors(d, effect: str, truth: dict) -> dict | None:
     i.e. the RMS of the fitted-minus-injected surface/wavefront error (or the length of the
     displacement error) relative to the injected one; other effects: equal to
     ``per_parameter``. For parameters the engine reports as ``sign_degenerate`` the
-    magnitudes are compared (the engine does not claim a sign). ``within_2sigma``: every
+    magnitudes about the parameter's sign origin (:attr:`.effects.Parameter.origin`) are
+    compared (the engine does not claim a sign). ``within_2sigma``: every
     parameter within twice its reported 1-sigma uncertainty of the truth (are the error
     bars honest?). None if the effect is out of the library or was not fitted."""
     f = d.finding(effect)
@@ -363,8 +364,9 @@ def recovery_errors(d, effect: str, truth: dict) -> dict | None:
             errs.append(math.inf)
             sig_ok = False
             continue
-        if k in f.sign_degenerate:  # the engine reports |value|, sign undetermined
-            fit, v = abs(fit), abs(v)
+        if k in f.sign_degenerate:  # sign undetermined: the fit's mirror on the truth's side
+            o = parameter_spec(k).origin  # (magnitudes compared about the sign origin)
+            fit = fit if (fit - o) * (v - o) >= 0 else 2.0 * o - fit
         errs.append(abs(fit - v) / max(abs(v), floor))
         dv.append(fit - v)
         tv.append(v)

@@ -103,6 +103,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
+
 from . import effect_draws
 
 __all__ = ["Parameter", "Effect", "LIBRARY", "PLATING_GRADIENT_REF_MM", "BOW_REF_RADIUS_MM", "COLLIMATOR_PUPIL_RADIUS_MM",
@@ -118,7 +120,10 @@ class Parameter:
     coarse grid search, the absolute recovery tolerance ``floor``, its ``unit`` (as
     written in reports; "1" for a dimensionless ratio), a one-line ``meaning`` and the
     measurement ``kinds`` it changes (empty: every kind of its effect; a parameter none
-    of whose kinds is in the data is not fitted: it has no leverage there)."""
+    of whose kinds is in the data is not fitted: it has no leverage there).
+    ``sign_origin``: the value at which the physical term the parameter adds to vanishes,
+    if not its null (an extra term added to a default one: the sign the data may not tell
+    is that of ``value - sign_origin``, and its mirror value is ``2 sign_origin - value``)."""
 
     name: str
     null: float
@@ -129,6 +134,7 @@ class Parameter:
     unit: str = "1"
     meaning: str = ""
     kinds: tuple[str, ...] = ()
+    sign_origin: float | None = None
 
     def __post_init__(self) -> None:
         if not self.lo <= self.null <= self.hi:
@@ -137,6 +143,11 @@ class Parameter:
     @property
     def width(self) -> float:
         return self.hi - self.lo
+
+    @property
+    def origin(self) -> float:
+        """Value about which the parameter's sign is defined (``sign_origin``, else ``null``)."""
+        return self.null if self.sign_origin is None else self.sign_origin
 
 
 @dataclass(frozen=True)
@@ -334,8 +345,10 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
                       meaning="extra wavefront Zernike Z(3,1), RMS-normalised over the 110 mm pupil"),
             Parameter("coll_defocus_um", 0.0, -0.4, 0.4, floor=0.04, unit="µm",
                       meaning="extra wavefront Zernike Z(2,0), RMS-normalised over the 110 mm pupil"),
+            # the sign line profiles cannot tell is that of the total Z(2,-2), default included
             Parameter("coll_astig45_um", 0.0, -0.4, 0.4, floor=0.06, unit="µm",
-                      meaning="extra wavefront Zernike Z(2,-2), RMS-normalised over the 110 mm pupil")),
+                      meaning="extra wavefront Zernike Z(2,-2), RMS-normalised over the 110 mm pupil",
+                      sign_origin=-DEFAULT_COLLIMATOR_ZERNIKE_UM[(2, -2)])),
            description="extra low-order spectrograph WFE (RMS-normalised Zernike over the 110 mm pupil)",
            vector=True, draw_truth=effect_draws.collimator_wfe, summary=_summary_collimator),
     Effect("slit_width", ("line_profile",),

@@ -50,10 +50,23 @@ def degeneracies(findings, fits, prob, c: Criteria):
 
 
 def sign_degeneracies(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, joint=None) -> tuple:
-    """Signed parameters (null 0, fitted > 2 sigma from 0) whose sign the data cannot tell:
-    with that parameter held at its mirror value ``-v`` and the *other* parameters of the
-    finding refitted from the mirrored start (nuisances too), the score is within
-    ``degenerate_bic`` — a profile-likelihood test of the sign.
+    """Signed parameters (null 0) whose sign the data cannot tell: with that parameter held
+    at its mirror value
+    ``2 o - v`` (``o`` = :attr:`.effects.Parameter.origin`, the value where its physical
+    term vanishes; 0 unless the parameter adds to a default term) and the *other*
+    parameters of the finding refitted from the mirrored start (nuisances too), the score
+    is within ``degenerate_bic`` — a profile-likelihood test of the sign. The mirror may
+    lie beyond the prior range; a parameter at a prior bound or within its error bar of
+    the origin is tested all the same (a value consistent with no term has its sign
+    undetermined too, and is reported so).
+
+    Collimator oblique astigmatism on line profiles: the pupil mirror eta -> -eta flips
+    Z(2,-2) only and the profile integrates along the slit, so the profiles depend on
+    the *total* Z(2,-2) through its square — default collimator term included. Mirroring
+    the extra term about 0 (the previous test) compared two different magnitudes and
+    never flagged it, and a screen ``|v| > 2 sigma`` skipped the test where sigma was
+    inf (at a bound) or the flipped total was within its error bar: in the campaign the
+    profiles fitted it at the +0.4 µm bound or with the wrong sign, none flagged.
 
     Physical case: line profiles are integrals along the slit, and the blank and the
     pupil are mirror-symmetric in y, so a footprint shift +y and -y give (nearly) the same
@@ -99,12 +112,16 @@ def _sign_test(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, eff
             continue  # a companion's sign is not tested (it is refitted with the others)
         v = fo.parameters.get(name, finding.parameters[name])
         q = next((q for q in params if q.name == name), None)
-        if q is None or q.null != 0.0 or not q.lo <= -v <= q.hi:
+        if q is None or q.null != 0.0:
             continue
-        if not abs(v) > 2.0 * finding.uncertainties.get(name, math.inf):
-            continue  # consistent with zero: its sign is trivially unknown, nothing to report
+        # The mirror is taken about the value where the physical term vanishes, and may lie
+        # beyond the prior: the prior bounds the search, not what the data can tell apart.
+        # No screen on the linearised sigma: where the data see a term through its square,
+        # that sigma is meaningless near the origin (inf at a bound, small beside a flipped
+        # sign), and the mirror's cost is the test.
+        mirror = 2.0 * q.origin - v
         others = tuple(o for o in params if o.name != name)
-        flip = fit(prob, others, fixed={name: -v}, start={o.name: start[o.name] for o in others if o.name in start})
+        flip = fit(prob, others, fixed={name: mirror}, start={o.name: start[o.name] for o in others if o.name in start})
         cflip = flip.weighted_rss(prob.weights)
         if prob.absolute:  # two-part error model: the flip must cost more than the errors could
             if not sign_is_claimed(prob, fo, flip, predictions(prob, fo), predictions(prob, flip)):

@@ -14,7 +14,7 @@ from .finding import Finding
 from .fitting import FitOutcome, Problem, fit
 from .gap import excesses, recount
 
-__all__ = ["parameters_of", "fit_effects", "rank", "predictions", "mismatch_errors"]
+__all__ = ["parameters_of", "fit_effects", "rank", "pair_singles", "predictions", "mismatch_errors"]
 
 
 def parameters_of(names, forwards) -> tuple:
@@ -54,8 +54,7 @@ def rank(prob: Problem, nom: FitOutcome, cands, criteria: Criteria, memo: dict) 
         f, fo = fit_effects(prob, nom, (e.name,), criteria, memo=memo)
         findings.append(f)
         fits[f.effect] = fo
-    singles = sorted([f for f in findings if f.significant and not _background_only(f)],
-                     key=lambda f: f.score)[:criteria.pair_from]
+    singles = pair_singles(findings, criteria.pair_from)
     for a, b in itertools.combinations(singles, 2):
         names = tuple(sorted(a.effects + b.effects, key=list(LIBRARY).index))
         if _same_rescaling(names, prob):
@@ -68,6 +67,25 @@ def rank(prob: Problem, nom: FitOutcome, cands, criteria: Criteria, memo: dict) 
     findings = _with_companions(prob, nom, findings, fits, cands, criteria, joint_fits, memo)
     findings.sort(key=lambda f: _rank_key(f, criteria))
     return findings, fits, joint_fits
+
+
+def pair_singles(findings, n: int) -> list:
+    """The ``n`` best significant, not background-only singles of ``findings`` (lowest
+    score first) among which pairs are formed, keeping only the best of the rescaling
+    effects (``Effect.rescales``).
+
+    Why: temperature and amplitude_scale are exactly degenerate on one blank and their
+    pair is never fitted (:func:`_same_rescaling`), so when both were among the best
+    singles they took two of the slots and shut a real pair out. The other one still
+    competes as a single."""
+    out, rescaling = [], False
+    for f in sorted((f for f in findings if f.significant and not _background_only(f)), key=lambda f: f.score):
+        r = any(LIBRARY[e].rescales for e in f.effects)
+        if r and rescaling:
+            continue
+        rescaling |= r
+        out.append(f)
+    return out[:n]
 
 
 def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict, cands, c: Criteria,

@@ -1,0 +1,92 @@
+"""Identifiability of signs, and the pair search's slots.
+
+Signs: line profiles integrate along the slit and the pupil is mirror-symmetric in eta,
+so for a y-symmetric grating the mirror eta -> -eta changes only the sign of the total
+oblique astigmatism Z(2,-2) (the default collimator's term plus the fitted extra one):
+the profiles depend on that total through its square, and the sign the data cannot tell
+is that of the total, not of the extra term."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
+from optics.sagmap import quilt_sag_map
+from pipeline.diagnosis import diagnose
+from pipeline.diagnosis.campaign import recovery_errors
+from pipeline.diagnosis.effects import parameter_spec
+from pipeline.diagnosis.finding import Finding
+from pipeline.diagnosis.forward import profile_curve
+from pipeline.diagnosis.ranking import pair_singles
+
+from test_diagnosis import _FakeDiagnosis, _FakeFinding
+from test_diagnosis_psf import _case
+
+#: The extra Z(2,-2) at which the total vanishes: the default collimator's term, negated.
+ASTIG_ORIGIN_UM = -DEFAULT_COLLIMATOR_ZERNIKE_UM[(2, -2)]
+
+
+def test_profiles_see_the_total_oblique_astigmatism_through_its_square():
+    """On a y-symmetric quilt, extra astigmatism ``a`` and ``2 o - a`` (total Z(2,-2) +t and
+    -t) give the same profile to rounding; ``a`` and ``-a`` (totals of different size) differ
+    by several percent of the peak, far above a 1 % noise."""
+    sag = quilt_sag_map(0.6, "sum", spacing_mm=0.5)
+    X, Y = sag.grid()
+    assert np.array_equal(sag.sag_um, sag.sample(X, -Y))  # the premise: y-symmetric grating
+    assert parameter_spec("coll_astig45_um").origin == pytest.approx(ASTIG_ORIGIN_UM)
+    base = {"coll_coma_um": 0.1, "coll_defocus_um": 0.05}
+    for a in (-0.3, 0.4):
+        _, p = profile_curve("J", 1.25, -2, 250, sag, {**base, "coll_astig45_um": a})
+        _, mirror = profile_curve("J", 1.25, -2, 250, sag, {**base, "coll_astig45_um": 2 * ASTIG_ORIGIN_UM - a})
+        _, minus = profile_curve("J", 1.25, -2, 250, sag, {**base, "coll_astig45_um": -a})
+        assert np.max(np.abs(p - mirror)) < 1e-9 * p.max()
+        assert np.max(np.abs(p - minus)) > 0.02 * p.max()
+
+
+@pytest.mark.parametrize("astig45_um", [-0.3, 0.4])
+def test_sign_of_oblique_astigmatism_on_profiles_is_flagged(tmp_path, astig45_um):
+    """Profiles of a truth with extra astigmatism ``astig45_um`` (noisy, shifted, scaled,
+    with a background): the data are the same for the mirrored total, so the engine must
+    report that sign undetermined — also at the prior bound (0.4 µm, whose mirror lies
+    beyond the prior). The coma's sign is seen (the profile's left-right asymmetry)."""
+    truth = {"coll_coma_um": 0.1, "coll_defocus_um": 0.05, "coll_astig45_um": astig45_um}
+    d = diagnose(_case(tmp_path, truth, psf=False), effects=("collimator_wfe",), heldout=False)
+    f = d.finding("collimator_wfe")
+    assert "coll_astig45_um" in f.sign_degenerate
+    assert "coll_coma_um" not in f.sign_degenerate
+    fitted_total = f.parameters["coll_astig45_um"] - ASTIG_ORIGIN_UM
+    assert abs(fitted_total) == pytest.approx(abs(astig45_um - ASTIG_ORIGIN_UM), abs=0.1)
+
+
+def test_campaign_scores_an_undetermined_sign_by_the_total_magnitude():
+    """A sign-degenerate astigmatism fitted at the mirror of the truth (same |total|) is
+    recovered; the same fit without the flag is scored as the wrong value it is."""
+    truth = {"coll_coma_um": 0.10, "coll_defocus_um": 0.05, "coll_astig45_um": -0.30}
+    fit = {**truth, "coll_astig45_um": 2 * ASTIG_ORIGIN_UM + 0.30 + 0.01}  # mirror, 0.01 µm off in size
+    sig = dict.fromkeys(fit, 0.02)
+    flagged = recovery_errors(_FakeDiagnosis("collimator_wfe", _FakeFinding(fit, sig, ["coll_astig45_um"])),
+                              "collimator_wfe", truth)
+    silent = recovery_errors(_FakeDiagnosis("collimator_wfe", _FakeFinding(fit, sig)), "collimator_wfe", truth)
+    assert flagged["per_parameter"] == pytest.approx(0.01 / 0.30) and flagged["within_2sigma"]
+    assert silent["per_parameter"] == pytest.approx(abs(fit["coll_astig45_um"] + 0.30) / 0.30)
+    assert not silent["within_2sigma"]
+
+
+def _single(effect, score, significant=True):
+    return Finding(effect, (effect,), {}, {}, score, score, 1.0, 1.0, 0.0, 0.0, significant=significant)
+
+
+def test_pair_slots_keep_one_rescaling_effect():
+    """temperature and amplitude_scale rescale the same deformation (their pair is never
+    fitted): with both among the three best singles, only the better one takes a slot and
+    the next effect gets the third, so a real pair can be formed. Background-only and
+    not-significant singles take none."""
+    findings = [_single("temperature", -120.0), _single("amplitude_scale", -119.0), _single("pupil_shift", -90.0),
+                _single("collimator_wfe", -80.0), _single("slit_width", -200.0, significant=False),
+                _single("quilt_shape", -300.0)]
+    chosen = [f.effect for f in pair_singles(findings, 3)]
+    assert chosen == ["temperature", "pupil_shift", "collimator_wfe"]
+    assert [f.effect for f in pair_singles(findings, 1)] == ["temperature"]
+    findings[1] = _single("amplitude_scale", -130.0)  # the better rescaling one is kept, whichever it is
+    assert [f.effect for f in pair_singles(findings, 3)] == ["amplitude_scale", "pupil_shift", "collimator_wfe"]
