@@ -20,10 +20,11 @@ too: an amplitude change of a blank whose quilt prints through sharper than the 
 least-squares projection) raises the fundamental while the temperature lowers it, and
 one map only sees the product. Measured, two campaign maps at 128 K (+22 K and +32 K
 warmer, i.e. 0.91 and 0.86 of the amplitude in the projection's convention): temperature
-beside quilt_shape fitted +11 ± 33 K and +15 ± 32 K (x fundamental 0.95 and 0.93,
-sigma 0.16), temperature alone +43 K and +54 K, quilt_shape alone (amplitude held at 1)
-ranked first by a delta BIC of 2-4. All three are consistent with the data; the engine
-named the last.
+beside quilt_shape fits +11 ± 33 K and +15 ± 32 K (x fundamental 0.95 and 0.93, sigma
+0.16), temperature alone +43 K and +54 K, and quilt_shape alone (amplitude held at 1)
+ranks first by a delta BIC of 2-4. Beside the shape, the amplitude's interval holds both
+no change and what the rescaling alone reads: naming the shape change alone would claim
+an amplitude the data do not measure.
 
 The rule: the top finding, a ``quilt_shape``-alone one, is degenerate with a rescaling
 finding when (1) the rescaling effect fitted alone (the shape held at the simulation's)
@@ -40,8 +41,8 @@ residual's effective samples, excluded the +43 K case above at 1.9 "sigma" while
 reported uncertainty of the joint fit was twice that, and it is the reported one that
 the verdict must agree with. Where the x fundamental is measured the interval is
 narrow: a map whose quilt harmonics changed at the simulated amplitude stays a shape
-change, and a map 20-40 % lower in amplitude is named a rescaling outright (its joint
-fit beats the shape alone). No new threshold: two sigma, as the sign test.
+change, and a map 20-40 % lower in amplitude is named a rescaling outright (it beats
+the shape alone). No new threshold: two sigma, as the sign test.
 """
 
 from __future__ import annotations
