@@ -82,7 +82,7 @@ def amplitude_degeneracies(prob: Problem, findings: list) -> list:
     if not findings or not shape_only(findings[0]):
         return findings
     shape = findings[0]
-    out = list(findings)
+    out, flagged = list(findings), []
     for i, r in enumerate(findings[1:], start=1):
         if not rescaling_only(r):
             continue
@@ -96,8 +96,16 @@ def amplitude_degeneracies(prob: Problem, findings: list) -> list:
             beside, sigma = joint.parameters, joint.errors
         if own and all(_claims_change(q, alone) and _admits(q, beside, sigma, (q.null, alone.parameters[q.name]))
                        for q in own):
-            out[i] = replace(out[i], degenerate_with=tuple(dict.fromkeys(out[i].degenerate_with + (shape.effect,))))
-            out[0] = replace(out[0], degenerate_with=tuple(dict.fromkeys(out[0].degenerate_with + (r.effect,))))
+            flagged.append(i)
+    # temperature and amplitude_scale are one rescaling of one blank (each lists the other as
+    # degenerate): what one shares with the shape, the other does too, although their
+    # two-sigma intervals, linear in kelvin and in scale, can fall either side of a value
+    for i, r in enumerate(findings[1:], start=1):
+        if i not in flagged and rescaling_only(r) and any(findings[j].effect in r.degenerate_with for j in flagged):
+            flagged.append(i)
+    for i in flagged:
+        out[i] = replace(out[i], degenerate_with=tuple(dict.fromkeys(out[i].degenerate_with + (shape.effect,))))
+        out[0] = replace(out[0], degenerate_with=tuple(dict.fromkeys(out[0].degenerate_with + (out[i].effect,))))
     return out
 
 
