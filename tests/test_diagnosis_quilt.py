@@ -327,3 +327,93 @@ def test_amplitude_hidden_by_a_shape_change_is_found_beside_quilt_shape(tmp_path
     dT = temp.parameters["temperature_offset_K"]
     assert thermal_factor(128.0 + dT, 80.0) == pytest.approx(a * thermal_factor(128.0, 80.0), abs=0.01), dT
     assert amp.parameters["quilt_cross_ratio"] == pytest.approx(2.0, abs=0.05)
+
+
+# --- Amplitude or shape (pipeline.diagnosis.amplitude_or_shape) ---------------------------
+
+_RESCALINGS = ("amplitude_scale", "temperature")
+
+
+def _reshaped_map_case(tmp_path, amplitude, fund_x=1.0, fund_y=1.0, cross=1.0, h20=1.0, h02=1.0, figure=1.0,
+                       correlated_um=0.0, seed=5):
+    """A 128 K map (numpy) of a blank whose quilt parts are reshaped by hand, the whole then
+    normalised so that its least-squares projection on the nominal over the 82 x 72 mm
+    centre is 1 and times ``amplitude``: the amplitude in the projection's convention, as
+    a real blank's would be quoted. Measured like a real map: white noise 0.01 µm,
+    correlated noise (Gaussian-filtered, 25 mm) of ``correlated_um`` RMS, piston and tilt.
+    Returns (manifest path, the x fundamental's amplitude relative to the nominal's)."""
+    from scipy.ndimage import gaussian_filter
+
+    x, y, X, Y = _grid()
+    cx, cy = np.cos(2 * np.pi * X / DX), np.cos(2 * np.pi * Y / DY)
+    quilt = (fund_x * FUND_X_UM * cx + fund_y * FUND_Y_UM * cy - 2 * cross * CROSS_UM * cx * cy
+             + h20 * H20_UM * np.cos(4 * np.pi * X / DX) + h02 * H02_UM * np.cos(4 * np.pi * Y / DY))
+    shape = figure * _smooth(X, Y) + quilt
+    centre = (np.abs(X) <= 41.0) & (np.abs(Y) <= 36.0)
+    s, t = _map().sag_um[centre], shape[centre]
+    s, t = s - s.mean(), t - t.mean()
+    k = float(t @ s / (s @ s))
+    rng = np.random.default_rng(seed)
+    z = amplitude / k * shape * thermal_factor(128, 80) + rng.normal(0.0, 0.01, X.shape)
+    if correlated_um:
+        cn = gaussian_filter(rng.normal(size=X.shape), 25.0 / 0.5, mode="wrap")
+        z = z + correlated_um * cn / cn.std()
+    write_sag_map(_map(), tmp_path / "nominal.npz")
+    write_sag_map(SagMap(x, y, z + 0.3 + 1e-3 * X - 2e-3 * Y), tmp_path / "map.npz")
+    p = tmp_path / "m.toml"
+    p.write_text('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\nkind = "surface"\n'
+                 'file = "map.npz"\ntemperature_K = 128\naperture_diameter_mm = 137\n')
+    return p, amplitude * fund_x / k
+
+
+def _ranking(d):
+    return [(f.effect, f.companions, round(f.delta_bic, 1), f.degenerate_with) for f in d.findings]
+
+
+def test_amplitude_change_with_reshaped_harmonics_is_a_rescaling(tmp_path):
+    """30 % less deformation and 15 % more cross terms and harmonics: the x fundamental
+    moved with the amplitude, so the map measures it; amplitude_scale or temperature is
+    named, at the amplitude within two of its standard deviations, and not reported as
+    indistinguishable from a shape change."""
+    path, fx = _reshaped_map_case(tmp_path, 0.7, cross=1.15, h20=1.15, h02=1.15)
+    d = diagnose(path, effects=_RESCALINGS + ("quilt_shape",), heldout=False)
+    assert d.verdict == "explained" and d.best.effect in _RESCALINGS, _ranking(d)
+    assert "quilt_shape" not in d.best.degenerate_with, _ranking(d)
+    amp = d.finding("amplitude_scale")
+    scale, sigma = amp.parameters["scale_spare"], amp.uncertainties["scale_spare"]
+    assert abs(scale - fx) <= 2 * sigma and sigma < 0.1, (scale, sigma, fx)
+    dT = d.finding("temperature").parameters["temperature_offset_K"]
+    assert thermal_factor(128.0 + dT, 80.0) == pytest.approx(fx * thermal_factor(128.0, 80.0), abs=2 * sigma * 0.3)
+
+
+def test_pure_shape_change_is_not_an_amplitude_change(tmp_path):
+    """The nominal's x fundamental, a 30 % stronger y fundamental and twice the cross terms
+    and harmonics: named quilt_shape, and the map excludes the amplitude change a rescaling
+    alone reads in it (no degeneracy with temperature or amplitude_scale)."""
+    x, y, X, Y = _grid()
+    d = diagnose(_write_map_case(tmp_path, _map(fund_y=1.3, harmonics=2.0), seed=4),
+                 effects=_RESCALINGS + ("quilt_shape",), heldout=False)
+    assert d.verdict == "explained" and d.best.effect == "quilt_shape", _ranking(d)
+    assert not set(d.best.degenerate_with) & set(_RESCALINGS), _ranking(d)
+
+
+def test_shape_and_amplitude_one_map_cannot_separate_are_degenerate(tmp_path):
+    """A 10 % lower amplitude (projection's convention) of a quilt that prints through
+    sharper (x fundamental 10 % up, cross terms and the (2, 0) harmonic down, figure
+    halved), on a map with 25 mm correlated noise: beside the shape the x fundamental is
+    0.96 of the nominal's with a sigma of several per cent, so a pure shape change and the
+    amplitude change a rescaling reads in the map both fit. The top finding must not
+    name quilt_shape as the single answer: it lists temperature and amplitude_scale as
+    degenerate (or a rescaling is named with the x fundamental's value)."""
+    path, fx = _reshaped_map_case(tmp_path, 0.9, fund_x=1.1, cross=0.77, h20=0.7, h02=1.2, figure=0.5,
+                                  correlated_um=0.008, seed=1)
+    # the companions too: the amplitude's reported uncertainty holds the moves to them
+    d = diagnose(path, effects=_RESCALINGS + ("quilt_shape", "plating_gradient", "blank_bow"), heldout=False)
+    assert d.verdict == "explained", _ranking(d)
+    if d.best.effect == "quilt_shape":
+        assert set(_RESCALINGS) <= set(d.best.degenerate_with), _ranking(d)
+        for e in _RESCALINGS:
+            assert "quilt_shape" in d.finding(e).degenerate_with, _ranking(d)
+    else:
+        amp = d.finding("amplitude_scale")
+        assert abs(amp.parameters["scale_spare"] - fx) <= 2 * amp.uncertainties["scale_spare"], _ranking(d)

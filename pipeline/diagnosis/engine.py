@@ -19,6 +19,7 @@ import numpy as np
 from .criteria import N_EFF_SOURCES, Criteria
 from .effects import (LIBRARY, SummaryContext, applicable_effects, library_rows, parameter_spec, parameter_units,
                       physical_summary)
+from .amplitude_or_shape import amplitude_degeneracies
 from .error_model import errors_summary, measure_errors, two_part_problem, weights_settled
 from .finding import Finding, all_effects
 from .fitting import FitOutcome, Problem, fit
@@ -259,6 +260,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
                         remaining_gap=tuple(g["measurement"] for g in gaps(prob, fits[f.effect], criteria)))
                 for f in findings]
     findings = degeneracies(findings, fits, prob, criteria)
+    findings = amplitude_degeneracies(prob, findings)  # shape alone or amplitude too
     findings = [replace(f, sign_degenerate=sign_degeneracies(prob, f, fits[f.effect], criteria,
                                                              joint_fits.get(f.effect)))
                 if len(f.effects) == 1 and f.significant else f for f in findings]
