@@ -10,11 +10,25 @@ SHARED_SCOPES = {
 }
 # The work units that hold most of the suite's CPU time (FEA table solves, diagnosis fits),
 # handed out first and longest first, so that the many short modules fill the other worker
-# meanwhile instead of leaving one long module running alone at the end. Check the order
-# with ``-n 0 --durations=0`` summed per module when a heavy module is added.
+# meanwhile instead of leaving one long module running alone at the end (xdist's own order
+# is by number of tests, which puts these few-test modules last). The first two start together
+# on the two workers; the next are ranked by ``pytest -n 0 --durations=0`` summed per module;
+# the slow-tier modules after them are the other units with tests over ~20 s. Re-rank when a
+# heavy module is added.
 HEAVY_FIRST = (
     "tests/test_paper_claims.py+tests/test_paper_tables.py",
     "tests/test_diagnosis_scenarios.py",
+    "tests/test_diagnosis.py",
+    "tests/test_diagnosis_bow.py",
+    "tests/test_diagnosis_plating.py",
+    "tests/test_diagnosis_quilt.py",
+    "tests/test_surrogate_sweep.py",
+    "tests/test_fea_blank.py",
+    "tests/test_fea_layer.py",
+    "tests/test_optics_on_fea.py",
+    "tests/test_fea_mesh_convergence.py",
+    "tests/test_fea_reduced.py",
+    "tests/test_study_dataset.py",
 )
 
 
