@@ -1,13 +1,61 @@
-"""Fixtures shared across test modules."""
+"""Fixtures shared across test modules, and the order in which pytest-xdist hands them out."""
 import pytest
+
+# Modules that share session-scoped work run as one xdist work unit (one worker): the
+# paper scorecard solves the Table 1 and 2 cases into ``paper_fea_dir`` and the table
+# checks reload them from there instead of solving them again on the other worker.
+SHARED_SCOPES = {
+    "tests/test_paper_claims.py": "tests/test_paper_claims.py+tests/test_paper_tables.py",
+    "tests/test_paper_tables.py": "tests/test_paper_claims.py+tests/test_paper_tables.py",
+}
+# The work units that hold most of the suite's CPU time (FEA table solves, diagnosis fits),
+# handed out first and longest first, so that the many short modules fill the other worker
+# meanwhile instead of leaving one long module running alone at the end (xdist's own order
+# is by number of tests, which puts these few-test modules last). The first two start together
+# on the two workers; the next are ranked by ``pytest -n 0 --durations=0`` summed per module;
+# the slow-tier modules after them are the other units with tests over ~20 s. Re-rank when a
+# heavy module is added.
+HEAVY_FIRST = (
+    "tests/test_paper_claims.py+tests/test_paper_tables.py",
+    "tests/test_diagnosis_scenarios.py",
+    "tests/test_diagnosis.py",
+    "tests/test_diagnosis_bow.py",
+    "tests/test_diagnosis_plating.py",
+    "tests/test_diagnosis_quilt.py",
+    "tests/test_surrogate_sweep.py",
+    "tests/test_fea_blank.py",
+    "tests/test_fea_layer.py",
+    "tests/test_optics_on_fea.py",
+    "tests/test_fea_mesh_convergence.py",
+    "tests/test_fea_reduced.py",
+    "tests/test_study_dataset.py",
+)
+
+
+@pytest.hookimpl(optionalhook=True, tryfirst=True)
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadscope`` with :data:`SHARED_SCOPES` merged and :data:`HEAVY_FIRST` first."""
+    if config.getvalue("dist") != "loadscope":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class SharedHeavyFirstScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid):
+            scope = super()._split_scope(nodeid)
+            return SHARED_SCOPES.get(scope.split("::", 1)[0], scope)
+
+        def _assign_work_unit(self, node):
+            for scope in reversed(HEAVY_FIRST):
+                if scope in self.workqueue:
+                    self.workqueue.move_to_end(scope, last=False)
+            super()._assign_work_unit(node)
+
+    return SharedHeavyFirstScheduling(config, log)
 
 
 @pytest.fixture(scope="session")
 def paper_fea_dir(tmp_path_factory):
     """One directory for the paper's FEA cases (Tables 1 and 2 on the default mesh, and the
-    scorecard's extra cases), so the modules that check them solve each case once per
-    worker session. scripts/test runs pytest-xdist with ``--dist loadscope`` (a module's
-    tests on one worker), so a module-scoped fixture such as the scorecard is built once.
-    (``--dist loadgroup`` with ``xdist_group`` marks did not keep the marked tests on one
-    worker with the installed pytest-xdist 3.8.)"""
+    scorecard's extra cases), so the modules that check them solve each case once. Under
+    pytest-xdist both modules run on one worker (:data:`SHARED_SCOPES`)."""
     return tmp_path_factory.mktemp("paper")

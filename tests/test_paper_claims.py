@@ -1,8 +1,9 @@
 """The paper, claim by claim: the status the scorecard reports for each claim is pinned.
 
-The scorecard is computed once per session into pytest's cache directory, so the FEA
-cases (15 paper cases + AlSi40, solid and doubled-period blanks) are solved once and
-reused by later runs. Each claim is one test: a change of the model that flips a claim
+The scorecard is computed once per session into the session's ``paper_fea_dir``
+(tests/conftest.py), so the FEA cases (15 paper cases + AlSi40, solid and
+doubled-period blanks) are solved once; test_paper_tables reloads the table cases from
+there (under pytest-xdist both modules run on one worker). Each claim is one test: a change of the model that flips a claim
 shows up here. The statuses follow from rules written in ``pipeline/paper/*_claims.py``
 before the model numbers were looked at; the fast tests below check the measuring
 functions on analytic inputs whose answers are known in closed form.
@@ -130,7 +131,7 @@ def test_stretched_map_has_twice_the_period():
 def card(paper_fea_dir):
     from pipeline.paper import scorecard
 
-    out = paper_fea_dir  # the FEA cases of test_paper_tables are reused (same worker, same session)
+    out = paper_fea_dir  # shared with test_paper_tables: same worker (conftest.SHARED_SCOPES), same session
     claims = scorecard(out, progress=False)
     return out, {c.id: c for c in claims}
 
