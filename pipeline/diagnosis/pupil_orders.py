@@ -11,8 +11,8 @@ data can tell the two apart.
 
 Which terms leave a trace in a line profile
 -------------------------------------------
-Pupil coordinates ``xi`` (dispersion) and ``eta`` (along the slit), ``rho``, ``theta`` on
-the 55 mm disc. The slit is long and incoherently illuminated along ``eta``, so the
+Pupil coordinates ``xi`` (dispersion) and ``eta`` (along the slit), normalised to the
+55 mm pupil radius, and ``rho``, ``theta``. The slit is long and incoherently illuminated along ``eta``, so the
 detected profile is the intensity integrated along the slit, which by Parseval along
 ``eta`` is the sum over pupil rows ``eta`` of ``|FT_xi(P(xi, eta))|^2``. A wavefront term
 that depends on ``eta`` alone is a constant phase on each row: it leaves **no trace**
@@ -29,7 +29,7 @@ on ``eta`` alone give the same profiles whatever else is in the pupil:
   ``eta`` defocuses the rows ``+eta`` and ``-eta`` oppositely and broadens the profile only
   to second order. Both fade with the illuminated pupil height (relative NA 0.1 at
   25 mas): the 250 mas profiles carry most of the information on them.
-* Z(3,1) and Z(3,3) differ on a row by ``sqrt(8)(12 xi eta^2 - 2 xi)``: a tilt (the
+* Z(3,1) and 3 Z(3,3) differ on a row by ``sqrt(8)(12 xi eta^2 - 2 xi)``: a tilt (the
   profile's offset, a nuisance) plus a row-dependent shift that needs a tall illuminated
   pupil. On 25 mas profiles alone coma and trefoil are nearly the same thing.
 
