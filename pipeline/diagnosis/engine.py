@@ -58,7 +58,8 @@ class Diagnosis:
     #: nominal when there is none): the part of the gap nothing in the library explains.
     unexplained_in: tuple = ()
     #: Why the top finding is not the best by BIC (a pair's member explains; see
-    #: :func:`member_explains`), else "".
+    #: :func:`member_explains`), and why a collimator finding does not explain
+    #: (:mod:`.pupil_orders`), else "".
     ranking_note: str = ""
 
     @property
