@@ -31,6 +31,7 @@ from .manifest import Manifest, load_data, load_manifest
 from .nominal import nominal_sag_map
 from .plausibility import at_prior_bound, check_measurements
 from .psf_image import PsfImageForward
+from .pupil_orders import checks, other_orders_check, with_check
 from .ranking import fit_effects, parameters_of, predictions, rank
 from .where import measurement_parts, profile_parts, psf_image_parts, satellite_spacing_um, surface_parts
 
@@ -58,7 +59,8 @@ class Diagnosis:
     #: nominal when there is none): the part of the gap nothing in the library explains.
     unexplained_in: tuple = ()
     #: Why the top finding is not the best by BIC (a pair's member explains; see
-    #: :func:`member_explains`), else "".
+    #: :func:`member_explains`), and why a collimator finding does not explain
+    #: (:mod:`.pupil_orders`), else "".
     ranking_note: str = ""
 
     @property
@@ -282,9 +284,14 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     if gap and findings and len(findings[0].effects) > 1 and not explains(findings[0], criteria):
         findings, note = member_explains(prob, findings, criteria, heldout)
     best = findings[0] if findings else None
+    pupil = None
+    if gap and checks(best) and explains(best, criteria):  # is the pupil aberration the collimator's?
+        pupil = other_orders_check(prob, best, fits[best.effect], criteria)
+        best = findings[0] = with_check(best, pupil)
+        note = "; ".join(n for n in (note, pupil.note if pupil.ambiguous else "") if n)
     if not gap:
         verdict = "no_gap"
-    elif best and explains(best, criteria):
+    elif best and explains(best, criteria) and not (pupil and pupil.ambiguous):
         verdict = "explained"
     else:
         verdict = "unexplained"

@@ -198,11 +198,20 @@ PROFILE_KEYS = tuple(p.name for e in LIBRARY.values() if set(e.kinds) & {"line_p
                      for p in e.parameters)
 
 
+#: Pupil Zernike terms of other orders than the collimator's, set only by the diagnostic
+#: alternative of :mod:`.pupil_orders` (not a library effect): parameter -> (n, m),
+#: RMS-normalised wavefront (µm) over the 110 mm pupil, null 0.
+OTHER_ORDER_TERMS = {"pupil_spherical_um": (4, 0), "pupil_trefoil_0_um": (3, 3), "pupil_trefoil_30_um": (3, -3),
+                     "pupil_coma2_um": (5, 1)}
+
+
 def collimator_terms(p: dict) -> dict:
-    """The spectrograph's collimator Zernike terms {(n, m): µm}: the default collimator
-    plus the ``collimator_wfe`` effect's coma Z(3,1), defocus Z(2,0), oblique astigmatism Z(2,-2)."""
+    """The spectrograph's pupil Zernike terms {(n, m): µm}: the default collimator plus the
+    ``collimator_wfe`` effect's coma Z(3,1), defocus Z(2,0), oblique astigmatism Z(2,-2),
+    plus any :data:`OTHER_ORDER_TERMS` in ``p``."""
     coll = dict(DEFAULT_COLLIMATOR_ZERNIKE_UM)
-    for key, nm in (("coll_coma_um", (3, 1)), ("coll_defocus_um", (2, 0)), ("coll_astig45_um", (2, -2))):
+    for key, nm in (("coll_coma_um", (3, 1)), ("coll_defocus_um", (2, 0)), ("coll_astig45_um", (2, -2)),
+                    *OTHER_ORDER_TERMS.items()):
         coll[nm] = coll.get(nm, 0.0) + p.get(key, 0.0)
     return coll
 
@@ -231,7 +240,7 @@ class SpectrographImageModel:
     deformation's overall factor and a memo of the model per physical parameter set
     (varying only the nuisances then costs an interpolation)."""
 
-    _KEYS = PROFILE_KEYS
+    _KEYS = PROFILE_KEYS + tuple(OTHER_ORDER_TERMS)
 
     def _setup(self, m, nominal: SagMap, cold_K: float, warm_K: float, settings, cache_size: int,
                materials: tuple[str, str] = DEFAULT_MATERIALS) -> None:
@@ -241,7 +250,7 @@ class SpectrographImageModel:
         self._grid = nominal.grid()
         self.quilt = quilt_components(nominal)
         self._quilt_at = quilt_parts(self.quilt, *self._grid)
-        self._nulls = {q: parameter_spec(q).null for q in self._KEYS}
+        self._nulls = {q: parameter_spec(q).null if q in PROFILE_KEYS else 0.0 for q in self._KEYS}
         self._cache: OrderedDict = OrderedDict()
         self._cache_size = cache_size
         self.noise_known = m.noise_rel
