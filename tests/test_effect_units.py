@@ -121,6 +121,36 @@ def test_a_rescaling_effect_only_rescales_the_nominal_map(name):
     assert not {q.name for q in LIBRARY[name].parameters} & set(PROFILE_KEYS)
 
 
+def test_only_and_every_rescaling_effect_gives_the_projection_convention():
+    """The projection convention converts an overall factor of the deformation: every
+    ``rescales`` effect carries an ``Effect.projection`` and one on any other is refused."""
+    from pipeline.diagnosis.effects import Effect, Parameter
+
+    assert {n for n, e in LIBRARY.items() if e.projection is not None} == {n for n, e in LIBRARY.items() if e.rescales}
+    with pytest.raises(ValueError, match="rescales=True"):
+        Effect("fake_shift", ("surface",), (Parameter("fake_shift_mm", 0.0, -1.0, 1.0, unit="mm"),),
+               projection=lambda p, k, ctx: {})
+
+
+def test_a_new_rescaling_effects_projection_is_added_beside_quilt_shape(monkeypatch):
+    """The summaries beside ``quilt_shape`` come from ``Effect.projection``, not from a list
+    of names: a new rescaling effect's entry appears, at the projection factor of the
+    nominal's part shares (x and y fundamentals held, the rest at 0.4 of the nominal's)."""
+    from pipeline.diagnosis.effects import Effect, Parameter
+
+    fake = Effect("fake_gain", ("surface",), (Parameter("fake_gain", 1.0, 0.5, 2.0),), rescales=True,
+                  summary=lambda p, ctx: {"gain": p["fake_gain"]},
+                  projection=lambda p, k, ctx: {"fake_gain_projection": p["fake_gain"] * k})
+    monkeypatch.setitem(LIBRARY, "fake_gain", fake)
+    w = {"fundamental_x": 0.45, "fundamental_y": 0.38, "cross": 0.07, "harmonics": 0.02, "figure": 0.08}
+    ctx = SummaryContext(cold_K=80.0, blanks=("J",), quilt_weights=w)
+    ratios = {"quilt_harmonics_ratio": 0.4, "quilt_cross_ratio": 0.4, "quilt_figure_ratio": 0.4}
+    s = physical_summary(("fake_gain", "quilt_shape"), {"fake_gain": 1.5, **ratios}, ctx)
+    k = 0.45 + 0.38 + 0.4 * (0.07 + 0.02 + 0.08)
+    assert s["fake_gain"] == {"gain": 1.5, "fake_gain_projection": pytest.approx(1.5 * k)}
+    assert physical_summary(("fake_gain",), {"fake_gain": 1.5}, ctx) == {"fake_gain": {"gain": 1.5}}
+
+
 def test_make_case_refuses_a_drawn_parameter_it_does_not_apply(tmp_path, monkeypatch):
     """A new effect whose truth the model campaign does not know how to apply is refused,
     not injected as nothing."""
