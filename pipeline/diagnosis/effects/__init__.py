@@ -5,7 +5,7 @@ One module per effect (or per family sharing a summary: :mod:`.rescaling`) holds
 the concepts (:class:`Parameter`, :class:`Effect`, :class:`SummaryContext`);
 :mod:`.library` the :data:`LIBRARY`, in its order, and the questions asked of it.
 
-Each effect is a named set of parameters of the forward model (:mod:`.forward`) with a
+Each effect is a named set of parameters of the forward model (:mod:`pipeline.diagnosis.forward`) with a
 physical meaning, a null value (the nominal model) and a prior range (fit bounds).
 All effects act on the same parameter vector, so a pair of effects is simply the union
 of their parameters.
@@ -39,7 +39,7 @@ blank_bow           bow_defocus_um Z(2,0), bow_spherical_um      rotationally sy
                     deformation (companion, below)               bimetal; mount)
 quilt_shape         quilt_fund_xy_ratio (1; 0.3…3; maps and      the quilt's harmonic content
                     PSF images only), quilt_harmonics_ratio,     differs from the FEA's
-                    quilt_cross_ratio (1; -1…3; both 0 = pure    (:mod:`.quilt`, below;
+                    quilt_cross_ratio (1; -1…3; both 0 = pure    (:mod:`pipeline.diagnosis.quilt`, below;
                     sinusoid), quilt_figure_ratio (1; -1…3)      background companion)
 ==================  ===========================================  ============================
 
@@ -47,7 +47,7 @@ quilt_shape         quilt_fund_xy_ratio (1; 0.3…3; maps and      the quilt's h
 ``S + (rho - 1) F_y + (h - 1) H + (c - 1) C + (g - 1) R`` with ``F_x``, ``F_y`` the quilt's
 fundamentals (21 mm along x, 18 mm along y), ``C`` its (1, ±1) egg-crate cross terms, ``H``
 its other harmonics, from a Fourier fit of the nominal over the 82 x 72 mm centre
-(:mod:`.quilt`), and ``R = S - F_x - F_y - H - C`` the smooth figure the fit leaves;
+(:mod:`pipeline.diagnosis.quilt`), and ``R = S - F_x - F_y - H - C`` the smooth figure the fit leaves;
 ``rho = quilt_fund_xy_ratio``, ``h = quilt_harmonics_ratio``, ``c = quilt_cross_ratio``,
 ``g = quilt_figure_ratio``. The
 fundamentals' amplitude is not a parameter of it: separate scales of ``F_x``, ``F_y`` and
