@@ -57,8 +57,6 @@ def rank(prob: Problem, nom: FitOutcome, cands, criteria: Criteria, memo: dict) 
     singles = pair_singles(findings, criteria.pair_from)
     for a, b in itertools.combinations(singles, 2):
         names = tuple(sorted(a.effects + b.effects, key=list(LIBRARY).index))
-        if _same_rescaling(names, prob):
-            continue
         f, fo = fit_effects(prob, nom, names, criteria, start={**a.parameters, **b.parameters}, memo=memo)
         findings.append(f)
         fits[f.effect] = fo
@@ -74,10 +72,11 @@ def pair_singles(findings, n: int) -> list:
     score first) among which pairs are formed, keeping only the best of the rescaling
     effects (``Effect.rescales``).
 
-    Why: temperature and amplitude_scale are exactly degenerate on one blank and their
-    pair is never fitted (:func:`_same_rescaling`), so when both were among the best
-    singles they took two of the slots and shut a real pair out. The other one still
-    competes as a single."""
+    Why: temperature and amplitude_scale are exactly degenerate on one blank (the
+    per-blank scales absorb any common temperature factor, exactly for one cold
+    temperature per blank), so their pair is redundant and is never formed; when both
+    were among the best singles they would take two of the slots and shut a real pair
+    out. The other one still competes as a single."""
     out, rescaling = [], False
     for f in sorted((f for f in findings if f.significant and not _background_only(f)), key=lambda f: f.score):
         r = any(LIBRARY[e].rescales for e in f.effects)
@@ -194,13 +193,6 @@ def mismatch_errors(chosen: Finding, alternatives: list, own) -> dict:
         if moves and q in out:
             out[q] = float(math.hypot(out[q], max(moves)))
     return out
-
-
-def _same_rescaling(names, prob) -> bool:
-    """Two rescaling effects (``Effect.rescales``: temperature + amplitude_scale) are
-    redundant: the per-blank scales absorb any common temperature factor (exactly, for one
-    cold temperature per blank)."""
-    return sum(LIBRARY[n].rescales for n in names) >= 2
 
 
 def _rank_key(f: Finding, c: Criteria) -> float:
