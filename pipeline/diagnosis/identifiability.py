@@ -63,10 +63,10 @@ def sign_degeneracies(prob: Problem, finding: Finding, fo: FitOutcome, c: Criter
     Collimator oblique astigmatism on line profiles: the pupil mirror eta -> -eta flips
     Z(2,-2) only and the profile integrates along the slit, so the profiles depend on
     the *total* Z(2,-2) through its square — default collimator term included. Mirroring
-    the extra term about 0 (the previous test) compared two different magnitudes and
-    never flagged it, and a screen ``|v| > 2 sigma`` skipped the test where sigma was
-    inf (at a bound) or the flipped total was within its error bar: in the campaign the
-    profiles fitted it at the +0.4 µm bound or with the wrong sign, none flagged.
+    the extra term about 0 would compare two different magnitudes and never flag it, and
+    a screen ``|v| > 2 sigma`` would skip the test where sigma is inf (at a bound) or the
+    flipped total lies within its error bar: campaign profiles fit it at the +0.4 µm
+    bound or with the wrong sign, and such fits must be flagged.
 
     Physical case: line profiles are integrals along the slit, and the blank and the
     pupil are mirror-symmetric in y, so a footprint shift +y and -y give (nearly) the same
