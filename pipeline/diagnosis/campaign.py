@@ -60,7 +60,7 @@ import numpy as np
 
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
-from pipeline.io.measured import write_psf_image_csv
+from pipeline.io.measured import write_line_profile_csv, write_psf_image_csv
 from pipeline.io.registry import write_sag_map
 
 from .effect_draws import signed_uniform
@@ -69,7 +69,7 @@ from .engine import Criteria, diagnose
 from .manifest import NOMINAL_SIMULATION, Simulation
 from .nominal import case_sag_map, thermal_factor
 from .synth import (quilt_shape_map, shape_discrepancy, synthetic_profile, synthetic_psf_image, synthetic_surface,
-                    unmodelled_shape, write_profile_csv)
+                    unmodelled_shape)
 
 __all__ = ["CASE_TYPES", "EXTRA_CASE_TYPES", "DISCREPANCIES", "DISCREPANCY_PRESENT", "TRUTHS", "PROFILE_SETS", "PSF_IMAGE_SPEC",
            "OUT_OF_LIBRARY", "APPLIED_PARAMETERS", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "run_case", "run_campaign",
@@ -317,7 +317,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
     meas = []
     for i, (g, wl, order, ps) in enumerate(cfg.profile_specs):
         u, y, _ = synthetic_profile(g, wl, order, ps, t, rng, params=params, noise_rel=cfg.noise_rel, distortion=distortion)
-        write_profile_csv(out / f"p{i}.csv", u, y)
+        write_line_profile_csv(out / f"p{i}.csv", u, y)
         meas.append({"kind": "line_profile", "file": f"p{i}.csv", "name": f"{g}_{wl}_{ps}mas", "grating": g,
                      "order": order, "wavelength_um": wl, "pixel_scale_mas": ps})
     if cfg.profile_map_K is not None:

@@ -19,12 +19,11 @@ import numpy as np
 from optics.lineprofile import LsfSettings
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
-from pipeline.io.measured import write_line_profile_csv
 
 from .forward import blank_shape_um, profile_curve, quilt_parts
 from .quilt import quilt_components
 
-__all__ = ["quilt_shape_map", "shape_discrepancy", "unmodelled_shape", "FOIL_TERMS", "synthetic_surface", "synthetic_profile", "synthetic_psf_image", "write_profile_csv"]
+__all__ = ["quilt_shape_map", "shape_discrepancy", "unmodelled_shape", "FOIL_TERMS", "synthetic_surface", "synthetic_profile", "synthetic_psf_image"]
 
 
 def quilt_shape_map(sag: SagMap, fund_xy_ratio: float = 1.0, harmonics_ratio: float = 1.0,
@@ -132,11 +131,6 @@ def synthetic_profile(grating: str, wavelength_um: float, order: int, pixel_scal
     peak = float(y.max())
     meas = flux * (model + background * peak + rng.normal(0.0, noise_rel * peak, x.size))
     return x, np.clip(meas, 0.0, None), {"shift_um": shift, "flux": flux}
-
-
-def write_profile_csv(path, offset_um: np.ndarray, intensity: np.ndarray) -> None:
-    """CSV ``offset_um,intensity``: :func:`pipeline.io.measured.write_line_profile_csv`."""
-    write_line_profile_csv(path, offset_um, intensity)
 
 
 def synthetic_psf_image(grating: str, wavelength_um: float, order: int, truth: SagMap, rng: np.random.Generator, *,
