@@ -14,9 +14,9 @@ from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.effects import LIBRARY, applicable_effects
 from pipeline.diagnosis.engine import Finding
 from pipeline.diagnosis.ranking import mismatch_errors
-from pipeline.diagnosis.forward import blank_bow_map, bow_um
+from pipeline.diagnosis.effects.blank_bow import bow_um
 from pipeline.diagnosis.nominal import thermal_factor
-from pipeline.diagnosis.synth import synthetic_surface
+from pipeline.diagnosis.synth import blank_shape_map, synthetic_surface
 from pipeline.io.measured import write_line_profile_csv
 from pipeline.io.registry import write_sag_map
 
@@ -27,7 +27,7 @@ def _bow_map(tmp_path, b2, b4, temperature_K=128.0, seed=7):
     """A 128 K map of a blank whose cold deformation at 80 K carries a bow (b2, b4) µm,
     really at ``temperature_K`` (the manifest says 128 K)."""
     nom = _nominal(tmp_path)
-    t = blank_bow_map(nom, b2, b4).scaled(thermal_factor(temperature_K, 80))
+    t = blank_shape_map(nom, {"bow_defocus_um": b2, "bow_spherical_um": b4}).scaled(thermal_factor(temperature_K, 80))
     write_sag_map(synthetic_surface(t, np.random.default_rng(seed), noise_um=0.005), tmp_path / "map.npz")
     return _manifest(tmp_path)
 
@@ -121,7 +121,7 @@ def _bowed_profiles(tmp_path, b2):
     from pipeline.diagnosis.synth import synthetic_profile
 
     nom = _nominal(tmp_path)
-    truth = blank_bow_map(nom, b2, 0.0)
+    truth = blank_shape_map(nom, {"bow_defocus_um": b2, "bow_spherical_um": 0.0})
     rng = np.random.default_rng(11)
     lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
     for ps in (250, 25):

@@ -13,7 +13,8 @@ from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.criteria import Criteria
 from pipeline.diagnosis.finding import Finding
 from pipeline.diagnosis.fitting import FitOutcome
-from pipeline.diagnosis.forward import OTHER_ORDER_TERMS, collimator_terms
+from pipeline.diagnosis.effects.pupil_other_orders import PUPIL_OTHER_ORDERS
+from pipeline.diagnosis.forward import collimator_terms
 from pipeline.diagnosis.pupil_orders import OTHER_ORDERS_LABEL, PupilOrdersCheck, checks, other_orders_check, with_check
 from pipeline.diagnosis.truth.abbe import RELATIVE_NA, abbe_line_profile
 from pipeline.diagnosis.truth.detector import measure_profile
@@ -55,7 +56,7 @@ def _profiles(tmp_path, camera_um=None, collimator_extra_um=None, seed=3):
 def test_other_order_terms_reach_the_pupil_and_are_not_the_collimators():
     terms = collimator_terms({"pupil_spherical_um": 0.2, "coll_coma_um": 0.1})
     assert terms[(4, 0)] == 0.2
-    assert set(OTHER_ORDER_TERMS.values()).isdisjoint({(3, 1), (2, 0), (2, -2)})
+    assert {nm for _, nm in PUPIL_OTHER_ORDERS.pupil_zernike}.isdisjoint({(3, 1), (2, 0), (2, -2)})
     assert {nm: v for nm, v in collimator_terms({}).items() if v} == COLLIMATOR_UM
 
 
