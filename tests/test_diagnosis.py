@@ -16,7 +16,8 @@ from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.cli import main
 from pipeline.diagnosis.noise import effective_samples, estimate_noise
 from pipeline.diagnosis.nominal import thermal_factor
-from pipeline.diagnosis.synth import synthetic_surface, write_profile_csv
+from pipeline.diagnosis.synth import synthetic_surface
+from pipeline.io.measured import write_line_profile_csv
 from pipeline.io.registry import write_sag_map
 
 
@@ -151,7 +152,7 @@ def _profile_manifest(tmp_path, grating="J", wl=1.25, order=-2, intensity=None):
     _nominal(tmp_path)
     u = np.linspace(-100, 100, 101)
     y = np.exp(-0.5 * (u / 10) ** 2) if intensity is None else intensity(u)
-    write_profile_csv(tmp_path / "p.csv", u, y)
+    write_line_profile_csv(tmp_path / "p.csv", u, y)
     p = tmp_path / "m.toml"
     p.write_text('[simulation]\nsag_file = "nominal.npz"\n[[measurement]]\nkind = "line_profile"\nfile = "p.csv"\n'
                  f'grating = "{grating}"\norder = {order}\nwavelength_um = {wl}\npixel_scale_mas = 250\n')

@@ -14,9 +14,10 @@ from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.effects import LIBRARY, applicable_effects
 from pipeline.diagnosis.engine import Finding
 from pipeline.diagnosis.ranking import mismatch_errors
-from pipeline.diagnosis.forward import blank_bow_map, bow_um
+from pipeline.diagnosis.effects.blank_bow import bow_um
 from pipeline.diagnosis.nominal import thermal_factor
-from pipeline.diagnosis.synth import synthetic_surface
+from pipeline.diagnosis.synth import blank_shape_map, synthetic_surface
+from pipeline.io.measured import write_line_profile_csv
 from pipeline.io.registry import write_sag_map
 
 from test_diagnosis import _manifest, _nominal
@@ -26,7 +27,7 @@ def _bow_map(tmp_path, b2, b4, temperature_K=128.0, seed=7):
     """A 128 K map of a blank whose cold deformation at 80 K carries a bow (b2, b4) µm,
     really at ``temperature_K`` (the manifest says 128 K)."""
     nom = _nominal(tmp_path)
-    t = blank_bow_map(nom, b2, b4).scaled(thermal_factor(temperature_K, 80))
+    t = blank_shape_map(nom, {"bow_defocus_um": b2, "bow_spherical_um": b4}).scaled(thermal_factor(temperature_K, 80))
     write_sag_map(synthetic_surface(t, np.random.default_rng(seed), noise_um=0.005), tmp_path / "map.npz")
     return _manifest(tmp_path)
 
@@ -117,15 +118,15 @@ def test_campaign_map_temperature_checked():
 def _bowed_profiles(tmp_path, b2):
     """J 1.25 µm profiles at 250 and 25 mas of the analytic blank carrying a bow ``b2`` µm
     (no collimator error): manifest path."""
-    from pipeline.diagnosis.synth import synthetic_profile, write_profile_csv
+    from pipeline.diagnosis.synth import synthetic_profile
 
     nom = _nominal(tmp_path)
-    truth = blank_bow_map(nom, b2, 0.0)
+    truth = blank_shape_map(nom, {"bow_defocus_um": b2, "bow_spherical_um": 0.0})
     rng = np.random.default_rng(11)
     lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
     for ps in (250, 25):
         u, y, _ = synthetic_profile("J", 1.25, -2, ps, truth, rng, noise_rel=0.005)
-        write_profile_csv(tmp_path / f"p{ps}.csv", u, y)
+        write_line_profile_csv(tmp_path / f"p{ps}.csv", u, y)
         lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{ps}.csv"\ngrating = "J"\norder = -2\n'
                      f'wavelength_um = 1.25\npixel_scale_mas = {ps}\n')
     p = tmp_path / "m.toml"
@@ -239,7 +240,7 @@ def test_slit_explained_beside_an_unexplained_map(tmp_path):
     ``unexplained_in`` (chi^2 excess ~130 sd) instead of lowering the explained fraction
     (over all data: measured 0.64; in a slit-width campaign case the map and a PSF image took it to
     0.31 and the verdict to ``unexplained``)."""
-    from pipeline.diagnosis.synth import synthetic_profile, unmodelled_shape, write_profile_csv
+    from pipeline.diagnosis.synth import synthetic_profile, unmodelled_shape
 
     nom = _nominal(tmp_path)
     truth = unmodelled_shape(nom, np.random.default_rng(5), rms_um=0.03)
@@ -249,7 +250,7 @@ def test_slit_explained_beside_an_unexplained_map(tmp_path):
     lines = [_manifest(tmp_path).read_text()]
     for ps in (250, 25):
         u, y, _ = synthetic_profile("J", 1.25, -2, ps, truth, rng, params={"slit_image_width_um": 35.0})
-        write_profile_csv(tmp_path / f"p{ps}.csv", u, y)
+        write_line_profile_csv(tmp_path / f"p{ps}.csv", u, y)
         lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{ps}.csv"\ngrating = "J"\norder = -2\n'
                      f'wavelength_um = 1.25\npixel_scale_mas = {ps}\n')
     (tmp_path / "m.toml").write_text("\n".join(lines))

@@ -10,9 +10,8 @@ from optics.zernike import zernike_xy
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.effects import LIBRARY
 from pipeline.diagnosis.fitting import Problem, _long_run_s2
-from pipeline.diagnosis.forward import plating_gradient_map
 from pipeline.diagnosis.nominal import thermal_factor
-from pipeline.diagnosis.synth import synthetic_surface
+from pipeline.diagnosis.synth import blank_shape_map, synthetic_surface
 from pipeline.io.registry import write_sag_map
 
 from test_diagnosis import _manifest, _nominal
@@ -20,7 +19,7 @@ from test_diagnosis import _manifest, _nominal
 
 def _gradient_map(tmp_path, gx, gy, extra=None, seed=5, noise_um=0.002):
     nom = _nominal(tmp_path)
-    t = plating_gradient_map(nom.scaled(thermal_factor(128, 80)), gx, gy)
+    t = blank_shape_map(nom.scaled(thermal_factor(128, 80)), {"plating_grad_x": gx, "plating_grad_y": gy})
     write_sag_map(synthetic_surface(t, np.random.default_rng(seed), extra_um=extra, noise_um=noise_um), tmp_path / "map.npz")
     return _manifest(tmp_path)
 

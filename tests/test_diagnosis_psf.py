@@ -9,9 +9,9 @@ import pytest
 
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.psf_image import psf_image_model
-from pipeline.diagnosis.synth import synthetic_profile, synthetic_psf_image, write_profile_csv
+from pipeline.diagnosis.synth import synthetic_profile, synthetic_psf_image
 from pipeline.diagnosis.where import psf_image_parts
-from pipeline.io.measured import write_psf_image_csv
+from pipeline.io.measured import write_line_profile_csv, write_psf_image_csv
 
 from test_diagnosis import _nominal
 
@@ -52,7 +52,7 @@ def _case(tmp_path, params, psf=True, pixel_um=0.0, seed=3):
     lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
     for ps in (250, 25):
         u, y, _ = synthetic_profile("J", 1.25, -2, ps, nom, rng, params=params, noise_rel=0.01)
-        write_profile_csv(tmp_path / f"p{ps}.csv", u, y)
+        write_line_profile_csv(tmp_path / f"p{ps}.csv", u, y)
         lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{ps}.csv"\ngrating = "J"\norder = -2\n'
                      f'wavelength_um = 1.25\npixel_scale_mas = {ps}\n')
     if psf:

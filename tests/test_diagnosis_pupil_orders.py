@@ -13,11 +13,13 @@ from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.criteria import Criteria
 from pipeline.diagnosis.finding import Finding
 from pipeline.diagnosis.fitting import FitOutcome
-from pipeline.diagnosis.forward import OTHER_ORDER_TERMS, collimator_terms
+from pipeline.diagnosis.effects.pupil_other_orders import PUPIL_OTHER_ORDERS
+from pipeline.diagnosis.forward import collimator_terms
 from pipeline.diagnosis.pupil_orders import OTHER_ORDERS_LABEL, PupilOrdersCheck, checks, other_orders_check, with_check
 from pipeline.diagnosis.truth.abbe import RELATIVE_NA, abbe_line_profile
 from pipeline.diagnosis.truth.detector import measure_profile
-from pipeline.diagnosis.truth.generate import COLLIMATOR_UM, write_profile
+from pipeline.diagnosis.truth.generate import COLLIMATOR_UM
+from pipeline.io.measured import write_line_profile_csv
 
 from test_diagnosis import _nominal
 
@@ -43,7 +45,7 @@ def _profiles(tmp_path, camera_um=None, collimator_extra_um=None, seed=3):
     for ps in (250, 25):
         u, det = abbe_line_profile("J", 1.25, -2, RELATIVE_NA[ps], sag, collimator_um=coll, camera_um=camera_um)
         x, counts, _ = measure_profile(u, det, rng)
-        write_profile(tmp_path / f"p{ps}.csv", x, counts)
+        write_line_profile_csv(tmp_path / f"p{ps}.csv", x, counts)
         lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{ps}.csv"\ngrating = "J"\norder = -2\n'
                      f'wavelength_um = 1.25\npixel_scale_mas = {ps}\n')
     p = tmp_path / "m.toml"
@@ -54,7 +56,7 @@ def _profiles(tmp_path, camera_um=None, collimator_extra_um=None, seed=3):
 def test_other_order_terms_reach_the_pupil_and_are_not_the_collimators():
     terms = collimator_terms({"pupil_spherical_um": 0.2, "coll_coma_um": 0.1})
     assert terms[(4, 0)] == 0.2
-    assert set(OTHER_ORDER_TERMS.values()).isdisjoint({(3, 1), (2, 0), (2, -2)})
+    assert {nm for _, nm in PUPIL_OTHER_ORDERS.pupil_zernike}.isdisjoint({(3, 1), (2, 0), (2, -2)})
     assert {nm: v for nm, v in collimator_terms({}).items() if v} == COLLIMATOR_UM
 
 

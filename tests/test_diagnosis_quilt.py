@@ -21,7 +21,8 @@ from pipeline.diagnosis.forward import ProfileForward, SurfaceForward
 from pipeline.diagnosis.manifest import load_data, load_manifest
 from pipeline.diagnosis.nominal import thermal_factor
 from pipeline.diagnosis.quilt import quilt_components
-from pipeline.diagnosis.synth import quilt_shape_map, synthetic_surface, write_profile_csv
+from pipeline.diagnosis.synth import quilt_shape_map, synthetic_surface
+from pipeline.io.measured import write_line_profile_csv
 from pipeline.io.registry import write_sag_map
 
 DX, DY = 21.0, 18.0
@@ -79,7 +80,7 @@ def _map_and_profile_data(nominal: SagMap, tmp_path):
     write_sag_map(nominal, tmp_path / "nominal.npz")
     write_sag_map(synthetic_surface(nominal, np.random.default_rng(0)), tmp_path / "map.npz")
     u = np.arange(-100.0, 100.1, 2.0)
-    write_profile_csv(tmp_path / "p.csv", u, np.exp(-0.5 * (u / 20.0) ** 2))
+    write_line_profile_csv(tmp_path / "p.csv", u, np.exp(-0.5 * (u / 20.0) ** 2))
     (tmp_path / "m.toml").write_text(
         '[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\nkind = "surface"\nfile = "map.npz"\n'
         'temperature_K = 80\naperture_diameter_mm = 137\n\n[[measurement]]\nkind = "line_profile"\nfile = "p.csv"\n'
@@ -176,7 +177,7 @@ def test_profiles_of_another_quilt_shape_are_named_quilt_shape(tmp_path, harmoni
     for i, (wl, ps) in enumerate(((1.25, 250), (1.25, 25), (1.175, 25))):
         r = line_profile(get_grating("J"), wl, ps, truth, order=-2)
         u, y = _sample_profile(r.detected.offset_um, r.detected.intensity, rng)
-        write_profile_csv(tmp_path / f"p{i}.csv", u, y)
+        write_line_profile_csv(tmp_path / f"p{i}.csv", u, y)
         lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{i}.csv"\ngrating = "J"\norder = -2\n'
                      f'wavelength_um = {wl}\npixel_scale_mas = {ps}\n')
     (tmp_path / "m.toml").write_text("\n".join(lines))

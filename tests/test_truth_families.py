@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from pipeline.diagnosis.truth.generate import FAMILIES, GRATING_FAMILIES, check_families, truth_grating, write_profile
+from pipeline.diagnosis.truth.generate import FAMILIES, GRATING_FAMILIES, check_families, truth_grating
 from pipeline.diagnosis.truth.gratings import central, harmonic_distance
 from pipeline.diagnosis.truth.lattice import (BLEND_SIGMA_MM, cell_field, cell_index, pocket_jitter, rib_harmonics,
                                               rib_profile, sharp_ribs, smooth_figure)
+from pipeline.io.measured import write_line_profile_csv
 
 AX_X = np.arange(-80.0, 80.0 + 0.25, 0.5)
 AX_Y = np.arange(-70.0, 70.0 + 0.25, 0.5)
@@ -159,11 +160,11 @@ def test_profile_csv_keeps_subpixel_samples_1e5_um_apart_distinct(tmp_path):
 
     x = np.array([-126.123456, -18.0, 0.0, 35.999995, 36.000005, 36.000005 + 1e-9, 90.5])
     y = np.array([10.0, 200.0, 1000.0, 400.0, 401.0, 402.0, 5.0])
-    write_profile(tmp_path / "p.csv", x, y)
+    write_line_profile_csv(tmp_path / "p.csv", x, y)
     xr, yr = read_line_profile(tmp_path / "p.csv", normalise=False)
     assert np.array_equal(xr, x) and np.array_equal(yr, y)
     with pytest.raises(ValueError, match="duplicate"):
-        write_profile(tmp_path / "q.csv", [1.0, 1.0, 2.0], [1.0, 2.0, 3.0])
+        write_line_profile_csv(tmp_path / "q.csv", [1.0, 1.0, 2.0], [1.0, 2.0, 3.0])
 
 
 def test_make_case_draws_a_selected_family_and_records_it(tmp_path):

@@ -60,19 +60,20 @@ import numpy as np
 
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
-from pipeline.io.measured import write_psf_image_csv
+from pipeline.io.measured import write_line_profile_csv, write_psf_image_csv
 from pipeline.io.registry import write_sag_map
 
 from .effect_draws import signed_uniform
-from .effects import LIBRARY, draw_campaign_truth, parameter_spec
+from .effects import LIBRARY, Effect, draw_campaign_truth, parameter_spec
 from .engine import Criteria, diagnose
+from .forward import blank_coordinates, deformation_factor, map_terms_um, true_temperature
 from .manifest import NOMINAL_SIMULATION, Simulation
 from .nominal import case_sag_map, thermal_factor
-from .synth import (quilt_shape_map, shape_discrepancy, synthetic_profile, synthetic_psf_image, synthetic_surface,
-                    unmodelled_shape, write_profile_csv)
+from .synth import (blank_shape_map, shape_discrepancy, synthetic_profile, synthetic_psf_image, synthetic_surface,
+                    unmodelled_shape)
 
 __all__ = ["CASE_TYPES", "EXTRA_CASE_TYPES", "DISCREPANCIES", "DISCREPANCY_PRESENT", "TRUTHS", "PROFILE_SETS", "PSF_IMAGE_SPEC",
-           "OUT_OF_LIBRARY", "APPLIED_PARAMETERS", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "run_case", "run_campaign",
+           "OUT_OF_LIBRARY", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "run_case", "run_campaign",
            "write_campaign"]
 
 CASE_TYPES = (
@@ -83,8 +84,11 @@ CASE_TYPES = (
     ("line_profile", "ool_ghost"), ("line_profile", "ool_distortion"),
 )
 #: Case types run only when asked for (``only_types`` / ``--types``), after CASE_TYPES in the
-#: cycle, so that the default campaign's cases keep their indices and draws.
-EXTRA_CASE_TYPES = (("surface", "quilt_shape"), ("line_profile", "quilt_shape"))
+#: cycle, so that the default campaign's cases keep their indices and draws: every other
+#: (kind, effect) of a library effect with a truth draw (a new effect's cases are these
+#: until it is appended to CASE_TYPES, which changes the default campaign's draws).
+EXTRA_CASE_TYPES = tuple((k, e.name) for e in LIBRARY.values() if e.draw_truth is not None
+                         for k in ("surface", "line_profile") if k in e.kinds and (k, e.name) not in CASE_TYPES)
 #: (grating, wavelength µm, order, pixel scale mas) of the synthetic line profiles.
 #: "minimal": the three profiles of the first campaigns. "extended": what an instrument
 #: team measures in a J-band line-profile test (the paper's set: all three pixel scales at
@@ -105,6 +109,8 @@ PSF_IMAGE_SPEC = ("J", 1.25, -2, 0.0)
 PROFILE_SPECS_MINIMAL = PROFILE_SETS["minimal"]
 PROFILE_SPECS = PROFILE_SETS["extended"]
 SURFACE_T_K = 128.0
+#: Aperture (mm) of the campaign's synthetic maps.
+MAP_APERTURE_MM = 137.0
 #: CampaignConfig.discrepancy -> the truth's model discrepancy (see the module docstring).
 DISCREPANCIES = {"unmodelled": unmodelled_shape, "companions": shape_discrepancy}
 #: Library effects the model truth carries besides the injected one, per discrepancy.
@@ -233,44 +239,40 @@ OUT_OF_LIBRARY = {"surface": {"ool_coma": _ool_coma, "ool_bump": _ool_bump},
                   "line_profile": {"ool_ghost": _ool_ghost, "ool_distortion": _ool_distortion}}
 
 
-#: The library parameters :func:`make_case` applies to the truth's map, per case kind
-#: (line profiles also take every parameter of a spectrograph effect, one that changes no
-#: surface, into the optics).
-APPLIED_PARAMETERS = {
-    "surface": ("scale_spare", "temperature_offset_K", "quilt_fund_xy_ratio", "quilt_harmonics_ratio", "astig_0_um",
-                "astig_45_um", "reg_dx_mm", "reg_dy_mm", "reg_rot_deg"),
-    "line_profile": ("scale_J", "temperature_offset_K", "quilt_fund_xy_ratio", "quilt_harmonics_ratio"),
-}
+def _applies(e: Effect, kind: str) -> bool:
+    """Whether :func:`make_case` applies effect ``e``'s truth to a case of ``kind``: through
+    the blank's deformation (``scale``, ``temperature``, ``shape``: at ``truth_stage``
+    "blank" on a map), the measured map (``coordinates``, ``map_zernike``: at "map") or,
+    for line profiles, the deformation or the spectrograph (``pupil_zernike``, ``optics``)."""
+    blank = e.scale is not None or e.temperature is not None or e.shape is not None
+    if kind == "surface":
+        return blank if e.truth_stage == "blank" else (e.coordinates is not None or bool(e.map_zernike))
+    return blank or e.optics is not None or bool(e.pupil_zernike)
 
 
 def _library_truth(effect: str, kind: str, rng: np.random.Generator, blank: str) -> dict:
-    """The effect's drawn truth; ValueError if :func:`make_case` would not apply a parameter
-    of it (the case would silently inject nothing)."""
+    """The effect's drawn truth; ValueError if :func:`make_case` would not apply it (the
+    case would silently inject nothing)."""
     truth = draw_campaign_truth(effect, kind, rng, blank)
-    spectrograph = kind == "line_profile" and "surface" not in LIBRARY[effect].kinds
-    unknown = [] if spectrograph else sorted(set(truth) - set(APPLIED_PARAMETERS[kind]))
-    if unknown:
-        raise ValueError(f"make_case: parameters {unknown} of effect={effect!r} are not applied to a {kind} truth; "
-                         f"applied: {list(APPLIED_PARAMETERS[kind])} (add how to apply them in make_case)")
+    e = LIBRARY[effect]
+    if not _applies(e, kind):
+        raise ValueError(f"make_case: parameters {sorted(truth)} of effect={effect!r} are not applied to a {kind} "
+                         f"truth: the effect has no hook for it (Effect.scale, temperature or shape at truth_stage "
+                         f"'blank', coordinates or map_zernike at 'map'; for line profiles also pupil_zernike or "
+                         f"optics)")
     return truth
-
-
-def _reshaped_quilt(base: SagMap, truth: dict) -> SagMap:
-    """``base`` with the truth's quilt shape (unchanged without ``quilt_shape`` parameters)."""
-    if "quilt_harmonics_ratio" not in truth:
-        return base
-    return quilt_shape_map(base, truth.get("quilt_fund_xy_ratio", 1.0), truth["quilt_harmonics_ratio"])
 
 
 def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, out: Path,
               cfg: CampaignConfig) -> tuple[dict, dict]:
     """Write one synthetic case into ``out``; returns (manifest dict, injected truth).
 
-    A library effect's truth is its ``Effect.draw_truth``; it is applied through its
-    parameters: amplitude scale, temperature offset and quilt shape change the blank's
-    deformation before the model discrepancy, astigmatism and registration change the
-    measured map after it, and the spectrograph effects (those that do not change a
-    surface) are handed to the profile and PSF-image synthesis."""
+    A library effect's truth is its ``Effect.draw_truth``; it is applied through the
+    effect's hooks (:class:`~.effects.Effect`), as the forward model applies them: the
+    overall factor and the blank's shape (decomposed from the truth's own map) change the
+    blank's deformation before the model discrepancy; the measured points' coordinates
+    and the map terms change a map after it (a "map"-stage truth is drawn after the
+    discrepancy); the spectrograph's hooks act in the profile and PSF-image synthesis."""
     if kind not in OUT_OF_LIBRARY:
         raise ValueError(f"make_case: kind={kind!r} is not one of {list(OUT_OF_LIBRARY)}")
     if effect not in LIBRARY and effect not in OUT_OF_LIBRARY[kind]:
@@ -282,52 +284,49 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
     if kind == "surface":
         if lib is not None and lib.truth_stage == "blank":
             truth = _library_truth(effect, kind, rng, "spare")
-        scale = truth.get("scale_spare", 1.0)
-        T = SURFACE_T_K + truth["temperature_offset_K"] if "temperature_offset_K" in truth else SURFACE_T_K
-        base = _reshaped_quilt(base, truth)
-        t = DISCREPANCIES[cfg.discrepancy](base.scaled(scale * thermal_factor(T, _COLD_K)), rng)
+        k = deformation_factor(truth, "spare", SURFACE_T_K, _COLD_K)
+        t = DISCREPANCIES[cfg.discrepancy](blank_shape_map(base, truth).scaled(k), rng)
         extra = None
         if lib is None:
             truth, extra = OUT_OF_LIBRARY[kind][effect](rng)
-        elif lib.truth_stage == "map":
-            truth = _library_truth(effect, kind, rng, "spare")
-        if "astig_0_um" in truth:
-            extra = lambda x, y: truth["astig_0_um"] * zernike_xy(2, 2, x, y, 68.5) + truth["astig_45_um"] * zernike_xy(2, -2, x, y, 68.5)
-        if "reg_dx_mm" in truth:
-            X, Y = t.grid()
-            c, s = math.cos(math.radians(truth["reg_rot_deg"])), math.sin(math.radians(truth["reg_rot_deg"]))
-            xr, yr = X - truth["reg_dx_mm"], Y - truth["reg_dy_mm"]
-            t = t.with_sag(t.sample(c * xr + s * yr, -s * xr + c * yr))
+        else:
+            if lib.truth_stage == "map":
+                truth = _library_truth(effect, kind, rng, "spare")
+            if {name for name, _ in lib.map_zernike} & set(truth):
+                extra = lambda x, y: map_terms_um(x, y, 0.5 * MAP_APERTURE_MM, truth)  # noqa: E731
+            moved = blank_coordinates(*t.grid(), truth)
+            if moved is not None:
+                t = t.with_sag(t.sample(*moved))
         m = synthetic_surface(t, rng, noise_um=cfg.noise_um, extra_um=extra)
         write_sag_map(m, out / "map.npz")
-        meas = [{"kind": "surface", "file": "map.npz", "temperature_K": SURFACE_T_K, "aperture_diameter_mm": 137.0}]
+        meas = [{"kind": "surface", "file": "map.npz", "temperature_K": SURFACE_T_K,
+                 "aperture_diameter_mm": MAP_APERTURE_MM}]
         return {"simulation": sim, "measurement": meas}, truth
     distortion = None
     if lib is None:
         truth, distortion = OUT_OF_LIBRARY[kind][effect](rng)
     else:
         truth = _library_truth(effect, kind, rng, "J")
-    scale = truth.get("scale_J", 1.0)
-    if "temperature_offset_K" in truth:
-        scale = thermal_factor(_COLD_K + truth["temperature_offset_K"], _COLD_K)
-    # Spectrograph effects act in the optics; the others are in the truth's map.
-    params = truth if lib is not None and "surface" not in lib.kinds else {}
-    base = _reshaped_quilt(base, truth)
-    t = DISCREPANCIES[cfg.discrepancy](base.scaled(scale), rng)
+    # The profiles are stated at the simulation's cold temperature.
+    k = deformation_factor(truth, "J", _COLD_K, _COLD_K)
+    # A library truth's spectrograph hooks act in the optics (its others ignore the optics).
+    params = truth if lib is not None else {}
+    t = DISCREPANCIES[cfg.discrepancy](blank_shape_map(base, truth).scaled(k), rng)
     meas = []
     for i, (g, wl, order, ps) in enumerate(cfg.profile_specs):
         u, y, _ = synthetic_profile(g, wl, order, ps, t, rng, params=params, noise_rel=cfg.noise_rel, distortion=distortion)
-        write_profile_csv(out / f"p{i}.csv", u, y)
+        write_line_profile_csv(out / f"p{i}.csv", u, y)
         meas.append({"kind": "line_profile", "file": f"p{i}.csv", "name": f"{g}_{wl}_{ps}mas", "grating": g,
                      "order": order, "wavelength_um": wl, "pixel_scale_mas": ps})
     if cfg.profile_map_K is not None:
         # The same blank (discrepancy included) cooled to the map's temperature; a
         # temperature offset is one of the cryostat's reading, so it applies here too.
         # Drawn after the profiles: the profiles are those of the profile-only campaign.
-        dT = truth.get("temperature_offset_K", 0.0)
-        m = synthetic_surface(t.scaled(thermal_factor(cfg.profile_map_K + dT, _COLD_K + dT)), rng, noise_um=cfg.noise_um)
+        m = synthetic_surface(t.scaled(thermal_factor(true_temperature(cfg.profile_map_K, truth),
+                                                      true_temperature(_COLD_K, truth))), rng, noise_um=cfg.noise_um)
         write_sag_map(m, out / "map.npz")
-        meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K, "aperture_diameter_mm": 137.0})
+        meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K,
+                     "aperture_diameter_mm": MAP_APERTURE_MM})
     if cfg.psf_image is not None:
         # Drawn last: the profiles (and map) are those of the campaign without the image.
         g, wl, order, pix = cfg.psf_image

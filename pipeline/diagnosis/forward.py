@@ -8,18 +8,21 @@ and return the prediction at the measured samples *before* the nuisance paramete
 * line profiles: an offset shift ``delta_um`` (nonlinear, a fit parameter), a flux
   scale and a constant background (linear, projected out).
 
+What each effect does is its own (the hooks of :class:`.effects.Effect`); the functions
+here apply every effect of the library (and of its diagnostic alternatives) in the hooks'
+order: :func:`deformation_factor`, :func:`blank_coordinates`, :func:`blank_shape_um`,
+:func:`map_terms_um`, :func:`collimator_terms` and :func:`spectrograph_optics`.
+
 Speed: the nominal map is sampled once; amplitude and temperature are exact rescalings;
-registration re-samples the map by bilinear interpolation; line profiles are recomputed
-with coarser-than-default :class:`optics.lineprofile.LsfSettings` (≤ 0.5 % L1 from
-the defaults, ~4x faster) and memoised on the physical parameters, so varying only
-the offset shift costs an interpolation.
+moved map points (registration) re-sample the map by bilinear interpolation; line
+profiles are recomputed with coarser-than-default :class:`optics.lineprofile.LsfSettings`
+(≤ 0.5 % L1 from the defaults, ~4x faster) and memoised on the physical parameters, so
+varying only the offset shift costs an interpolation.
 """
 
 from __future__ import annotations
 
-import math
 from collections import OrderedDict
-from dataclasses import replace
 
 import numpy as np
 from scipy.interpolate import CubicSpline, RegularGridInterpolator
@@ -29,15 +32,15 @@ from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
 
-from .effects import BOW_REF_RADIUS_MM, LIBRARY, NOMINAL_SLIT_UM, PLATING_GRADIENT_REF_MM, parameter_spec
+from .effects import LIBRARY, SHAPE_STAGES, SpectrographOptics, forward_effects
 from .manifest import ProfileData, SurfaceData
 from .noise import estimate_noise
 from .nominal import DEFAULT_MATERIALS, thermal_factor
 from .quilt import QuiltComponents, quilt_components
 
-__all__ = ["FIT_LSF_SETTINGS", "PROFILE_KEYS", "SurfaceForward", "SpectrographImageModel", "ProfileForward", "profile_curve", "collimator_terms", "plating_gradient_map", "bow_um",
-           "blank_bow_map", "blank_shape_um",
-           "quilt_parts"]
+__all__ = ["FIT_LSF_SETTINGS", "PROFILE_KEYS", "SurfaceForward", "SpectrographImageModel", "ProfileForward", "profile_curve",
+           "true_temperature", "deformation_factor", "blank_coordinates", "blank_shape_um", "map_terms_um",
+           "collimator_terms", "spectrograph_optics", "quilt_parts"]
 
 #: Line-profile sampling used while fitting (measured: 0.1-0.45 % L1 from the defaults).
 FIT_LSF_SETTINGS = LsfSettings(detector_step_um=1.5, n_fft=256, source_step_mm=2.5, min_source_rows=5,
@@ -47,17 +50,6 @@ FIT_LSF_SETTINGS = LsfSettings(detector_step_um=1.5, n_fft=256, source_step_mm=2
 def _lstsq_residual(A: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     c, *_ = np.linalg.lstsq(A, d, rcond=None)
     return d - A @ c, c
-
-
-def bow_um(x_mm: np.ndarray, y_mm: np.ndarray, defocus_um: float, spherical_um: float) -> np.ndarray:
-    """``blank_bow`` surface (µm) at blank coordinates: Zernike (2,0) and (4,0),
-    RMS-normalised over the ``BOW_REF_RADIUS_MM`` disc (:mod:`.effects`)."""
-    out = np.zeros(np.broadcast(x_mm, y_mm).shape)
-    if defocus_um:
-        out = out + defocus_um * zernike_xy(2, 0, x_mm, y_mm, BOW_REF_RADIUS_MM)
-    if spherical_um:
-        out = out + spherical_um * zernike_xy(4, 0, x_mm, y_mm, BOW_REF_RADIUS_MM)
-    return out
 
 
 def quilt_parts(quilt: QuiltComponents | None, x_mm: np.ndarray, y_mm: np.ndarray) -> tuple | None:
@@ -70,52 +62,77 @@ def quilt_parts(quilt: QuiltComponents | None, x_mm: np.ndarray, y_mm: np.ndarra
     return fy, hh, cc, quilt.fundamental_x_um(x_mm, y_mm) + fy + hh + cc
 
 
+def true_temperature(temperature_K: float, p: dict) -> float:
+    """The true temperature (K) of a measurement stated at ``temperature_K`` (``Effect.temperature``)."""
+    for e in forward_effects():
+        if e.temperature is not None:
+            temperature_K = e.temperature(temperature_K, p)
+    return temperature_K
+
+
+def deformation_factor(p: dict, blank: str, temperature_K: float, cold_K: float, warm_K: float = 293.0,
+                       materials: tuple[str, str] = DEFAULT_MATERIALS) -> float:
+    """The deformation's overall factor for a measurement of ``blank`` stated at
+    ``temperature_K`` against the nominal at ``cold_K``: the thermal factor at the true
+    temperature times every ``Effect.scale``."""
+    k = thermal_factor(true_temperature(temperature_K, p), cold_K, warm_K, *materials)
+    for e in forward_effects():
+        if e.scale is not None:
+            k = k * e.scale(p, blank)
+    return k
+
+
+def blank_coordinates(x_mm: np.ndarray, y_mm: np.ndarray, p: dict) -> tuple | None:
+    """Blank coordinates of a map's measured points (``Effect.coordinates``), None where no
+    effect moves them."""
+    moved = None
+    for e in forward_effects():
+        if e.coordinates is not None:
+            q = e.coordinates(x_mm, y_mm, p)
+            if q is not None:
+                moved = x_mm, y_mm = q
+    return moved
+
+
 def blank_shape_um(base_um: np.ndarray, x_mm: np.ndarray, y_mm: np.ndarray, p: dict,
                    quilt: tuple | None = None) -> np.ndarray:
     """Deformation ``base_um`` (µm, at blank coordinates ``x_mm``, ``y_mm``) changed by the
-    blank effects in ``p``: the quilt's shape (``quilt`` = :func:`quilt_parts` at the same
-    points: ``+ (rho - 1) F_y + (h - 1) H + (c - 1) C + (g - 1) R`` with ``R`` the smooth
-    figure, ``base_um`` minus its quilt), then times
-    ``1 + (plating_grad_x x + plating_grad_y y) / 70 mm`` (plating gradient: it scales the
-    local deformation, quilt included), plus the blank bow (:func:`bow_um`). Shared by the
-    map and the spectrograph-image models."""
-    rho, h = p.get("quilt_fund_xy_ratio", 1.0), p.get("quilt_harmonics_ratio", 1.0)
-    c, g = p.get("quilt_cross_ratio", 1.0), p.get("quilt_figure_ratio", 1.0)
-    if quilt is not None and (rho != 1.0 or h != 1.0 or c != 1.0 or g != 1.0):
-        fy, hh, cc, whole = quilt
-        figure = base_um - whole
-        base_um = base_um + (rho - 1.0) * fy + (h - 1.0) * hh + (c - 1.0) * cc + (g - 1.0) * figure
-    gx, gy = p.get("plating_grad_x", 0.0), p.get("plating_grad_y", 0.0)
-    if gx or gy:
-        base_um = base_um * (1.0 + (gx * x_mm + gy * y_mm) / PLATING_GRADIENT_REF_MM)
-    b2, b4 = p.get("bow_defocus_um", 0.0), p.get("bow_spherical_um", 0.0)
-    if b2 or b4:
-        base_um = base_um + bow_um(x_mm, y_mm, b2, b4)
+    ``Effect.shape`` transforms of the parameters ``p``, stage by stage
+    (:data:`.effects.SHAPE_STAGES`; ``quilt`` = :func:`quilt_parts` at the same points).
+    Shared by the map and the spectrograph-image models and the synthetic truths."""
+    for stage in SHAPE_STAGES:
+        for e in forward_effects():
+            if e.shape is not None and e.shape_stage == stage:
+                base_um = e.shape(base_um, x_mm, y_mm, p, quilt)
     return base_um
 
 
-def blank_bow_map(sag: SagMap, defocus_um: float, spherical_um: float) -> SagMap:
-    """``sag`` plus the ``blank_bow`` surface (same grid)."""
-    return sag.with_sag(blank_shape_um(sag.sag_um, *sag.grid(), {"bow_defocus_um": defocus_um,
-                                                                   "bow_spherical_um": spherical_um}))
+def map_terms(x_mm: np.ndarray, y_mm: np.ndarray, radius_mm: float) -> tuple:
+    """``((parameter, null, Z), ...)``: every ``Effect.map_zernike`` term, RMS-normalised
+    over the ``radius_mm`` disc, at the points."""
+    nulls = {q.name: q.null for e in forward_effects() for q in e.parameters}
+    return tuple((name, nulls[name], zernike_xy(n, m, x_mm, y_mm, radius_mm)) for e in forward_effects()
+                 for name, (n, m) in e.map_zernike)
 
 
-def plating_gradient_map(sag: SagMap, gx: float, gy: float) -> SagMap:
-    """``sag`` times ``1 + (gx x + gy y) / 70 mm`` (blank coordinates): a linear NiP
-    thickness gradient scales the local deformation (:mod:`.effects`, ``plating_gradient``)."""
-    return sag.with_sag(blank_shape_um(sag.sag_um, *sag.grid(), {"plating_grad_x": gx, "plating_grad_y": gy}))
+def map_terms_um(x_mm: np.ndarray, y_mm: np.ndarray, radius_mm: float, p: dict):
+    """The ``Effect.map_zernike`` surface (µm) of the parameters ``p`` at the points, over
+    the ``radius_mm`` disc; None if ``p`` holds none of their parameters."""
+    out = None
+    for name, _, z in map_terms(x_mm, y_mm, radius_mm):
+        if name in p:
+            out = p[name] * z if out is None else out + p[name] * z
+    return out
 
 
 class SurfaceForward:
-    """Cold-minus-warm surface map model: ``k * (g(q) * (S0(q) + Q(q)) + B(q)) + astigmatism``
-    with ``q = R^-1(p - d)`` the blank coordinates of measured point ``p``, ``Q`` the
-    quilt-shape change (:func:`blank_shape_um`),
-    ``g(q) = 1 + (plating_grad_x q_x + plating_grad_y q_y) / 70 mm`` (plating gradient)
-    and ``B`` the blank bow (:func:`bow_um`).
-
-    ``k = thermal_factor(T_meas + temperature_offset_K, cold_K) * scale_<blank>``;
-    ``S0`` is the nominal map at the simulation's ``cold_K``; the astigmatism is
-    RMS-normalised Zernike (2, ±2) over the measurement aperture disc.
+    """Cold-minus-warm surface map model: ``k * shape(S0(q), q) + Z`` with ``q`` the blank
+    coordinates of the measured points (:func:`blank_coordinates`; e.g. ``q = R^-1(p - d)``
+    of a registration), ``S0`` the nominal map at the simulation's ``cold_K``, ``shape`` the
+    blank-shape effects (:func:`blank_shape_um`: quilt shape, plating gradient, bow), ``k``
+    the overall factor at the map's stated temperature (:func:`deformation_factor`:
+    temperature offset, ``scale_<blank>``) and ``Z`` the map terms (:func:`map_terms`:
+    astigmatism, RMS-normalised over the measurement aperture disc).
     """
 
     kind = "surface"
@@ -140,8 +157,7 @@ class SurfaceForward:
         if bad.any():
             raise ValueError(f"measurement {m.name!r}: {int(bad.sum())} samples inside aperture_diameter_mm="
                              f"{m.aperture_diameter_mm} fall outside the nominal map")
-        self.z22 = zernike_xy(2, 2, self.x, self.y, self.radius_mm)
-        self.z2m2 = zernike_xy(2, -2, self.x, self.y, self.radius_mm)
+        self._map_terms = map_terms(self.x, self.y, self.radius_mm)
         self.nuisance = np.column_stack([np.ones(self.n), self.x / self.radius_mm, self.y / self.radius_mm])
         self.noise_known = m.noise_um
         self.quilt = quilt_components(nominal)
@@ -153,16 +169,13 @@ class SurfaceForward:
         return np.where(self._valid(pts) > 0.999, v, np.nan)
 
     def factor(self, p: dict) -> float:
-        k = thermal_factor(self.T_K + p.get("temperature_offset_K", 0.0), self.cold_K, self.warm_K, *self.materials)
-        return k * p.get(f"scale_{self.blank}", 1.0)
+        return deformation_factor(p, self.blank, self.T_K, self.cold_K, self.warm_K, self.materials)
 
     def predict(self, p: dict) -> np.ndarray:
         """Model sag (µm) at the measured points, before piston/tilt."""
-        dx, dy, rot = p.get("reg_dx_mm", 0.0), p.get("reg_dy_mm", 0.0), p.get("reg_rot_deg", 0.0)
-        if dx or dy or rot:
-            c, s = math.cos(math.radians(rot)), math.sin(math.radians(rot))
-            xr, yr = self.x - dx, self.y - dy
-            qx, qy = c * xr + s * yr, -s * xr + c * yr
+        moved = blank_coordinates(self.x, self.y, p)
+        if moved is not None:
+            qx, qy = moved
             base = self._sample(qx, qy)
             off = ~np.isfinite(base)
             base = np.where(off, 0.0, base)  # points moved off the map: no deformation there
@@ -170,8 +183,10 @@ class SurfaceForward:
             quilt = None if quilt is None else tuple(np.where(off, 0.0, c) for c in quilt)
         else:
             base, qx, qy, quilt = self.base, self.x, self.y, self._quilt_at
-        base = blank_shape_um(base, qx, qy, p, quilt)
-        return self.factor(p) * base + p.get("astig_0_um", 0.0) * self.z22 + p.get("astig_45_um", 0.0) * self.z2m2
+        out = self.factor(p) * blank_shape_um(base, qx, qy, p, quilt)
+        for name, null, z in self._map_terms:
+            out = out + p.get(name, null) * z
+        return out
 
     def residual(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
         """Data minus model with piston and tilt fitted on ``mask`` (µm); ``delta_um`` unused."""
@@ -198,40 +213,37 @@ PROFILE_KEYS = tuple(p.name for e in LIBRARY.values() if set(e.kinds) & {"line_p
                      for p in e.parameters)
 
 
-#: Pupil Zernike terms of other orders than the collimator's, set only by the diagnostic
-#: alternative of :mod:`.pupil_orders` (not a library effect): parameter -> (n, m),
-#: RMS-normalised wavefront (µm) over the 110 mm pupil, null 0.
-OTHER_ORDER_TERMS = {"pupil_spherical_um": (4, 0), "pupil_trefoil_0_um": (3, 3), "pupil_trefoil_30_um": (3, -3),
-                     "pupil_coma2_um": (5, 1)}
-
-
 def collimator_terms(p: dict) -> dict:
-    """The spectrograph's pupil Zernike terms {(n, m): µm}: the default collimator plus the
-    ``collimator_wfe`` effect's coma Z(3,1), defocus Z(2,0), oblique astigmatism Z(2,-2),
-    plus any :data:`OTHER_ORDER_TERMS` in ``p``."""
+    """The spectrograph's pupil Zernike terms {(n, m): µm}: the default collimator plus
+    every ``Effect.pupil_zernike`` term of the library and its alternatives in ``p``."""
     coll = dict(DEFAULT_COLLIMATOR_ZERNIKE_UM)
-    for key, nm in (("coll_coma_um", (3, 1)), ("coll_defocus_um", (2, 0)), ("coll_astig45_um", (2, -2)),
-                    *OTHER_ORDER_TERMS.items()):
-        coll[nm] = coll.get(nm, 0.0) + p.get(key, 0.0)
+    for e in forward_effects():
+        for key, nm in e.pupil_zernike:
+            coll[nm] = coll.get(nm, 0.0) + p.get(key, 0.0)
     return coll
+
+
+def spectrograph_optics(grating, p: dict) -> SpectrographOptics:
+    """The spectrograph's optics for effect parameters ``p``: ``grating`` (name or
+    :class:`optics.grating.Grating`), no footprint offset and :func:`collimator_terms`,
+    changed by every ``Effect.optics``."""
+    from optics.grating import get_grating
+
+    o = SpectrographOptics(get_grating(grating), (0.0, 0.0), collimator_terms(p))
+    for e in forward_effects():
+        if e.optics is not None:
+            o = e.optics(o, p)
+    return o
 
 
 def profile_curve(grating: str, wavelength_um: float, order: int, pixel_scale_mas: int, sag: SagMap | None,
                   p: dict, slit_position: float = 0.0, settings: LsfSettings = FIT_LSF_SETTINGS):
-    """Detected line profile (offset_um, unit-area intensity) for effect parameters ``p``.
-
-    ``p`` may hold ``pupil_x_mm``, ``pupil_y_mm``, ``coll_coma_um``, ``coll_defocus_um``,
-    ``coll_astig45_um`` and ``slit_image_width_um``; the sag is passed already scaled.
-    """
-    from optics.grating import get_grating
-
-    g = get_grating(grating)
-    w = p.get("slit_image_width_um", NOMINAL_SLIT_UM)
-    if w != NOMINAL_SLIT_UM:
-        g = replace(g, slit_image_width_um=g.slit_image_width_um * w / NOMINAL_SLIT_UM)
-    r = line_profile(g, wavelength_um, pixel_scale_mas, sag, order=order,
-                     pupil_shift_mm=(p.get("pupil_x_mm", 0.0), p.get("pupil_y_mm", 0.0)),
-                     slit_position=slit_position, collimator_zernike_um=collimator_terms(p), settings=settings)
+    """Detected line profile (offset_um, unit-area intensity) for effect parameters ``p``
+    (those of the spectrograph: :func:`spectrograph_optics`); the sag is passed already
+    scaled and shaped."""
+    o = spectrograph_optics(grating, p)
+    r = line_profile(o.grating, wavelength_um, pixel_scale_mas, sag, order=order, pupil_shift_mm=o.pupil_shift_mm,
+                     slit_position=slit_position, collimator_zernike_um=o.collimator_zernike_um, settings=settings)
     return r.detected.offset_um, r.detected.intensity
 
 
@@ -240,7 +252,10 @@ class SpectrographImageModel:
     deformation's overall factor and a memo of the model per physical parameter set
     (varying only the nuisances then costs an interpolation)."""
 
-    _KEYS = PROFILE_KEYS + tuple(OTHER_ORDER_TERMS)
+    #: the memo key's parameters and their nulls: :data:`PROFILE_KEYS` and the alternatives' likewise
+    _NULLS = {q.name: q.null for e in forward_effects() if set(e.kinds) & {"line_profile", "psf_image"}
+              and not e.rescales for q in e.parameters}
+    _KEYS = tuple(_NULLS)
 
     def _setup(self, m, nominal: SagMap, cold_K: float, warm_K: float, settings, cache_size: int,
                materials: tuple[str, str] = DEFAULT_MATERIALS) -> None:
@@ -250,15 +265,14 @@ class SpectrographImageModel:
         self._grid = nominal.grid()
         self.quilt = quilt_components(nominal)
         self._quilt_at = quilt_parts(self.quilt, *self._grid)
-        self._nulls = {q: parameter_spec(q).null if q in PROFILE_KEYS else 0.0 for q in self._KEYS}
+        self._nulls = self._NULLS
         self._cache: OrderedDict = OrderedDict()
         self._cache_size = cache_size
         self.noise_known = m.noise_rel
 
     def factor(self, p: dict) -> float:
-        k = thermal_factor(self.cold_K + p.get("temperature_offset_K", 0.0), self.cold_K, self.warm_K,
-                           *self.materials)
-        return k * p.get(f"scale_{self.blank}", 1.0)
+        # taken at the simulation's cold_K: spectrograph data are stated at it
+        return deformation_factor(p, self.blank, self.cold_K, self.cold_K, self.warm_K, self.materials)
 
     def _memo(self, p: dict, build):
         """``build(sag, p)`` for the grating's deformed sag, memoised on the physical parameters."""

@@ -28,7 +28,7 @@ from optics.imaging import box_convolve
 from optics.lineprofile import otf_cutoff_per_um, point_psf
 from optics.sagmap import SagMap
 
-from .forward import SpectrographImageModel, collimator_terms
+from .forward import SpectrographImageModel, spectrograph_optics
 from .manifest import PsfImageData
 from .nominal import DEFAULT_MATERIALS
 from .noise import estimate_noise, estimate_noise_band_limited
@@ -74,10 +74,10 @@ def psf_image_model(grating: str, wavelength_um: float, order: int, sag: SagMap 
     grating, wavelength_um, order
         As :func:`optics.lineprofile.point_psf`.
     sag : SagMap or None
-        Grating sag (µm), already scaled (amplitude, temperature, gradient, bow).
+        Grating sag (µm), already scaled and shaped (amplitude, temperature, gradient, bow).
     p : dict
-        ``pupil_x_mm``, ``pupil_y_mm``, ``coll_coma_um``, ``coll_defocus_um``,
-        ``coll_astig45_um`` (missing = 0).
+        Effect parameters of the spectrograph (:func:`.forward.spectrograph_optics`;
+        missing = null).
     pixel_um : float
         Detector pixel (µm) the image is integrated over on both axes (0: none).
 
@@ -88,9 +88,9 @@ def psf_image_model(grating: str, wavelength_um: float, order: int, sag: SagMap 
     image : ndarray, shape (y, x)
         Unit-volume intensity before the pixel; after it, same normalisation.
     """
-    ps = point_psf(grating, wavelength_um, sag, order=order,
-                   pupil_shift_mm=(p.get("pupil_x_mm", 0.0), p.get("pupil_y_mm", 0.0)),
-                   collimator_zernike_um=collimator_terms(p), detector_step_um=settings.detector_step_um,
+    o = spectrograph_optics(grating, p)
+    ps = point_psf(o.grating, wavelength_um, sag, order=order, pupil_shift_mm=o.pupil_shift_mm,
+                   collimator_zernike_um=o.collimator_zernike_um, detector_step_um=settings.detector_step_um,
                    n_fft=settings.n_fft, window_um=settings.window_um, workers=1)
     img = ps.intensity
     if pixel_um > 0:

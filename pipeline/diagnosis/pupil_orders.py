@@ -58,24 +58,18 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from .criteria import Criteria
-from .effects import Parameter
+from .effects.pupil_other_orders import PUPIL_OTHER_ORDERS
 from .finding import Finding, all_effects
 from .fitting import FitOutcome, Problem, fit
-from .forward import OTHER_ORDER_TERMS
 from .ranking import parameters_of
 
 __all__ = ["OTHER_ORDER_PARAMETERS", "OTHER_ORDERS_LABEL", "PupilOrdersCheck", "checks", "other_orders_check",
            "with_check"]
 
-_MEANING = {(4, 0): "primary spherical", (3, 3): "trefoil (cos 3 theta)", (3, -3): "trefoil (sin 3 theta)",
-            (5, 1): "secondary coma (cos theta)"}
-
 #: The diagnostic basis of pupil terms of other orders (module docstring), µm RMS over the
-#: 110 mm pupil.
-OTHER_ORDER_PARAMETERS = tuple(
-    Parameter(name, 0.0, -0.4, 0.4, floor=0.04, unit="µm", kinds=("line_profile", "psf_image"),
-              meaning=f"{_MEANING[nm]} wavefront Zernike Z({nm[0]},{nm[1]}), RMS-normalised over the 110 mm pupil")
-    for name, nm in OTHER_ORDER_TERMS.items())
+#: 110 mm pupil: the parameters of the alternative's effect unit, which declares their
+#: Zernike terms (:mod:`.effects.pupil_other_orders`).
+OTHER_ORDER_PARAMETERS = PUPIL_OTHER_ORDERS.parameters
 
 #: What a finding is degenerate with when the other orders fit as well.
 OTHER_ORDERS_LABEL = ("pupil aberration of other orders (spherical Z(4,0), trefoil Z(3,±3), "

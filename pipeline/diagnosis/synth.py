@@ -19,12 +19,12 @@ import numpy as np
 from optics.lineprofile import LsfSettings
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
-from pipeline.io.measured import write_line_profile_csv
 
+from .effects import SHAPE_STAGES, forward_effects
 from .forward import blank_shape_um, profile_curve, quilt_parts
 from .quilt import quilt_components
 
-__all__ = ["quilt_shape_map", "shape_discrepancy", "unmodelled_shape", "FOIL_TERMS", "synthetic_surface", "synthetic_profile", "synthetic_psf_image", "write_profile_csv"]
+__all__ = ["blank_shape_map", "quilt_shape_map", "shape_discrepancy", "unmodelled_shape", "FOIL_TERMS", "synthetic_surface", "synthetic_profile", "synthetic_psf_image"]
 
 
 def quilt_shape_map(sag: SagMap, fund_xy_ratio: float = 1.0, harmonics_ratio: float = 1.0,
@@ -40,9 +40,25 @@ def quilt_shape_map(sag: SagMap, fund_xy_ratio: float = 1.0, harmonics_ratio: fl
     q = quilt_components(sag)
     if q is None:
         raise ValueError(f"quilt_shape_map: map {sag.label!r} does not cover the 82 x 72 mm centre the quilt is fitted on")
-    X, Y = sag.grid()
     p = {"quilt_fund_xy_ratio": fund_xy_ratio, "quilt_harmonics_ratio": harmonics_ratio, "quilt_cross_ratio": cross_ratio}
-    return sag.with_sag(blank_shape_um(sag.sag_um, X, Y, p, quilt_parts(q, X, Y)), label=f"{sag.label} + quilt shape")
+    return blank_shape_map(sag, p, q)
+
+
+def blank_shape_map(sag: SagMap, p: dict, quilt=None) -> SagMap:
+    """``sag`` changed by the blank-shape effects (``Effect.shape``) of the parameters ``p``
+    (:func:`~pipeline.diagnosis.forward.blank_shape_um`); a "reshape"-stage effect's parts
+    are decomposed from ``sag`` itself (``quilt``: :func:`~pipeline.diagnosis.quilt.quilt_components`
+    of it, if already made). ``sag`` itself where ``p`` holds no parameter of such an effect."""
+    def names(stages):
+        return {q.name for e in forward_effects() if e.shape is not None and e.shape_stage in stages
+                for q in e.parameters}
+
+    if not names(SHAPE_STAGES) & set(p):
+        return sag
+    X, Y = sag.grid()
+    if quilt is None and names(("reshape",)) & set(p):
+        quilt = quilt_components(sag)
+    return sag.with_sag(blank_shape_um(sag.sag_um, X, Y, p, quilt_parts(quilt, X, Y)), label=f"{sag.label} + blank shape")
 
 
 def shape_discrepancy(sag: SagMap, rng: np.random.Generator, gradient: float = 0.03, bow_um: float = 0.01) -> SagMap:
@@ -132,11 +148,6 @@ def synthetic_profile(grating: str, wavelength_um: float, order: int, pixel_scal
     peak = float(y.max())
     meas = flux * (model + background * peak + rng.normal(0.0, noise_rel * peak, x.size))
     return x, np.clip(meas, 0.0, None), {"shift_um": shift, "flux": flux}
-
-
-def write_profile_csv(path, offset_um: np.ndarray, intensity: np.ndarray) -> None:
-    """CSV ``offset_um,intensity``: :func:`pipeline.io.measured.write_line_profile_csv`."""
-    write_line_profile_csv(path, offset_um, intensity)
 
 
 def synthetic_psf_image(grating: str, wavelength_um: float, order: int, truth: SagMap, rng: np.random.Generator, *,

@@ -34,7 +34,8 @@ from scipy.optimize import brentq
 from optics.zernike import zernike_xy
 from pipeline.diagnosis.manifest import NOMINAL_SIMULATION, Simulation
 from pipeline.diagnosis.nominal import case_sag_map, thermal_factor
-from pipeline.diagnosis.synth import shape_discrepancy, synthetic_profile, synthetic_surface, write_profile_csv
+from pipeline.diagnosis.synth import shape_discrepancy, synthetic_profile, synthetic_surface
+from pipeline.io.measured import write_line_profile_csv
 from pipeline.io.registry import write_sag_map
 
 HERE = Path(__file__).parent
@@ -86,7 +87,7 @@ def _profiles(out, rng, truth, specs, params) -> str:
     for g, wl, order, ps in specs:
         name = f"{g}_{str(wl).replace('.', 'p')}_{ps}mas"
         u, y, info = synthetic_profile(g, wl, order, ps, truth, rng, params=params)
-        write_profile_csv(out / f"{name}.csv", u, y)
+        write_line_profile_csv(out / f"{name}.csv", u, y)
         text += (f'\n[[measurement]]\nkind = "line_profile"\nfile = "{name}.csv"\ngrating = "{g}"\norder = {order}\n'
                  f"wavelength_um = {wl}\npixel_scale_mas = {ps}\nslit_position = 0.0\n")
     return text

@@ -1,9 +1,14 @@
 """The library of candidate unmodelled effects.
 
 One module per effect (or per family sharing a summary: :mod:`.rescaling`) holds its
-:class:`Effect` declaration, its report summary and the constants it owns; :mod:`.base`
-the concepts (:class:`Parameter`, :class:`Effect`, :class:`SummaryContext`);
-:mod:`.library` the :data:`LIBRARY`, in its order, and the questions asked of it.
+:class:`Effect` declaration, its action on the forward models (the hooks of
+:class:`Effect`: how it scales, moves, reshapes the deformation or changes the
+spectrograph; :mod:`.base` lists them in the order the models call them), its report
+summary and the constants it owns; :mod:`.base` the concepts (:class:`Parameter`,
+:class:`Effect`, :class:`SpectrographOptics`, :class:`SummaryContext`); :mod:`.library`
+the :data:`LIBRARY`, in its order, the :data:`ALTERNATIVES` (effect units a check fits
+instead of a library effect, never candidates: :mod:`.pupil_other_orders`) and the
+questions asked of them.
 
 Each effect is a named set of parameters of the forward model (:mod:`pipeline.diagnosis.forward`) with a
 physical meaning, a null value (the nominal model) and a prior range (fit bounds).
@@ -102,14 +107,16 @@ the best smaller one by ``companion_bic`` (each companion adopted must be suppor
 (relative error is ``|fit - true| / max(|true|, floor)``).
 """
 
-from .base import Effect, Parameter, SummaryContext
+from .base import SHAPE_STAGES, Effect, Parameter, SpectrographOptics, SummaryContext
 from .blank_bow import BOW_REF_RADIUS_MM
 from .collimator_wfe import COLLIMATOR_PUPIL_RADIUS_MM
-from .library import (LIBRARY, applicable_effects, draw_campaign_truth, effect_parameters, library_markdown, library_rows,
-                      parameter_spec, parameter_units, physical_summary)
+from .library import (ALTERNATIVES, LIBRARY, applicable_effects, draw_campaign_truth, effect_parameters,
+                      forward_effects, library_markdown, library_rows, parameter_spec, parameter_units,
+                      physical_summary)
 from .plating_gradient import PLATING_GRADIENT_REF_MM
 from .slit_width import NOMINAL_SLIT_UM
 
-__all__ = ["Parameter", "Effect", "LIBRARY", "PLATING_GRADIENT_REF_MM", "BOW_REF_RADIUS_MM", "COLLIMATOR_PUPIL_RADIUS_MM",
+__all__ = ["Parameter", "Effect", "SHAPE_STAGES", "SpectrographOptics", "LIBRARY", "ALTERNATIVES", "forward_effects",
+           "PLATING_GRADIENT_REF_MM", "BOW_REF_RADIUS_MM", "COLLIMATOR_PUPIL_RADIUS_MM",
            "draw_campaign_truth", "effect_parameters", "parameter_spec", "parameter_units", "applicable_effects", "NOMINAL_SLIT_UM",
            "SummaryContext", "physical_summary", "library_rows", "library_markdown"]

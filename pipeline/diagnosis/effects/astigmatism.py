@@ -25,4 +25,5 @@ ASTIGMATISM = Effect(
      Parameter("astig_45_um", 0.0, -1.0, 1.0, floor=0.02, unit="µm",
                meaning="surface Zernike Z(2,-2), RMS-normalised over the map's aperture disc")),
     description="mount-induced surface astigmatism (Zernike (2,2) and (2,-2), RMS-normalised over the aperture)",
-    vector=True, draw_truth=effect_draws.astigmatism, truth_stage="map", summary=_summary)
+    vector=True, draw_truth=effect_draws.astigmatism, truth_stage="map", summary=_summary,
+    map_zernike=(("astig_0_um", (2, 2)), ("astig_45_um", (2, -2))))

@@ -1,6 +1,21 @@
 """The concepts of the effect library: a fit :class:`Parameter`, a candidate
-unmodelled :class:`Effect` and the :class:`SummaryContext` its report summary reads
-(the library itself and what it means: :mod:`pipeline.diagnosis.effects`)."""
+unmodelled :class:`Effect`, the :class:`SpectrographOptics` its optics hook changes and
+the :class:`SummaryContext` its report summary reads (the library itself and what it
+means: :mod:`pipeline.diagnosis.effects`).
+
+How an effect acts on the forward models (:mod:`pipeline.diagnosis.forward`, which loops
+over the library and calls these hooks in this order; each hook reads only its own
+parameters, a missing one at its null, and leaves the input unchanged there):
+
+1. the deformation's overall factor ``k = thermal_factor(T) * prod(scale)``: ``temperature``
+   maps the stated temperature to the true one, ``scale`` gives a factor;
+2. a map's measured points to blank coordinates: ``coordinates``;
+3. the blank's shape in blank coordinates, before ``k``: ``shape`` at its ``shape_stage``
+   (:data:`SHAPE_STAGES`);
+4. a map after ``k``: ``map_zernike`` terms over the map's aperture disc;
+5. the spectrograph (line profiles, PSF images): ``pupil_zernike`` terms added to the
+   collimator's wavefront, then ``optics``.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +23,13 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-__all__ = ["Parameter", "Effect", "SummaryContext", "vector_norm"]
+__all__ = ["Parameter", "Effect", "SHAPE_STAGES", "SpectrographOptics", "SummaryContext", "vector_norm"]
+
+#: The order in which the ``shape`` transforms act on the blank's deformation: "reshape"
+#: (changes the nominal's own parts, so it sees the unchanged nominal), "multiply"
+#: (scales the local deformation, reshaped quilt included), "add" (adds a surface that
+#: the others do not scale). Within a stage, the library's order.
+SHAPE_STAGES = ("reshape", "multiply", "add")
 
 
 @dataclass(frozen=True)
@@ -102,6 +123,31 @@ class Effect:
         every fitted parameter of the finding, the projection factor ``k``
         (:func:`pipeline.diagnosis.quilt.projection_factor`) and the
         :class:`SummaryContext`; None: none.
+    scale : callable or None
+        Factor of the deformation, ``scale(parameters, blank) -> float`` for the
+        measurement of grating blank ``blank``.
+    temperature : callable or None
+        The true temperature, ``temperature(temperature_K, parameters) -> K``, of a
+        measurement stated at ``temperature_K`` (the thermal factor is taken there).
+    coordinates : callable or None
+        Blank coordinates of a map's measured points, ``coordinates(x_mm, y_mm,
+        parameters) -> (qx_mm, qy_mm)``, or None where the parameters do not move them.
+    shape : callable or None
+        The blank's changed deformation, ``shape(sag_um, x_mm, y_mm, parameters, quilt) ->
+        sag_um`` at blank coordinates (mm), before the overall factor; ``quilt`` is
+        :func:`pipeline.diagnosis.forward.quilt_parts` of the nominal at the same points
+        (None: no quilt fit).
+    shape_stage : str
+        When ``shape`` acts, one of :data:`SHAPE_STAGES`.
+    map_zernike : tuple of (str, (int, int))
+        ``(parameter, (n, m))``: surface Zernike terms added to a map after the overall
+        factor, RMS-normalised over the map's aperture disc (µm).
+    pupil_zernike : tuple of (str, (int, int))
+        ``(parameter, (n, m))``: wavefront Zernike terms added to the collimator's,
+        RMS-normalised over the 110 mm pupil (µm).
+    optics : callable or None
+        The spectrograph's changed optics, ``optics(SpectrographOptics, parameters) ->
+        SpectrographOptics``.
     """
 
     name: str
@@ -118,14 +164,45 @@ class Effect:
     rescales: bool = False
     summary: Callable | None = None
     projection: Callable | None = None
+    scale: Callable | None = None
+    temperature: Callable | None = None
+    coordinates: Callable | None = None
+    shape: Callable | None = None
+    shape_stage: str = "add"
+    map_zernike: tuple = ()
+    pupil_zernike: tuple = ()
+    optics: Callable | None = None
 
     def __post_init__(self) -> None:
+        if self.shape_stage not in SHAPE_STAGES:
+            raise ValueError(f"Effect {self.name!r}: shape_stage={self.shape_stage!r} must be one of "
+                             f"{list(SHAPE_STAGES)}")
+        own = {p.name for p in self.parameters}
+        for field_name in ("map_zernike", "pupil_zernike"):
+            for name, nm in getattr(self, field_name):
+                if name not in own or len(nm) != 2:
+                    raise ValueError(f"Effect {self.name!r}: {field_name} entry ({name!r}, {nm!r}) must be (one of its "
+                                     f"parameters {sorted(own)}, (n, m))")
         if self.truth_stage not in ("blank", "map"):
             raise ValueError(f"Effect {self.name!r}: truth_stage={self.truth_stage!r} must be 'blank' or 'map'")
+        if self.rescales and (self.coordinates or self.shape or self.map_zernike or self.pupil_zernike or self.optics):
+            # a rescaling acts only through the overall factor (never paired, not in the image memo key)
+            raise ValueError(f"Effect {self.name!r}: rescales=True allows only the scale= and temperature= hooks")
         if self.projection is not None and not self.rescales:
             # the projection convention converts an overall factor of the deformation
             raise ValueError(f"Effect {self.name!r}: projection= is only for an effect with rescales=True "
                              f"(got rescales={self.rescales})")
+
+
+@dataclass(frozen=True)
+class SpectrographOptics:
+    """What the ``optics`` hooks change: the grating (an :class:`optics.grating.Grating`,
+    its slit image width included), the beam footprint's offset on it (mm; x dispersion,
+    y rulings) and the collimator's pupil Zernike terms ``{(n, m): µm}``."""
+
+    grating: object
+    pupil_shift_mm: tuple[float, float]
+    collimator_zernike_um: dict
 
 
 @dataclass(frozen=True)

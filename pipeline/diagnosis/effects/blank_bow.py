@@ -3,13 +3,35 @@ tried only where a map is in the data: :mod:`pipeline.diagnosis.effects`)."""
 
 from __future__ import annotations
 
+import numpy as np
+
+from optics.zernike import zernike_xy
+
 from .base import Effect, Parameter, SummaryContext, vector_norm
 
-__all__ = ["BLANK_BOW", "BOW_REF_RADIUS_MM"]
+__all__ = ["BLANK_BOW", "BOW_REF_RADIUS_MM", "bow_um"]
 
 #: Radius (mm, blank coordinates) of the disc over which the ``blank_bow`` Zernike terms
 #: are RMS-normalised: half the blank's 140 mm height, independent of any measurement.
 BOW_REF_RADIUS_MM = 70.0
+
+
+def bow_um(x_mm: np.ndarray, y_mm: np.ndarray, defocus_um: float, spherical_um: float) -> np.ndarray:
+    """The bow's surface (µm) at blank coordinates (mm): Zernike (2,0) and (4,0),
+    RMS-normalised over the ``BOW_REF_RADIUS_MM`` disc."""
+    out = np.zeros(np.broadcast(x_mm, y_mm).shape)
+    if defocus_um:
+        out = out + defocus_um * zernike_xy(2, 0, x_mm, y_mm, BOW_REF_RADIUS_MM)
+    if spherical_um:
+        out = out + spherical_um * zernike_xy(4, 0, x_mm, y_mm, BOW_REF_RADIUS_MM)
+    return out
+
+
+def _shape(sag_um, x_mm, y_mm, p: dict, quilt):
+    b2, b4 = p.get("bow_defocus_um", 0.0), p.get("bow_spherical_um", 0.0)
+    if not (b2 or b4):
+        return sag_um
+    return sag_um + bow_um(x_mm, y_mm, b2, b4)
 
 
 def _summary(p: dict, ctx: SummaryContext) -> dict:
@@ -27,4 +49,4 @@ BLANK_BOW = Effect(
     description="rotationally symmetric figure change of the cold blank: Zernike (2,0) and (4,0), "
                 "RMS-normalised over a 70 mm radius disc in blank coordinates, at the simulation's cold_K "
                 "(scaled with the deformation)",
-    vector=True, companion=True, requires=("surface",), summary=_summary)
+    vector=True, companion=True, requires=("surface",), summary=_summary, shape=_shape, shape_stage="add")

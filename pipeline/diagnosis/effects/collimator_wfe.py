@@ -30,4 +30,5 @@ COLLIMATOR_WFE = Effect(
                meaning="extra wavefront Zernike Z(2,-2), RMS-normalised over the 110 mm pupil",
                sign_origin=-DEFAULT_COLLIMATOR_ZERNIKE_UM[(2, -2)])),
     description="extra low-order spectrograph WFE (RMS-normalised Zernike over the 110 mm pupil)",
-    vector=True, draw_truth=effect_draws.collimator_wfe, summary=_summary)
+    vector=True, draw_truth=effect_draws.collimator_wfe, summary=_summary,
+    pupil_zernike=(("coll_coma_um", (3, 1)), ("coll_defocus_um", (2, 0)), ("coll_astig45_um", (2, -2))))

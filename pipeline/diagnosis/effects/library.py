@@ -9,13 +9,14 @@ from .base import Effect, Parameter, SummaryContext
 from .blank_bow import BLANK_BOW
 from .collimator_wfe import COLLIMATOR_WFE
 from .plating_gradient import PLATING_GRADIENT
+from .pupil_other_orders import PUPIL_OTHER_ORDERS
 from .pupil_shift import PUPIL_SHIFT
 from .quilt_shape import QUILT_SHAPE
 from .registration import REGISTRATION
 from .rescaling import AMPLITUDE_SCALE, TEMPERATURE
 from .slit_width import SLIT_WIDTH
 
-__all__ = ["LIBRARY", "draw_campaign_truth", "effect_parameters", "parameter_spec", "parameter_units",
+__all__ = ["LIBRARY", "ALTERNATIVES", "forward_effects", "draw_campaign_truth", "effect_parameters", "parameter_spec", "parameter_units",
            "applicable_effects", "physical_summary", "library_rows", "library_markdown"]
 
 #: Every effect by name. The order is the library's order everywhere (a pair's name, ties
@@ -23,6 +24,17 @@ __all__ = ["LIBRARY", "draw_campaign_truth", "effect_parameters", "parameter_spe
 LIBRARY: dict[str, Effect] = {e.name: e for e in (
     ASTIGMATISM, AMPLITUDE_SCALE, TEMPERATURE, REGISTRATION, PUPIL_SHIFT, COLLIMATOR_WFE, SLIT_WIDTH,
     PLATING_GRADIENT, BLANK_BOW, QUILT_SHAPE)}
+
+#: Effects that are not candidates (never ranked or reported as an explanation) but whose
+#: parameters the forward models take: the diagnostic alternatives a check fits instead
+#: of a library effect (:mod:`pipeline.diagnosis.pupil_orders`).
+ALTERNATIVES: dict[str, Effect] = {e.name: e for e in (PUPIL_OTHER_ORDERS,)}
+
+
+def forward_effects() -> tuple[Effect, ...]:
+    """Every effect whose hooks the forward models call: the library's, in its order, then
+    the :data:`ALTERNATIVES`."""
+    return (*LIBRARY.values(), *ALTERNATIVES.values())
 
 
 def draw_campaign_truth(effect: str, kind: str, rng, blank: str) -> dict:

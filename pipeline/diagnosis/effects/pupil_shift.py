@@ -2,10 +2,17 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from .. import effect_draws
-from .base import Effect, Parameter, SummaryContext, vector_norm
+from .base import Effect, Parameter, SpectrographOptics, SummaryContext, vector_norm
 
 __all__ = ["PUPIL_SHIFT"]
+
+
+def _optics(o: SpectrographOptics, p: dict) -> SpectrographOptics:
+    x, y = o.pupil_shift_mm
+    return replace(o, pupil_shift_mm=(x + p.get("pupil_x_mm", 0.0), y + p.get("pupil_y_mm", 0.0)))
 
 
 def _summary(p: dict, ctx: SummaryContext) -> dict:
@@ -19,4 +26,4 @@ PUPIL_SHIFT = Effect(
      Parameter("pupil_y_mm", 0.0, -10.0, 10.0, (0.0, 4.5), floor=3.0, unit="mm",
                meaning="beam footprint offset on the grating along y (rulings)")),
     description="beam footprint offset on the grating (x dispersion, y ruling), common to all profiles",
-    vector=True, draw_truth=effect_draws.pupil_shift, summary=_summary)
+    vector=True, draw_truth=effect_draws.pupil_shift, summary=_summary, optics=_optics)

@@ -13,6 +13,17 @@ __all__ = ["QUILT_SHAPE"]
 _MAP_AND_IMAGE = ("surface", "psf_image")
 
 
+def _reshape(sag_um, x_mm, y_mm, p: dict, quilt):
+    """``S + (rho - 1) F_y + (h - 1) H + (c - 1) C + (g - 1) R`` (:mod:`pipeline.diagnosis.effects`),
+    ``quilt = (F_y, H, C, F)`` and ``R = S - F``; unchanged without a quilt fit."""
+    rho, h = p.get("quilt_fund_xy_ratio", 1.0), p.get("quilt_harmonics_ratio", 1.0)
+    c, g = p.get("quilt_cross_ratio", 1.0), p.get("quilt_figure_ratio", 1.0)
+    if quilt is None or (rho == 1.0 and h == 1.0 and c == 1.0 and g == 1.0):
+        return sag_um
+    fy, hh, cc, whole = quilt
+    return sag_um + (rho - 1.0) * fy + (h - 1.0) * hh + (c - 1.0) * cc + (g - 1.0) * (sag_um - whole)
+
+
 def _summary(p: dict, ctx: SummaryContext) -> dict:
     out = {"quilt_fund_xy_ratio": p.get("quilt_fund_xy_ratio", 1.0), "quilt_harmonics_ratio": p["quilt_harmonics_ratio"],
            "quilt_cross_ratio": p.get("quilt_cross_ratio", 1.0), "quilt_figure_ratio": p.get("quilt_figure_ratio", 1.0)}
@@ -44,4 +55,5 @@ QUILT_SHAPE = Effect(
     description="the quilt's harmonic content differs from the simulation's: the y fundamental relative "
                 "to the x fundamental and the higher harmonics relative to both (the fundamentals' "
                 "amplitude stays amplitude_scale's)",
-    companion=True, background=True, draw_truth=effect_draws.quilt_shape, summary=_summary)
+    companion=True, background=True, draw_truth=effect_draws.quilt_shape, summary=_summary,
+    shape=_reshape, shape_stage="reshape")

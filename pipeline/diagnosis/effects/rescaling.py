@@ -11,6 +11,14 @@ from .base import Effect, Parameter, SummaryContext
 __all__ = ["AMPLITUDE_SCALE", "TEMPERATURE"]
 
 
+def _scale(p: dict, blank: str) -> float:
+    return p.get(f"scale_{blank}", 1.0)
+
+
+def _true_temperature(temperature_K: float, p: dict) -> float:
+    return temperature_K + p.get("temperature_offset_K", 0.0)
+
+
 def _summary_scale(p: dict, ctx: SummaryContext) -> dict:
     scales = {k: v for k, v in p.items() if k.startswith("scale_")}
     return {"scale": next(iter(scales.values()))} if len(scales) == 1 else {}
@@ -61,7 +69,8 @@ AMPLITUDE_SCALE = Effect(
     (Parameter("scale", 1.0, 0.3, 3.0, floor=0.05, unit="1",
                meaning="deformation amplitude of blank <blank> relative to the simulation's"),), per_blank=True,
     description="deformation amplitude differs (NiP thickness or polish; e.g. a re-polished blank)",
-    rescales=True, draw_truth=effect_draws.amplitude_scale, summary=_summary_scale, projection=_projection_scale)
+    rescales=True, draw_truth=effect_draws.amplitude_scale, summary=_summary_scale, projection=_projection_scale,
+    scale=_scale)
 
 TEMPERATURE = Effect(
     "temperature", ("surface", "line_profile", "psf_image"),
@@ -69,4 +78,4 @@ TEMPERATURE = Effect(
                meaning="true cold temperature minus the stated one (all measurements)"),),
     description="true cold temperature = stated + offset (exact rescaling by the mismatch strain)",
     rescales=True, draw_truth=effect_draws.temperature, summary=_summary_temperature,
-    projection=_projection_temperature)
+    projection=_projection_temperature, temperature=_true_temperature)

@@ -30,7 +30,7 @@ from .lattice import pocket_jitter, sharp_ribs
 _COLD_K = NOMINAL_SIMULATION["cold_K"]
 
 __all__ = ["CASE_TYPES", "FAMILIES", "GRATING_FAMILIES", "SURFACE_T_K", "check_families", "truth_grating",
-           "measured_map", "write_profile", "make_case"]
+           "measured_map", "make_case"]
 
 CASE_TYPES = (
     ("surface", "astigmatism"), ("surface", "amplitude_scale"), ("surface", "temperature"),
@@ -100,14 +100,6 @@ def measured_map(g: GratingTruth, factor: float, rng: np.random.Generator, extra
     return ax, ax, z
 
 
-def write_profile(path: Path, offset_um, counts) -> None:
-    """Line-profile CSV (``offset_um,intensity``) by the file format's own writer
-    (:func:`pipeline.io.measured.write_line_profile_csv`: a shared file format, not model
-    code). Offsets are written in shortest round-trip form, so distinct samples stay
-    distinct however close their sub-pixel phases; ValueError if two offsets are equal."""
-    write_line_profile_csv(path, offset_um, counts)
-
-
 def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, out: Path, cfg,
               settings: AbbeSettings = AbbeSettings()) -> tuple[dict, dict]:
     """Write one independent case into ``out``; returns (manifest dict, injected truth).
@@ -173,7 +165,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
         x, counts, _ = measure_profile(u, det, rng, distortion=distortion)
         if artefact is not None:
             counts = artefact(x, counts, rng)
-        write_profile(out / f"p{i}.csv", x, counts)
+        write_line_profile_csv(out / f"p{i}.csv", x, counts)
         meas.append({"kind": "line_profile", "file": f"p{i}.csv", "name": f"{gr}_{wl}_{ps}mas", "grating": gr,
                      "order": order, "wavelength_um": wl, "pixel_scale_mas": ps})
     if cfg.profile_map_K is not None:
