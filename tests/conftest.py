@@ -1,5 +1,19 @@
-"""Fixtures shared across test modules, and the order in which pytest-xdist hands them out."""
-import pytest
+"""Fixtures shared across test modules, the order in which pytest-xdist hands them out, and
+one BLAS thread per test process."""
+import os
+
+# One OpenBLAS thread per process (numpy's and scipy's bundled OpenBLAS read this when they
+# load, so it must be set before anything imports numpy; pytest loads this file first and the
+# xdist workers inherit it). The suite runs two xdist workers on two cores, so a second BLAS
+# thread per worker has no core of its own, and OpenBLAS threads spin while they wait: the
+# diagnosis fits (an SVD of a tall Jacobian per trust-region step) then spend most of their time
+# waiting. Measured with ``pytest -n 0`` on a loaded 2-core machine: the bow-beside-every-single
+# diagnosis 365 s -> 44 s, the fast tier of test_diagnosis_bow.py 41 s -> 12 s (CPU time 27 s ->
+# 8 s). MKL (the PARDISO FEA solver) is left alone: its second thread costs no extra CPU time.
+# An OPENBLAS_NUM_THREADS already set by the user is kept.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import pytest  # noqa: E402
 
 # Modules that share session-scoped work run as one xdist work unit (one worker): the
 # paper scorecard solves the Table 1 and 2 cases into ``paper_fea_dir`` and the table
