@@ -174,8 +174,8 @@ def _collimator_basis(terms: tuple, xi_bytes: bytes, eta_bytes: bytes, radius_mm
     """Zernike ``terms`` on the pupil grid (read-only), shape (len(terms), n_eta, n_xi).
 
     Memoised because a fit evaluates many line profiles on the same pupil grid with other
-    coefficients only (the diagnosis: tens of thousands per run, the basis was ~10 % of
-    its time); keyed on the grid's bytes, so the values are those of a fresh evaluation."""
+    coefficients only (a diagnosis of profiles + map + PSF image: 5085 of 5093 look-ups hit);
+    keyed on the grid's bytes, so the values are those of a fresh evaluation."""
     xi, eta = np.frombuffer(xi_bytes), np.frombuffer(eta_bytes)
     basis = zernike_basis_xy(terms, xi[None, :], eta[:, None], radius_mm, norm=True)
     basis.flags.writeable = False
