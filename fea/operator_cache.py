@@ -2,8 +2,9 @@
 
 Why: assembling the thickness-independent film operators of the five coatable surface
 groups takes ~12 s at the default mesh, and every new process (each CLI call, each
-sweep worker, each test worker) paid it again; loading them, with the store's sha256 check
-of the ~690 MB, takes ~2 s on 2 busy cores.
+sweep worker, each test worker) paid it again. A warm load reads the ~690 MB once and checks
+them with the zip CRC-32 of every member (:func:`fea.store.open_checked`), not with a second
+sha256 pass over the file.
 
 An entry holds one :class:`fea.assembly.FilmOperators` (one surface group, one film
 material, after the symmetry-plane treatment of :meth:`fea.model.PreparedBlank.film_ops`)
@@ -15,8 +16,9 @@ and is a :mod:`fea.store` entry (payload, then checksummed sidecar, both atomic)
 The key (:func:`operator_key`) hashes the mesh arrays themselves (node positions,
 connectivity, the group's facets), the film's elastic constants, the constrained DOFs,
 :data:`fea.MODEL_VERSION` and :data:`FORMAT_VERSION`: a file can only be found for
-exactly the operators it holds. The store checks the sidecar and the payload's sha256;
-a missing, corrupt, truncated or inconsistent entry is rebuilt with a
+exactly the operators it holds. The store checks the sidecar and the payload's size, every
+member is read to its end (zipfile then checks its CRC-32) and the stored ``key`` member must
+be the entry's; a missing, corrupt, truncated or inconsistent entry is rebuilt with a
 :class:`fea.store.CacheWarning`, never used. A payload without a sidecar whose own
 ``key`` member matches and whose arrays read back whole (zip CRC of every member) is a
 complete entry written without the store's sidecar; the sidecar is added to it instead
@@ -99,10 +101,11 @@ def save_film_ops(e: store.Entry, ops: FilmOperators) -> Path | None:
     return e.payload
 
 
-def _ops(data: bytes, e: store.Entry) -> FilmOperators:
-    """The operators in verified payload bytes; CacheMiss when unreadable or inconsistent."""
+def _ops(fh, e: store.Entry) -> FilmOperators:
+    """The operators in the payload open as ``fh`` (every member read in full, so zipfile
+    checks its CRC-32); CacheMiss when unreadable, corrupt or inconsistent."""
     try:
-        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+        with np.load(fh, allow_pickle=False) as z:
             if str(z["key"]) != e.key:
                 raise ValueError("stored key differs")
             shape = tuple(int(s) for s in z["shape"])
@@ -113,7 +116,10 @@ def _ops(data: bytes, e: store.Entry) -> FilmOperators:
             R = sp.csr_matrix((z["R_data"], z["R_indices"], z["R_indptr"]), shape=shape)
             vecs = {name: z[name] for name in _VECTORS}
             E, nu, b_n = (float(v) for v in z["scalars"])
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError) as exc:
+    except zipfile.BadZipFile as exc:
+        raise store.CacheMiss(f"{e.payload.name} fails its zip checks (CRC-32 checksum or structure): {exc}; "
+                              "corrupt") from None
+    except (OSError, ValueError, KeyError, EOFError) as exc:
         raise store.CacheMiss(f"{e.payload.name} unreadable: {type(exc).__name__}: {exc}") from None
     return FilmOperators(R=R, youngs_modulus_MPa=E, poisson_ratio=nu, b_n=b_n, **mats, **vecs)
 
@@ -122,8 +128,9 @@ def load_film_ops(e: store.Entry) -> FilmOperators | None:
     """The stored operators of ``e``, or None when absent; a damaged entry is None with a
     :class:`fea.store.CacheWarning` (the caller assembles and stores them again)."""
     try:
-        data, _ = store.read_bytes(e)
-        return _ops(data, e)
+        fh, _ = store.open_checked(e)
+        with fh:
+            return _ops(fh, e)
     except FileNotFoundError:
         return None
     except store.CacheMiss as exc:
@@ -140,7 +147,7 @@ def _without_sidecar(e: store.Entry) -> FilmOperators | None:
         return None
     try:
         data = e.payload.read_bytes()
-        ops = _ops(data, e)
+        ops = _ops(io.BytesIO(data), e)
     except (OSError, store.CacheMiss):
         return None
     try:

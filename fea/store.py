@@ -22,6 +22,13 @@ or that belongs to another key (two files swapped) is never used: it raises
 :class:`CacheMiss` with the reason, and the caller warns (:func:`warn_rebuild`) and
 rebuilds.
 
+A payload whose format checks its own bytes as they are read (an ``.npz``: zipfile
+compares every member's CRC-32 with the one stored beside it when the member has been
+read to its end) may be opened with :func:`open_checked` instead: the sidecar and the
+payload's size are checked, the content is left to the format's own checksums, and the
+sha256 pass over the whole file is skipped (the film operators: ~700 MB, the sha256 pass
+was most of a warm load). The sidecar still records the sha256; :func:`verify` checks it.
+
 It lives in the FEA layer so that the mesh and film-operator caches
 (:mod:`fea.mesh_cache`, :mod:`fea.operator_cache`) use it as well as the pipeline's
 caches (sweep cases, nominal maps, kept fields, renders), without an upward import.
@@ -34,6 +41,7 @@ import hashlib
 import io
 import json
 import math
+import os
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -45,8 +53,8 @@ from .atomic import atomic_write
 
 __all__ = [
     "STORE_FORMAT", "CacheMiss", "CacheWarning", "Entry", "entry", "entry_key", "canonical_token",
-    "canonical_json", "library_version", "write_bytes", "commit", "read_sidecar", "read_bytes", "verify",
-    "save_arrays", "load_arrays", "warn_rebuild",
+    "canonical_json", "library_version", "write_bytes", "commit", "read_sidecar", "read_bytes", "open_checked",
+    "verify", "save_arrays", "load_arrays", "warn_rebuild",
 ]
 
 #: Layout of the sidecar; bump when its fields change (every entry then rebuilds with a warning).
@@ -286,6 +294,34 @@ def read_bytes(e: Entry) -> tuple[bytes, dict]:
     if _sha256(data) != side.get("sha256"):
         raise CacheMiss(f"{e.payload.name} checksum differs from its sidecar's (corrupt, or another key's file)")
     return data, side
+
+
+def open_checked(e: Entry):
+    """The payload of ``e`` opened for binary reading, with its sidecar checked and its size
+    (of the file opened, so nothing can swap it after the check) equal to the sidecar's;
+    returns ``(file object, sidecar)``, the caller closes the file.
+
+    The content is *not* hashed: only for payloads whose format checks its own bytes on
+    reading (every member of an ``.npz`` read to its end: zip CRC-32), read in full by the
+    caller (module docstring).
+
+    Raises
+    ------
+    FileNotFoundError, CacheMiss
+        as :func:`read_sidecar`; also a missing payload, or one whose size differs from the
+        sidecar's (truncated or replaced).
+    """
+    side = read_sidecar(e)
+    try:
+        fh = open(e.payload, "rb")
+    except OSError as exc:
+        raise CacheMiss(f"{e.payload.name} unreadable: {exc.strerror or exc}") from None
+    size = os.fstat(fh.fileno()).st_size
+    if size != side.get("size_bytes"):
+        fh.close()
+        raise CacheMiss(f"{e.payload.name} has {size} bytes, its sidecar records {side.get('size_bytes')} "
+                        "(truncated or replaced)")
+    return fh, side
 
 
 def verify(e: Entry) -> dict:

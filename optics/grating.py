@@ -18,6 +18,7 @@ Conventions
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -152,6 +153,11 @@ class Grating:
             If ``|sin beta| > 1`` (evanescent order) or the wavelength is not > 0; the
             message names the wavelength, order and valid wavelength range.
         """
+        if isinstance(wavelength_um, (int, float)) and not isinstance(wavelength_um, bool):
+            return _scalar_beta_deg(self, wavelength_um, self._order(order))
+        return self._beta_deg(wavelength_um, order)
+
+    def _beta_deg(self, wavelength_um, order: int | None = None) -> np.ndarray:
         m = self._order(order)
         wl = np.asarray(wavelength_um, dtype=float)
         s = self.sin_beta(wl, m)
@@ -254,6 +260,14 @@ class Grating:
         the anamorphic magnification changes with beta)."""
         mag = spectrograph.camera_focal_mm / spectrograph.collimator_focal_mm * self.anamorphic_factor(wavelength_um, order)
         return float(self.slit_width_collimator_um(spectrograph) * mag)
+
+
+@functools.lru_cache(maxsize=1024)
+def _scalar_beta_deg(grating: Grating, wavelength_um: float, order: int):
+    # Memoised for scalar wavelengths: every line profile of a diagnosis fit asks for the same
+    # few angles several times (anamorphic factor, dispersion, domain check); the value is that
+    # of Grating._beta_deg, an error is raised again on every call (lru_cache keeps no errors).
+    return grating._beta_deg(wavelength_um, order)
 
 
 #: Paper Table 2. Keys are the names accepted on the command line.

@@ -1,5 +1,19 @@
-"""Fixtures shared across test modules, and the order in which pytest-xdist hands them out."""
-import pytest
+"""Fixtures shared across test modules, the order in which pytest-xdist hands them out, and
+one BLAS thread per test process."""
+import os
+
+# One OpenBLAS thread per process (numpy's and scipy's bundled OpenBLAS read this when they
+# load, so it must be set before anything imports numpy; pytest loads this file first and the
+# xdist workers inherit it). The suite runs two xdist workers on two cores, so a second BLAS
+# thread per worker has no core of its own, and OpenBLAS threads spin while they wait: the
+# diagnosis fits (an SVD of a tall Jacobian per trust-region step) then spend most of their time
+# waiting. Measured with ``pytest -n 0`` on a loaded 2-core machine: the bow-beside-every-single
+# diagnosis 365 s -> 44 s, the fast tier of test_diagnosis_bow.py 41 s -> 12 s (CPU time 27 s ->
+# 8 s). MKL (the PARDISO FEA solver) is left alone: its second thread costs no extra CPU time.
+# An OPENBLAS_NUM_THREADS already set by the user is kept.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import pytest  # noqa: E402
 
 # Modules that share session-scoped work run as one xdist work unit (one worker): the
 # paper scorecard solves the Table 1 and 2 cases into ``paper_fea_dir`` and the table
@@ -8,27 +22,30 @@ SHARED_SCOPES = {
     "tests/test_paper_claims.py": "tests/test_paper_claims.py+tests/test_paper_tables.py",
     "tests/test_paper_tables.py": "tests/test_paper_claims.py+tests/test_paper_tables.py",
 }
-# The work units that hold most of the suite's CPU time (FEA table solves, diagnosis fits),
-# handed out first and longest first, so that the many short modules fill the other worker
-# meanwhile instead of leaving one long module running alone at the end (xdist's own order
-# is by number of tests, which puts these few-test modules last). The first two start together
-# on the two workers; the next are ranked by ``pytest -n 0 --durations=0`` summed per module;
-# the slow-tier modules after them are the other units with tests over ~20 s. Re-rank when a
-# heavy module is added.
+# The work units that hold most of the suite's CPU time (diagnosis campaigns and fits, FEA
+# table solves), handed out first and longest first, so that the many short modules fill the
+# other worker meanwhile instead of leaving one long module running alone at the end (xdist's
+# own order is by number of tests, which puts these few-test modules last). The first two start
+# together on the two workers; the others are ranked by CPU time (user + sys of
+# ``pytest -n 0 tests/<module>``, which counts the reduced campaign's worker processes too;
+# measured with one BLAS thread, above: scenarios 358 s, paper 130, fea_blank 112, bow 74,
+# fea_reduced 59, surrogate_sweep 46, quilt 43, fea_layer 31, mesh_convergence 24,
+# diagnosis 24, study_dataset 24, plating 10, optics_on_fea 8). Re-rank when a heavy module
+# is added.
 HEAVY_FIRST = (
     "tests/test_paper_claims.py+tests/test_paper_tables.py",
     "tests/test_diagnosis_scenarios.py",
-    "tests/test_diagnosis.py",
-    "tests/test_diagnosis_bow.py",
-    "tests/test_diagnosis_plating.py",
-    "tests/test_diagnosis_quilt.py",
-    "tests/test_surrogate_sweep.py",
     "tests/test_fea_blank.py",
-    "tests/test_fea_layer.py",
-    "tests/test_optics_on_fea.py",
-    "tests/test_fea_mesh_convergence.py",
+    "tests/test_diagnosis_bow.py",
     "tests/test_fea_reduced.py",
+    "tests/test_surrogate_sweep.py",
+    "tests/test_diagnosis_quilt.py",
+    "tests/test_fea_layer.py",
+    "tests/test_fea_mesh_convergence.py",
+    "tests/test_diagnosis.py",
     "tests/test_study_dataset.py",
+    "tests/test_diagnosis_plating.py",
+    "tests/test_optics_on_fea.py",
 )
 
 

@@ -78,3 +78,18 @@ def test_dataclass_validation():
     with pytest.raises(ValueError, match="relative_na"):
         PixelScale(10, 1.5)
     assert np.all(np.isfinite(GRATINGS["J"].beta_deg(np.array(GRATINGS["J"].band_um))))
+
+
+def test_scalar_angles_are_those_of_the_array_path_and_errors_repeat():
+    """A scalar wavelength's angle is memoised: the same value as through an array, for
+    equal gratings built apart, and a refused wavelength is refused on every call."""
+    from dataclasses import replace
+
+    g = GRATINGS["H"]
+    twin = replace(g, slit_image_width_um=g.slit_image_width_um)
+    for wl in (1.25, 1.6, np.float64(1.75), 2):
+        ref = g.beta_deg(np.array([wl], dtype=float))[0]
+        assert g.beta_deg(wl) == ref and twin.beta_deg(wl) == ref and g.beta_deg(wl, g.order) == ref
+    for _ in range(2):
+        with pytest.raises(ValueError, match="no propagating order"):
+            g.beta_deg(50.0)

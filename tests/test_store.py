@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
+import zipfile
 from types import SimpleNamespace
 
 import numpy as np
@@ -362,3 +363,25 @@ def test_a_nominal_map_cache_that_cannot_be_written_warns_and_the_map_is_returne
     with pytest.warns(CacheWarning, match="not cached in"):
         m = fea_sag_map(200.0, 0.75, "all", 80.0, "coarse", cache_dir=blocker)
     assert calls == [200.0] and np.allclose(m.sag_um, sag)
+
+
+def test_open_checked_checks_the_sidecar_and_the_size_but_not_the_content(tmp_path):
+    """For payloads whose format checks its own bytes (an npz: zip CRC-32 per member): the
+    sidecar faults and a cut file are misses, a same-size flipped byte is left to the format."""
+    a, b = _two_entries(tmp_path)
+    fh, side = store.open_checked(a)
+    with fh:
+        assert fh.read() == a.payload.read_bytes() and side["key"] == a.key
+    for fault in (_truncate, _drop_sidecar, _sidecar_of_other_key, _stale_format, _edited_params):
+        a, b = _two_entries(tmp_path / fault.__name__)
+        fault(a, b)
+        with pytest.raises(CacheMiss, match=FAULTS[fault]):
+            store.open_checked(a)
+    a, b = _two_entries(tmp_path / "corrupt")
+    _corrupt(a, b)
+    fh, _ = store.open_checked(a)
+    with fh, pytest.raises(zipfile.BadZipFile, match="CRC"):
+        with np.load(fh, allow_pickle=False) as z:
+            [z[k] for k in z.files]
+    with pytest.raises(FileNotFoundError):
+        store.open_checked(store.entry(tmp_path, "ns", {"x": 5.0}))

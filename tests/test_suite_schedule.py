@@ -54,3 +54,39 @@ def test_loadscope_runs_the_paper_modules_on_one_worker_and_heavy_units_first():
 
 def test_other_dist_modes_keep_the_xdist_scheduler():
     assert conftest.pytest_xdist_make_scheduler(_config("load"), None) is None
+
+
+def _openblas_threads() -> dict:
+    """Threads of every OpenBLAS that numpy and scipy bundle, as the loaded library reports
+    them (file name -> count); empty when the wheels bundle none (another BLAS)."""
+    import ctypes
+    import glob
+    import os
+
+    import numpy
+    import scipy
+    import scipy.linalg  # noqa: F401  (loads scipy's own OpenBLAS)
+
+    out = {}
+    for pkg in (numpy, scipy):
+        for lib in glob.glob(os.path.join(os.path.dirname(pkg.__file__), os.pardir, f"{pkg.__name__}.libs",
+                                          "libscipy_openblas*.so*")):
+            h = ctypes.CDLL(lib)  # the already loaded library (same file): no second copy
+            for name in ("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threads"):
+                if hasattr(h, name):
+                    out[os.path.basename(lib)] = getattr(h, name)()
+                    break
+    return out
+
+
+def test_blas_runs_one_thread_per_test_process():
+    """conftest sets OPENBLAS_NUM_THREADS=1 before numpy loads (two xdist workers on two cores:
+    a second spinning BLAS thread per worker made the diagnosis fits several times slower)."""
+    import os
+
+    if os.environ.get("OPENBLAS_NUM_THREADS") != "1":
+        pytest.skip(f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')!r} set by the user")
+    threads = _openblas_threads()
+    if not threads:
+        pytest.skip("numpy and scipy bundle no OpenBLAS here")
+    assert set(threads.values()) == {1}, threads

@@ -61,3 +61,20 @@ def test_one_node_grid_and_collinear_samples():
     assert got.shape == (1, 1) and got[0, 0] == pytest.approx(1.5)
     with pytest.raises(QhullError):
         linear_on_grid(np.arange(5.0), np.zeros(5), np.ones(5), np.arange(3.0), np.arange(3.0))
+
+
+def test_memoised_weights_give_the_values_of_a_fresh_evaluation():
+    """The weights are kept per (sample positions, grid): other values on the same samples,
+    or moved samples, give exactly what an evaluation with an empty memo gives."""
+    from optics import triangulation
+
+    rng = np.random.default_rng(5)
+    x, y = rng.uniform(-1, 1, 400), rng.uniform(-1, 1, 400)
+    gx = gy = np.linspace(-1, 1, 41)
+    cases = [(x, y, rng.normal(size=400)), (x, y, rng.normal(size=400)), (x + 0.01, y, rng.normal(size=400)),
+             (x, y, np.hypot(x, y))]
+    seen = [linear_on_grid(*c, gx, gy) for c in cases]
+    for c, got in zip(cases, seen):
+        triangulation._WEIGHTS.clear()
+        np.testing.assert_array_equal(got, linear_on_grid(*c, gx, gy))
+    assert not np.array_equal(seen[0], seen[1], equal_nan=True)
