@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -74,7 +73,7 @@ from .synth import (blank_shape_map, shape_discrepancy, synthetic_profile, synth
 
 __all__ = ["CASE_TYPES", "EXTRA_CASE_TYPES", "DISCREPANCIES", "DISCREPANCY_PRESENT", "TRUTHS", "PROFILE_SETS", "PSF_IMAGE_SPEC",
            "OUT_OF_LIBRARY", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "run_case", "run_campaign",
-           "write_campaign"]
+           "one_blas_thread", "write_campaign"]
 
 CASE_TYPES = (
     ("surface", "astigmatism"), ("surface", "amplitude_scale"), ("surface", "temperature"),
@@ -536,9 +535,7 @@ def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None, progres
              if cfg.only_types is None or types[i % len(types)] in cfg.only_types]
     t_maps = time.perf_counter() - t0
     if cfg.workers > 1:
-        # One BLAS/FFT thread per worker: the workers already fill the cores.
-        os.environ.setdefault("OMP_NUM_THREADS", "1")
-        with ProcessPoolExecutor(cfg.workers) as ex:
+        with ProcessPoolExecutor(cfg.workers, initializer=one_blas_thread) as ex:
             rows = [_log(r, progress) for r in ex.map(run_case, tasks, chunksize=1)]
     else:
         rows = [_log(run_case(t), progress) for t in tasks]
@@ -547,6 +544,19 @@ def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None, progres
     s["maps_s"] = t_maps
     return {"summary": s, "cases": rows, "config": {k: v for k, v in asdict(cfg).items() if k != "criteria"},
             "criteria": asdict(cfg.criteria)}
+
+
+def one_blas_thread() -> None:
+    """Limit this process's BLAS and OpenMP pools to one thread (the campaign workers'
+    initializer).
+
+    The workers already fill the cores; a second BLAS thread per worker has no core of its own
+    and OpenBLAS threads spin while they wait, which makes the diagnosis fits several times
+    slower. An environment variable set in the parent cannot do this: the workers are forked
+    after numpy has loaded its BLAS, so the pools are limited at run time (threadpoolctl)."""
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(limits=1)
 
 
 def write_campaign(result: dict, out_dir) -> Path:
