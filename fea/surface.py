@@ -44,7 +44,9 @@ class FrontSag:
     weight_mm2: np.ndarray
     is_node: np.ndarray
 
-    def _sel(self, region: str | Region | None) -> np.ndarray:
+    def in_region(self, region: str | Region | None) -> np.ndarray:
+        """Boolean mask of the front-face samples inside ``region``; an empty region is
+        refused by name."""
         m = resolve_region(region).contains(self.x_mm, self.y_mm)
         if not m.any():
             raise ValueError(f"no front-face nodes inside region {resolve_region(region).name!r}")
@@ -52,7 +54,7 @@ class FrontSag:
 
     def detrended(self, region: str | Region | None = "center") -> np.ndarray:
         """Sag (µm) minus the least-squares piston and tilt over ``region`` (all nodes)."""
-        m = self._sel(region)
+        m = self.in_region(region)
         sw = np.sqrt(self.weight_mm2[m])
         A = np.column_stack([np.ones(m.sum()), self.x_mm[m], self.y_mm[m]]) * sw[:, None]
         c, *_ = np.linalg.lstsq(A, self.sag_um[m] * sw, rcond=None)
@@ -60,13 +62,13 @@ class FrontSag:
 
     def pv_um(self, region: str | Region | None = "center", remove_tilt: bool = True) -> float:
         """Peak-to-valley (µm) over the nodes in ``region`` (piston/tilt removed there)."""
-        m = self._sel(region)
+        m = self.in_region(region)
         s = self.detrended(region)[m] if remove_tilt else self.sag_um[m]
         return float(s.max() - s.min())
 
     def rms_um(self, region: str | Region | None = "center", remove_tilt: bool = True) -> float:
         """Area-weighted RMS about the mean (µm) over ``region``."""
-        m = self._sel(region)
+        m = self.in_region(region)
         s = self.detrended(region)[m] if remove_tilt else self.sag_um[m]
         w = self.weight_mm2[m]
         mean = np.sum(w * s) / np.sum(w)

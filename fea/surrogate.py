@@ -121,7 +121,7 @@ class FEASurrogate:
         """
         if region not in self._region_ops:
             t = self.sag_template
-            m = t._sel(region)
+            m = t.in_region(region)
             S, w = self.sag_basis_um[m], t.weight_mm2[m]
             A = np.column_stack([np.ones(m.sum()), t.x_mm[m], t.y_mm[m]])
             sw = np.sqrt(w)[:, None]
