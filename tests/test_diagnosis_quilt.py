@@ -246,6 +246,7 @@ def test_projection_factor_of_a_hand_made_reshaped_quilt():
     piston removed) of quilts reshaped by hand — the pure sinusoid (cross terms and
     harmonics removed), and twice the cross terms with half the smooth figure — is what
     :func:`projection_factor` gives from the nominal's part shares; the shares add up to 1."""
+    from pipeline.diagnosis.effects.quilt_shape import part_ratios
     from pipeline.diagnosis.quilt import projection_factor
 
     x, y, X, Y = _grid()
@@ -261,12 +262,12 @@ def test_projection_factor_of_a_hand_made_reshaped_quilt():
 
     cx, cy = np.cos(2 * np.pi * X / DX), np.cos(2 * np.pi * Y / DY)
     sinusoid = _smooth(X, Y) + FUND_X_UM * cx + FUND_Y_UM * cy
-    assert projection_factor(w, {"quilt_cross_ratio": 0.0, "quilt_harmonics_ratio": 0.0}) == pytest.approx(
+    assert projection_factor(w, part_ratios({"quilt_cross_ratio": 0.0, "quilt_harmonics_ratio": 0.0})) == pytest.approx(
         projection(sinusoid), abs=2e-3)
     assert projection(sinusoid) < 0.97  # the removed cross terms and harmonics carried part of the projection
     crossed = 0.5 * _smooth(X, Y) + _quilt(X, Y) - 2 * CROSS_UM * cx * cy
     p = {"quilt_cross_ratio": 2.0, "quilt_figure_ratio": 0.5}
-    assert projection_factor(w, p) == pytest.approx(projection(crossed), abs=2e-3)
+    assert projection_factor(w, part_ratios(p)) == pytest.approx(projection(crossed), abs=2e-3)
 
 
 def test_amplitude_in_both_conventions_in_the_summary():

@@ -120,11 +120,6 @@ def quilt_components(nominal: SagMap) -> QuiltComponents | None:
     return QuiltComponents(f, projection_weights(nominal, q))
 
 
-#: The parts of the deformation and the ``quilt_shape`` ratio that scales each (None: held).
-_PART_RATIOS = {"fundamental_x": None, "fundamental_y": "quilt_fund_xy_ratio", "cross": "quilt_cross_ratio",
-                "harmonics": "quilt_harmonics_ratio", "figure": "quilt_figure_ratio"}
-
-
 def projection_weights(nominal: SagMap, q: QuiltComponents) -> dict:
     """Each part ``P`` of the nominal ``S`` (``F_x``, ``F_y``, ``C``, ``H`` and the smooth
     figure ``R = S - F_x - F_y - C - H``) as its share ``<P, S> / <S, S>`` of the nominal's
@@ -147,12 +142,14 @@ def projection_weights(nominal: SagMap, q: QuiltComponents) -> dict:
     return {k: float((v - v.mean()) @ s / ss) for k, v in parts.items()} if ss > 0 else {}
 
 
-def projection_factor(weights: dict, parameters: dict) -> float:
-    """Least-squares projection on the nominal of the nominal reshaped by the ``quilt_shape``
-    ratios in ``parameters`` (missing: 1), relative to the nominal:
-    ``w_Fx + rho w_Fy + c w_C + h w_H + g w_R`` (``weights`` from :func:`projection_weights`).
+def projection_factor(weights: dict, part_ratios: dict) -> float:
+    """Least-squares projection on the nominal of the nominal with each part scaled by its
+    ratio in ``part_ratios`` (part name -> ratio; a part missing there keeps ratio 1),
+    relative to the nominal: ``w_Fx + rho w_Fy + c w_C + h w_H + g w_R`` (``weights`` from
+    :func:`projection_weights`; which effect parameter scales which part is the
+    ``quilt_shape`` effect's :func:`~pipeline.diagnosis.effects.quilt_shape.part_ratios`).
 
     1 when the shape change leaves the projection unchanged. A deformation fitted as
     ``a`` times the reshaped nominal (``F_x`` held by the shape, so ``a`` is the x
     fundamental's amplitude) has projection amplitude ``a * projection_factor``."""
-    return float(sum(w * parameters.get(_PART_RATIOS[k], 1.0) if _PART_RATIOS[k] else w for k, w in weights.items()))
+    return float(sum(w * part_ratios.get(k, 1.0) for k, w in weights.items()))

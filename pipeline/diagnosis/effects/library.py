@@ -11,7 +11,7 @@ from .collimator_wfe import COLLIMATOR_WFE
 from .plating_gradient import PLATING_GRADIENT
 from .pupil_other_orders import PUPIL_OTHER_ORDERS
 from .pupil_shift import PUPIL_SHIFT
-from .quilt_shape import QUILT_SHAPE
+from .quilt_shape import QUILT_SHAPE, part_ratios
 from .registration import REGISTRATION
 from .rescaling import AMPLITUDE_SCALE, TEMPERATURE
 from .slit_width import SLIT_WIDTH
@@ -109,7 +109,7 @@ def _add_projection(out: dict, parameters: dict, ctx: SummaryContext) -> None:
     least-squares projection on the nominal over the centre."""
     from ..quilt import projection_factor
 
-    k = projection_factor(ctx.quilt_weights, parameters)
+    k = projection_factor(ctx.quilt_weights, part_ratios(parameters))
     q = out["quilt_shape"]
     q["projection_factor"] = k
     if "quilt_fund_xy_ratio" not in parameters:

@@ -7,17 +7,29 @@ from __future__ import annotations
 from .. import effect_draws
 from .base import Effect, Parameter, SummaryContext
 
-__all__ = ["QUILT_SHAPE"]
+__all__ = ["QUILT_SHAPE", "PART_RATIOS", "part_ratios"]
 
 #: The y fundamental runs along the rulings: only maps and PSF images see it.
 _MAP_AND_IMAGE = ("surface", "psf_image")
 
 
+#: The parts of the nominal's deformation (:mod:`pipeline.diagnosis.quilt`) and the ratio
+#: that scales each; the x fundamental has none (its amplitude is the rescalings').
+PART_RATIOS = {"fundamental_y": "quilt_fund_xy_ratio", "cross": "quilt_cross_ratio",
+               "harmonics": "quilt_harmonics_ratio", "figure": "quilt_figure_ratio"}
+
+
+def part_ratios(p: dict) -> dict:
+    """Part name -> ratio for the ``quilt_shape`` parameters in ``p`` (a ratio not in ``p``
+    is 1: the part keeps the nominal's share)."""
+    return {part: p.get(name, 1.0) for part, name in PART_RATIOS.items()}
+
+
 def _reshape(sag_um, x_mm, y_mm, p: dict, quilt):
     """``S + (rho - 1) F_y + (h - 1) H + (c - 1) C + (g - 1) R`` (:mod:`pipeline.diagnosis.effects`),
     ``quilt = (F_y, H, C, F)`` and ``R = S - F``; unchanged without a quilt fit."""
-    rho, h = p.get("quilt_fund_xy_ratio", 1.0), p.get("quilt_harmonics_ratio", 1.0)
-    c, g = p.get("quilt_cross_ratio", 1.0), p.get("quilt_figure_ratio", 1.0)
+    r = part_ratios(p)
+    rho, h, c, g = r["fundamental_y"], r["harmonics"], r["cross"], r["figure"]
     if quilt is None or (rho == 1.0 and h == 1.0 and c == 1.0 and g == 1.0):
         return sag_um
     fy, hh, cc, whole = quilt
