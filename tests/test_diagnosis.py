@@ -10,7 +10,6 @@ import math
 import numpy as np
 import pytest
 
-from optics.sagmap import quilt_sag_map
 from optics.zernike import zernike_xy
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.cli import main
@@ -20,33 +19,7 @@ from pipeline.diagnosis.synth import synthetic_surface
 from pipeline.io.measured import write_line_profile_csv
 from pipeline.io.registry import write_sag_map
 
-
-def _nominal(tmp_path):
-    m = quilt_sag_map(0.6, "sum", spacing_mm=0.5)
-    write_sag_map(m, tmp_path / "nominal.npz")
-    return m
-
-
-def _truth(nominal):
-    # a different model: 10 % product-form admixture and a slight period error
-    other = quilt_sag_map(0.6, "product", spacing_mm=0.5, period_x_mm=21.1)
-    return nominal.with_sag(0.9 * nominal.sag_um + 0.1 * other.sag_um)
-
-
-def _manifest(tmp_path, file="map.npz", extra=""):
-    text = ('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\nkind = "surface"\n'
-            f'file = "{file}"\ntemperature_K = 128\naperture_diameter_mm = 137\n{extra}')
-    p = tmp_path / "m.toml"
-    p.write_text(text)
-    return p
-
-
-def _map(tmp_path, extra=None, seed=0, scale=1.0):
-    nom = _nominal(tmp_path)
-    t = _truth(nom).scaled(thermal_factor(128, 80) * scale)
-    m = synthetic_surface(t, np.random.default_rng(seed), extra_um=extra, noise_um=0.01)
-    write_sag_map(m, tmp_path / "map.npz")
-    return _manifest(tmp_path)
+from diagnosis_cases import FakeDiagnosis, FakeFinding, nominal_map, other_quilt_truth, surface_case, surface_manifest
 
 
 def test_noise_estimate_white_noise():
@@ -60,7 +33,7 @@ def test_noise_estimate_white_noise():
 
 def test_astigmatism_recovered_and_explained(tmp_path):
     c45 = 0.08
-    p = _map(tmp_path, lambda x, y: c45 * zernike_xy(2, -2, x, y, 68.5))
+    p = surface_case(tmp_path, lambda x, y: c45 * zernike_xy(2, -2, x, y, 68.5))
     d = diagnose(p)
     assert d.verdict == "explained"
     assert d.best.effect == "astigmatism"
@@ -76,7 +49,7 @@ def test_astigmatism_recovered_and_explained(tmp_path):
 
 def test_amplitude_and_temperature_are_degenerate_on_one_map(tmp_path):
     # 0.7 x is reachable by a warmer map (~175 K); 1.4 x would not be (eps_m saturates when cold)
-    d = diagnose(_map(tmp_path, scale=0.7))
+    d = diagnose(surface_case(tmp_path, scale=0.7))
     assert d.verdict == "explained"
     assert {d.findings[0].effect, d.findings[1].effect} == {"amplitude_scale", "temperature"}
     assert d.best.degenerate_with == ("temperature",) or d.best.degenerate_with == ("amplitude_scale",)
@@ -85,19 +58,19 @@ def test_amplitude_and_temperature_are_degenerate_on_one_map(tmp_path):
 
 
 def test_registration_recovered(tmp_path):
-    nom = _nominal(tmp_path)
-    t = _truth(nom).scaled(thermal_factor(128, 80))
+    nom = nominal_map(tmp_path)
+    t = other_quilt_truth(nom).scaled(thermal_factor(128, 80))
     X, Y = t.grid()
     t = t.with_sag(t.sample(X - 3.0, Y + 2.0))  # model feature at p appears at p + (3, -2)
     write_sag_map(synthetic_surface(t, np.random.default_rng(1)), tmp_path / "map.npz")
-    d = diagnose(_manifest(tmp_path))
+    d = diagnose(surface_manifest(tmp_path))
     assert d.verdict == "explained" and d.best.effect == "registration"
     assert d.best.parameters["reg_dx_mm"] == pytest.approx(3.0, abs=0.3)
     assert d.best.parameters["reg_dy_mm"] == pytest.approx(-2.0, abs=0.3)
 
 
 def test_out_of_library_coma_is_unexplained(tmp_path):
-    p = _map(tmp_path, lambda x, y: 0.1 * zernike_xy(3, 1, x, y, 68.5), seed=2)
+    p = surface_case(tmp_path, lambda x, y: 0.1 * zernike_xy(3, 1, x, y, 68.5), seed=2)
     d = diagnose(p)
     assert d.verdict == "unexplained"
     after = {w["component"]: w["share"] for w in d.where_after if w["decomposition"] == "basis"}
@@ -105,10 +78,10 @@ def test_out_of_library_coma_is_unexplained(tmp_path):
 
 
 def test_no_gap_when_model_matches(tmp_path):
-    nom = _nominal(tmp_path)
+    nom = nominal_map(tmp_path)
     m = synthetic_surface(nom.scaled(thermal_factor(128, 80)), np.random.default_rng(4), noise_um=0.01)
     write_sag_map(m, tmp_path / "map.npz")
-    assert diagnose(_manifest(tmp_path)).verdict == "no_gap"
+    assert diagnose(surface_manifest(tmp_path)).verdict == "no_gap"
 
 
 def test_weak_gap_over_many_samples_is_a_gap(tmp_path):
@@ -119,12 +92,12 @@ def test_weak_gap_over_many_samples_is_a_gap(tmp_path):
     from pipeline.diagnosis.engine import Criteria, build_problem, has_gap
     from pipeline.diagnosis.manifest import load_data, load_manifest
 
-    nom = _nominal(tmp_path)
+    nom = nominal_map(tmp_path)
     rng = np.random.default_rng(4)
     m = synthetic_surface(nom.scaled(thermal_factor(128, 80)), rng, noise_um=0.01,
                           extra_um=lambda x, y: 0.006 * zernike_xy(2, 2, x, y, 68.5))
     write_sag_map(m, tmp_path / "map.npz")
-    man = load_manifest(_manifest(tmp_path))
+    man = load_manifest(surface_manifest(tmp_path))
     prob, nom_fit = build_problem(man, load_data(man), nom)
     (name,) = prob.noise
     assert 1.1 < np.sqrt(nom_fit.rss[name] / nom_fit.n[name]) / prob.noise[name] < Criteria().no_gap_ratio
@@ -141,7 +114,7 @@ def test_weak_gap_over_many_samples_is_a_gap(tmp_path):
     (lambda t: t.replace('kind = "surface"', 'kind = "interferogram"'), "kind='interferogram'"),
 ])
 def test_bad_surface_manifest(tmp_path, edit, fragment):
-    p = _map(tmp_path)
+    p = surface_case(tmp_path)
     p.write_text(edit(p.read_text()))
     with pytest.raises(ValueError) as e:
         diagnose(p)
@@ -149,7 +122,7 @@ def test_bad_surface_manifest(tmp_path, edit, fragment):
 
 
 def _profile_manifest(tmp_path, grating="J", wl=1.25, order=-2, intensity=None):
-    _nominal(tmp_path)
+    nominal_map(tmp_path)
     u = np.linspace(-100, 100, 101)
     y = np.exp(-0.5 * (u / 10) ** 2) if intensity is None else intensity(u)
     write_line_profile_csv(tmp_path / "p.csv", u, y)
@@ -172,18 +145,18 @@ def test_bad_profile_manifest(tmp_path, kw, fragment):
 
 
 def test_no_valid_pixels_in_aperture(tmp_path):
-    nom = _nominal(tmp_path)
+    nom = nominal_map(tmp_path)
     m = synthetic_surface(nom, np.random.default_rng(0))
     X, Y = m.grid()
     write_sag_map(m.with_sag(np.where(X**2 + Y**2 < 60**2, np.nan, m.sag_um)), tmp_path / "map.npz")
-    p = _manifest(tmp_path)
+    p = surface_manifest(tmp_path)
     p.write_text(p.read_text().replace("aperture_diameter_mm = 137", "aperture_diameter_mm = 100"))
     with pytest.raises(ValueError, match="measurement 'map': aperture_diameter_mm=100.0 leaves 0 valid pixels"):
         diagnose(p)
 
 
 def test_cli_writes_json_and_html(tmp_path):
-    p = _map(tmp_path, lambda x, y: 0.08 * zernike_xy(2, 2, x, y, 68.5))
+    p = surface_case(tmp_path, lambda x, y: 0.08 * zernike_xy(2, 2, x, y, 68.5))
     assert main(["diagnose", str(p), "--out", str(tmp_path / "out")]) == 0
     j = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
     assert j["verdict"] == "explained"
@@ -200,19 +173,6 @@ def test_cli_writes_json_and_html(tmp_path):
     assert math.isfinite(f["uncertainties"]["astig_0_um"])
 
 
-class _FakeFinding:
-    def __init__(self, parameters, uncertainties, sign_degenerate=()):
-        self.parameters, self.uncertainties, self.sign_degenerate = parameters, uncertainties, tuple(sign_degenerate)
-
-
-class _FakeDiagnosis:
-    def __init__(self, effect, finding):
-        self._f = {effect: finding}
-
-    def finding(self, effect):
-        return self._f.get(effect)
-
-
 def test_campaign_recovery_rules():
     """Per-parameter rule (floors), vector rule (norm of the coefficient error over the
     injected norm = RMS of the WFE error over the injected WFE RMS), sign-degenerate
@@ -221,7 +181,7 @@ def test_campaign_recovery_rules():
 
     truth = {"coll_coma_um": 0.10, "coll_defocus_um": 0.01, "coll_astig45_um": 0.20}
     fit = {"coll_coma_um": 0.11, "coll_defocus_um": 0.035, "coll_astig45_um": 0.19}
-    r = recovery_errors(_FakeDiagnosis("collimator_wfe", _FakeFinding(fit, dict.fromkeys(fit, 0.01))),
+    r = recovery_errors(FakeDiagnosis("collimator_wfe", FakeFinding(fit, dict.fromkeys(fit, 0.01))),
                         "collimator_wfe", truth)
     assert r["per_parameter"] == pytest.approx(0.025 / 0.04)  # defocus: 0.025 off, floor 0.04
     assert r["vector"] == pytest.approx(math.sqrt(0.01**2 + 0.025**2 + 0.01**2) / math.sqrt(0.1**2 + 0.01**2 + 0.2**2))
@@ -230,15 +190,15 @@ def test_campaign_recovery_rules():
     # a pupil_y sign flip: counts only if the engine said the sign is undetermined
     truth = {"pupil_x_mm": 5.0, "pupil_y_mm": 2.0}
     fit = {"pupil_x_mm": 5.2, "pupil_y_mm": -2.1}
-    flagged = recovery_errors(_FakeDiagnosis("pupil_shift", _FakeFinding(fit, dict.fromkeys(fit, 0.2), ["pupil_y_mm"])),
+    flagged = recovery_errors(FakeDiagnosis("pupil_shift", FakeFinding(fit, dict.fromkeys(fit, 0.2), ["pupil_y_mm"])),
                               "pupil_shift", truth)
-    silent = recovery_errors(_FakeDiagnosis("pupil_shift", _FakeFinding(fit, dict.fromkeys(fit, 0.2))), "pupil_shift", truth)
+    silent = recovery_errors(FakeDiagnosis("pupil_shift", FakeFinding(fit, dict.fromkeys(fit, 0.2))), "pupil_shift", truth)
     assert flagged["vector"] == pytest.approx(math.hypot(0.2, 0.1) / math.hypot(5.0, 2.0)) and flagged["within_2sigma"]
     assert silent["vector"] > 0.5 and not silent["within_2sigma"]
     # registration mixes mm and degrees: no vector rule
     truth = {"reg_dx_mm": 3.0, "reg_dy_mm": 0.0, "reg_rot_deg": 1.0}
     fit = {"reg_dx_mm": 3.1, "reg_dy_mm": 0.2, "reg_rot_deg": 1.0}
-    r = recovery_errors(_FakeDiagnosis("registration", _FakeFinding(fit, dict.fromkeys(fit, 0.1))), "registration", truth)
+    r = recovery_errors(FakeDiagnosis("registration", FakeFinding(fit, dict.fromkeys(fit, 0.1))), "registration", truth)
     assert r["vector"] == r["per_parameter"] == pytest.approx(0.2 / 0.5)
 
 
@@ -303,7 +263,7 @@ def test_evidence_counts_the_residual_after_the_best_fit(tmp_path):
 
     # Companions are held out of both runs: whether one is adopted depends on the score,
     # so with them the re-count could change which joint fit a finding reports.
-    p = _map(tmp_path, lambda x, y: 0.05 * zernike_xy(2, -2, x, y, 68.5))
+    p = surface_case(tmp_path, lambda x, y: 0.05 * zernike_xy(2, -2, x, y, 68.5))
     nominal = diagnose(p, criteria=Criteria(companion_top=0), heldout=False)
     post = diagnose(p, criteria=Criteria(n_eff_from="best_fit", companion_top=0), heldout=False)
     assert post.baseline["n_eff_from"] == "best_fit" and nominal.baseline["n_eff_from"] == "nominal"
@@ -329,10 +289,10 @@ def test_n_eff_source_checked(tmp_path, capsys):
     p = register(argparse.ArgumentParser().add_subparsers())
     action = next(a for a in p._actions if a.dest == "n_eff_from")
     assert tuple(action.choices) == N_EFF_SOURCES and action.default == Criteria().n_eff_from
-    assert main(["diagnose", str(_map(tmp_path)), "--out", str(tmp_path / "o"), "--no-heldout", "--n-eff-from", "best_fit"]) == 0
+    assert main(["diagnose", str(surface_case(tmp_path)), "--out", str(tmp_path / "o"), "--no-heldout", "--n-eff-from", "best_fit"]) == 0
     assert json.loads((tmp_path / "o" / "diagnosis.json").read_text())["baseline"]["n_eff_from"] == "best_fit"
     with pytest.raises(SystemExit):
-        main(["diagnose", str(_map(tmp_path)), "--out", str(tmp_path / "o"), "--n-eff-from", "post"])
+        main(["diagnose", str(surface_case(tmp_path)), "--out", str(tmp_path / "o"), "--n-eff-from", "post"])
     assert "--n-eff-from: invalid choice: 'post'" in capsys.readouterr().err
 
 
@@ -342,7 +302,7 @@ def test_a_finding_pinned_at_its_prior_bounds_is_no_explanation(tmp_path):
     not ``explained`` by it; a companion's parameter at its bound does not pin the finding."""
     from pipeline.diagnosis.engine import Criteria, Finding, explains
 
-    d = diagnose(_map(tmp_path, scale=4.0), heldout=False)
+    d = diagnose(surface_case(tmp_path, scale=4.0), heldout=False)
     a = d.finding("amplitude_scale")
     assert a.at_bound == tuple(q for q in a.parameters if q.startswith("scale_")) and a.at_bound
     assert a.parameters[a.at_bound[0]] == pytest.approx(3.0, abs=0.01)

@@ -20,16 +20,16 @@ from pipeline.diagnosis.synth import blank_shape_map, synthetic_surface
 from pipeline.io.measured import write_line_profile_csv
 from pipeline.io.registry import write_sag_map
 
-from test_diagnosis import _manifest, _nominal
+from diagnosis_cases import nominal_map, surface_manifest
 
 
 def _bow_map(tmp_path, b2, b4, temperature_K=128.0, seed=7):
     """A 128 K map of a blank whose cold deformation at 80 K carries a bow (b2, b4) µm,
     really at ``temperature_K`` (the manifest says 128 K)."""
-    nom = _nominal(tmp_path)
+    nom = nominal_map(tmp_path)
     t = blank_shape_map(nom, {"bow_defocus_um": b2, "bow_spherical_um": b4}).scaled(thermal_factor(temperature_K, 80))
     write_sag_map(synthetic_surface(t, np.random.default_rng(seed), noise_um=0.005), tmp_path / "map.npz")
-    return _manifest(tmp_path)
+    return surface_manifest(tmp_path)
 
 
 def test_bow_is_rms_normalised_zernike_on_70mm():
@@ -91,7 +91,7 @@ def test_campaign_map_beside_profiles(tmp_path):
     from pipeline.diagnosis.campaign import PROFILE_SETS, CampaignConfig, make_case
     from pipeline.diagnosis.manifest import parse_manifest
 
-    base = _nominal(tmp_path)
+    base = nominal_map(tmp_path)
     cfgs = [CampaignConfig(profile_specs=PROFILE_SETS["minimal"][:1], profile_map_K=k) for k in (None, 128.0)]
     out = []
     for cfg in cfgs:
@@ -120,7 +120,7 @@ def _bowed_profiles(tmp_path, b2):
     (no collimator error): manifest path."""
     from pipeline.diagnosis.synth import synthetic_profile
 
-    nom = _nominal(tmp_path)
+    nom = nominal_map(tmp_path)
     truth = blank_shape_map(nom, {"bow_defocus_um": b2, "bow_spherical_um": 0.0})
     rng = np.random.default_rng(11)
     lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
@@ -162,7 +162,7 @@ def test_seen_bow_refitted_beside_every_significant_single(tmp_path, seed):
     from pipeline.diagnosis.campaign import PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, make_case
     from pipeline.diagnosis.manifest import parse_manifest
 
-    base = _nominal(tmp_path)
+    base = nominal_map(tmp_path)
     cfg = CampaignConfig(profile_specs=PROFILE_SETS["minimal"], psf_image=PSF_IMAGE_SPEC, profile_map_K=128.0,
                          discrepancy="companions")
     man, truth = make_case("line_profile", "slit_width", np.random.default_rng([1, seed]), base, tmp_path, cfg)
@@ -207,10 +207,10 @@ def test_unmodelled_discrepancy_stays_unexplained(tmp_path):
     (3x the noise) has a gap, and no library effect takes it up: ``unexplained``."""
     from pipeline.diagnosis.synth import unmodelled_shape
 
-    nom = _nominal(tmp_path)
+    nom = nominal_map(tmp_path)
     t = unmodelled_shape(nom, np.random.default_rng(5), rms_um=0.03).scaled(thermal_factor(128, 80))
     write_sag_map(synthetic_surface(t, np.random.default_rng(6), noise_um=0.01), tmp_path / "map.npz")
-    d = diagnose(_manifest(tmp_path), heldout=False)
+    d = diagnose(surface_manifest(tmp_path), heldout=False)
     assert d.verdict == "unexplained"
     assert d.best is None or d.best.excess_explained < 0.5
 
@@ -242,12 +242,12 @@ def test_slit_explained_beside_an_unexplained_map(tmp_path):
     0.31 and the verdict to ``unexplained``)."""
     from pipeline.diagnosis.synth import synthetic_profile, unmodelled_shape
 
-    nom = _nominal(tmp_path)
+    nom = nominal_map(tmp_path)
     truth = unmodelled_shape(nom, np.random.default_rng(5), rms_um=0.03)
     write_sag_map(synthetic_surface(truth.scaled(thermal_factor(128, 80)), np.random.default_rng(6), noise_um=0.01),
                   tmp_path / "map.npz")
     rng = np.random.default_rng(11)
-    lines = [_manifest(tmp_path).read_text()]
+    lines = [surface_manifest(tmp_path).read_text()]
     for ps in (250, 25):
         u, y, _ = synthetic_profile("J", 1.25, -2, ps, truth, rng, params={"slit_image_width_um": 35.0})
         write_line_profile_csv(tmp_path / f"p{ps}.csv", u, y)

@@ -13,7 +13,7 @@ from pipeline.diagnosis.error_model import SIGN_Z, sign_is_claimed
 from pipeline.diagnosis.noise import two_part_errors
 from optics.zernike import zernike_xy
 
-from test_diagnosis import _map
+from diagnosis_cases import surface_case
 
 
 def test_two_part_split_of_a_residual():
@@ -69,7 +69,7 @@ def test_criteria_error_model_checked():
 def test_two_part_diagnosis_of_an_astigmatic_map(tmp_path):
     """The same map as test_diagnosis's astigmatism case: the astigmatism is still found and
     recovered; the errors are recorded (the truth's quilt mismatch is smooth: sigma_m > 0)."""
-    p = _map(tmp_path, lambda x, y: 0.08 * zernike_xy(2, -2, x, y, 68.5))
+    p = surface_case(tmp_path, lambda x, y: 0.08 * zernike_xy(2, -2, x, y, 68.5))
     d = diagnose(p, criteria=Criteria(error_model="two_part"))
     assert d.verdict == "explained" and "astigmatism" in d.best.effects
     assert d.best.parameters["astig_45_um"] == pytest.approx(0.08, rel=0.1)

@@ -14,14 +14,14 @@ from pipeline.diagnosis.nominal import thermal_factor
 from pipeline.diagnosis.synth import blank_shape_map, synthetic_surface
 from pipeline.io.registry import write_sag_map
 
-from test_diagnosis import _manifest, _nominal
+from diagnosis_cases import nominal_map, surface_manifest
 
 
 def _gradient_map(tmp_path, gx, gy, extra=None, seed=5, noise_um=0.002):
-    nom = _nominal(tmp_path)
+    nom = nominal_map(tmp_path)
     t = blank_shape_map(nom.scaled(thermal_factor(128, 80)), {"plating_grad_x": gx, "plating_grad_y": gy})
     write_sag_map(synthetic_surface(t, np.random.default_rng(seed), extra_um=extra, noise_um=noise_um), tmp_path / "map.npz")
-    return _manifest(tmp_path)
+    return surface_manifest(tmp_path)
 
 
 def test_library_keeps_names_and_adds_plating_gradient():
@@ -58,12 +58,12 @@ def test_gradient_is_fitted_as_companion_of_the_best_effect(tmp_path):
 def test_no_companion_without_a_gradient(tmp_path):
     """Without a gradient in the data the joint fit does not lower the BIC enough: the
     finding stays the effect alone."""
-    nom = _nominal(tmp_path)
+    nom = nominal_map(tmp_path)
     t = nom.scaled(thermal_factor(128, 80))
     m = synthetic_surface(t, np.random.default_rng(6), noise_um=0.01,
                           extra_um=lambda x, y: 0.06 * zernike_xy(2, -2, x, y, 68.5))
     write_sag_map(m, tmp_path / "map.npz")
-    d = diagnose(_manifest(tmp_path))
+    d = diagnose(surface_manifest(tmp_path))
     assert d.best.effect == "astigmatism" and d.best.companions == ()
 
 
@@ -94,10 +94,10 @@ def test_uncertainties_cover_truth_under_model_mismatch(tmp_path):
     is at least the long-run (correlated-residual) value, so the truth lies within 3 sigma."""
     c45 = 0.05
     bow = lambda x, y: 0.02 * zernike_xy(4, 0, x, y, 68.5) + 0.015 * zernike_xy(3, 3, x, y, 68.5)
-    nom = _nominal(tmp_path)
+    nom = nominal_map(tmp_path)
     t = nom.scaled(thermal_factor(128, 80))
     m = synthetic_surface(t, np.random.default_rng(8), noise_um=0.01,
                           extra_um=lambda x, y: c45 * zernike_xy(2, -2, x, y, 68.5) + bow(x, y))
     write_sag_map(m, tmp_path / "map.npz")
-    f = diagnose(_manifest(tmp_path), heldout=False).finding("astigmatism")
+    f = diagnose(surface_manifest(tmp_path), heldout=False).finding("astigmatism")
     assert abs(f.parameters["astig_45_um"] - c45) <= 3 * f.uncertainties["astig_45_um"]

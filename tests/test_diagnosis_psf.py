@@ -9,11 +9,9 @@ import pytest
 
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.psf_image import psf_image_model
-from pipeline.diagnosis.synth import synthetic_profile, synthetic_psf_image
 from pipeline.diagnosis.where import psf_image_parts
-from pipeline.io.measured import write_line_profile_csv, write_psf_image_csv
 
-from test_diagnosis import _nominal
+from diagnosis_cases import nominal_map, profile_image_case
 
 
 def test_pixel_integration_is_a_box_filter():
@@ -46,26 +44,6 @@ def test_where_parity_parts():
         assert sum(shares.values()) == pytest.approx(1.0, abs=1e-9)
 
 
-def _case(tmp_path, params, psf=True, pixel_um=0.0, seed=3):
-    nom = _nominal(tmp_path)
-    rng = np.random.default_rng(seed)
-    lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
-    for ps in (250, 25):
-        u, y, _ = synthetic_profile("J", 1.25, -2, ps, nom, rng, params=params, noise_rel=0.01)
-        write_line_profile_csv(tmp_path / f"p{ps}.csv", u, y)
-        lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{ps}.csv"\ngrating = "J"\norder = -2\n'
-                     f'wavelength_um = 1.25\npixel_scale_mas = {ps}\n')
-    if psf:
-        x, y, v, _ = synthetic_psf_image("J", 1.25, -2, nom, rng, params=params, noise_rel=0.01, pixel_um=pixel_um,
-                                         step_um=1.0, half_range_um=30.0)
-        write_psf_image_csv(tmp_path / "psf.csv", x, y, v)
-        lines.append(f'[[measurement]]\nkind = "psf_image"\nfile = "psf.csv"\ngrating = "J"\norder = -2\n'
-                     f'wavelength_um = 1.25\npixel_um = {pixel_um}\n')
-    p = tmp_path / "m.toml"
-    p.write_text("\n".join(lines))
-    return p
-
-
 @pytest.mark.slow
 def test_psf_image_pins_oblique_astigmatism(tmp_path):
     """Profiles alone know the collimator's oblique astigmatism to ~±0.06 µm (it enters
@@ -73,8 +51,8 @@ def test_psf_image_pins_oblique_astigmatism(tmp_path):
     included, and the profile-only error bar is honest about the difference."""
     truth = {"coll_coma_um": 0.05, "coll_defocus_um": 0.05, "coll_astig45_um": -0.15}
     eff = ("collimator_wfe", "pupil_shift")
-    d0 = diagnose(_case(tmp_path, truth, psf=False), effects=eff, heldout=False)
-    d1 = diagnose(_case(tmp_path, truth, psf=True), effects=eff, heldout=False)
+    d0 = diagnose(profile_image_case(tmp_path, truth, psf=False), effects=eff, heldout=False)
+    d1 = diagnose(profile_image_case(tmp_path, truth, psf=True), effects=eff, heldout=False)
     f0, f1 = d0.finding("collimator_wfe"), d1.finding("collimator_wfe")
     assert d1.verdict == "explained" and d1.best is f1 and not f1.sign_degenerate
     for k, v in truth.items():
@@ -89,7 +67,7 @@ def test_psf_image_pins_oblique_astigmatism(tmp_path):
     (lambda t: t.replace('grating = "J"\norder = -2\nwavelength_um = 1.25\npixel_um', 'grating = "Q"\norder = -2\nwavelength_um = 1.25\npixel_um'), "grating='Q'"),
 ])
 def test_bad_psf_manifest(tmp_path, edit, fragment):
-    p = _case(tmp_path, {}, psf=True)
+    p = profile_image_case(tmp_path, {}, psf=True)
     p.write_text(edit(p.read_text()))
     with pytest.raises(ValueError) as e:
         diagnose(p)
@@ -103,7 +81,7 @@ def test_bad_psf_manifest(tmp_path, edit, fragment):
     ("x_um,y_um,intensity\n" + "".join(f"{i},{i * 0.37},1\n" for i in range(30)), "noise_rel"),
 ])
 def test_bad_psf_file(tmp_path, content, fragment):
-    p = _case(tmp_path, {}, psf=True)
+    p = profile_image_case(tmp_path, {}, psf=True)
     (tmp_path / "psf.csv").write_text(content)
     with pytest.raises(ValueError) as e:
         diagnose(p)
@@ -116,7 +94,7 @@ def test_campaign_psf_image_beside_profiles(tmp_path):
     from pipeline.diagnosis.campaign import PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, make_case, parse_types
     from pipeline.diagnosis.manifest import parse_manifest
 
-    base = _nominal(tmp_path)
+    base = nominal_map(tmp_path)
     out = []
     for spec in (None, PSF_IMAGE_SPEC):
         cfg = CampaignConfig(profile_specs=PROFILE_SETS["minimal"][:1], psf_image=spec)

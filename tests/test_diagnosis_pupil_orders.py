@@ -21,7 +21,7 @@ from pipeline.diagnosis.truth.detector import measure_profile
 from pipeline.diagnosis.truth.generate import COLLIMATOR_UM
 from pipeline.io.measured import write_line_profile_csv
 
-from test_diagnosis import _nominal
+from diagnosis_cases import nominal_map
 
 
 def _profiles(tmp_path, camera_um=None, collimator_extra_um=None, seed=3):
@@ -29,7 +29,7 @@ def _profiles(tmp_path, camera_um=None, collimator_extra_um=None, seed=3):
     independent truth with the instrument's collimator plus ``collimator_extra_um`` and a
     camera wavefront ``camera_um`` ({(n, m): µm RMS}); measured with photon and read
     noise, background, sub-pixel phases (:func:`.truth.detector.measure_profile`)."""
-    nom = _nominal(tmp_path)
+    nom = nominal_map(tmp_path)
     s = np.where(np.isfinite(nom.sag_um), nom.sag_um, 0.0)
     itp = RegularGridInterpolator((nom.y_mm, nom.x_mm), s, bounds_error=False, fill_value=np.nan)
 

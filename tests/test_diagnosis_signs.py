@@ -20,8 +20,7 @@ from pipeline.diagnosis.finding import Finding
 from pipeline.diagnosis.forward import profile_curve
 from pipeline.diagnosis.ranking import pair_singles
 
-from test_diagnosis import _FakeDiagnosis, _FakeFinding
-from test_diagnosis_psf import _case
+from diagnosis_cases import FakeDiagnosis, FakeFinding, profile_image_case
 
 #: The extra Z(2,-2) at which the total vanishes: the default collimator's term, negated.
 ASTIG_ORIGIN_UM = -DEFAULT_COLLIMATOR_ZERNIKE_UM[(2, -2)]
@@ -51,7 +50,7 @@ def test_sign_of_oblique_astigmatism_on_profiles_is_flagged(tmp_path, astig45_um
     report that sign undetermined — also at the prior bound (0.4 µm, whose mirror lies
     beyond the prior). The coma's sign is seen (the profile's left-right asymmetry)."""
     truth = {"coll_coma_um": 0.1, "coll_defocus_um": 0.05, "coll_astig45_um": astig45_um}
-    d = diagnose(_case(tmp_path, truth, psf=False), effects=("collimator_wfe",), heldout=False)
+    d = diagnose(profile_image_case(tmp_path, truth, psf=False), effects=("collimator_wfe",), heldout=False)
     f = d.finding("collimator_wfe")
     assert "coll_astig45_um" in f.sign_degenerate
     assert "coll_coma_um" not in f.sign_degenerate
@@ -65,9 +64,9 @@ def test_campaign_scores_an_undetermined_sign_by_the_total_magnitude():
     truth = {"coll_coma_um": 0.10, "coll_defocus_um": 0.05, "coll_astig45_um": -0.30}
     fit = {**truth, "coll_astig45_um": 2 * ASTIG_ORIGIN_UM + 0.30 + 0.01}  # mirror, 0.01 µm off in size
     sig = dict.fromkeys(fit, 0.02)
-    flagged = recovery_errors(_FakeDiagnosis("collimator_wfe", _FakeFinding(fit, sig, ["coll_astig45_um"])),
+    flagged = recovery_errors(FakeDiagnosis("collimator_wfe", FakeFinding(fit, sig, ["coll_astig45_um"])),
                               "collimator_wfe", truth)
-    silent = recovery_errors(_FakeDiagnosis("collimator_wfe", _FakeFinding(fit, sig)), "collimator_wfe", truth)
+    silent = recovery_errors(FakeDiagnosis("collimator_wfe", FakeFinding(fit, sig)), "collimator_wfe", truth)
     assert flagged["per_parameter"] == pytest.approx(0.01 / 0.30) and flagged["within_2sigma"]
     assert silent["per_parameter"] == pytest.approx(abs(fit["coll_astig45_um"] + 0.30) / 0.30)
     assert not silent["within_2sigma"]

@@ -1,0 +1,78 @@
+"""Shared diagnosis test cases, built without the FEA: an analytic sum-quilt nominal, a
+surface truth of another quilt form, manifests for surface maps and for J-band line profiles
+with a PSF image, and stand-ins for a diagnosis and its finding (the campaign's scoring
+rules read only these attributes)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from optics.sagmap import quilt_sag_map
+from pipeline.diagnosis.nominal import thermal_factor
+from pipeline.diagnosis.synth import synthetic_profile, synthetic_psf_image, synthetic_surface
+from pipeline.io.measured import write_line_profile_csv, write_psf_image_csv
+from pipeline.io.registry import write_sag_map
+
+__all__ = ["nominal_map", "other_quilt_truth", "surface_manifest", "surface_case", "profile_image_case",
+           "FakeFinding", "FakeDiagnosis"]
+
+
+def nominal_map(tmp_path):
+    m = quilt_sag_map(0.6, "sum", spacing_mm=0.5)
+    write_sag_map(m, tmp_path / "nominal.npz")
+    return m
+
+
+def other_quilt_truth(nominal):
+    # a different model: 10 % product-form admixture and a slight period error
+    other = quilt_sag_map(0.6, "product", spacing_mm=0.5, period_x_mm=21.1)
+    return nominal.with_sag(0.9 * nominal.sag_um + 0.1 * other.sag_um)
+
+
+def surface_manifest(tmp_path, file="map.npz", extra=""):
+    text = ('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\nkind = "surface"\n'
+            f'file = "{file}"\ntemperature_K = 128\naperture_diameter_mm = 137\n{extra}')
+    p = tmp_path / "m.toml"
+    p.write_text(text)
+    return p
+
+
+def surface_case(tmp_path, extra=None, seed=0, scale=1.0):
+    nom = nominal_map(tmp_path)
+    t = other_quilt_truth(nom).scaled(thermal_factor(128, 80) * scale)
+    m = synthetic_surface(t, np.random.default_rng(seed), extra_um=extra, noise_um=0.01)
+    write_sag_map(m, tmp_path / "map.npz")
+    return surface_manifest(tmp_path)
+
+
+def profile_image_case(tmp_path, params, psf=True, pixel_um=0.0, seed=3):
+    nom = nominal_map(tmp_path)
+    rng = np.random.default_rng(seed)
+    lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
+    for ps in (250, 25):
+        u, y, _ = synthetic_profile("J", 1.25, -2, ps, nom, rng, params=params, noise_rel=0.01)
+        write_line_profile_csv(tmp_path / f"p{ps}.csv", u, y)
+        lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{ps}.csv"\ngrating = "J"\norder = -2\n'
+                     f'wavelength_um = 1.25\npixel_scale_mas = {ps}\n')
+    if psf:
+        x, y, v, _ = synthetic_psf_image("J", 1.25, -2, nom, rng, params=params, noise_rel=0.01, pixel_um=pixel_um,
+                                         step_um=1.0, half_range_um=30.0)
+        write_psf_image_csv(tmp_path / "psf.csv", x, y, v)
+        lines.append(f'[[measurement]]\nkind = "psf_image"\nfile = "psf.csv"\ngrating = "J"\norder = -2\n'
+                     f'wavelength_um = 1.25\npixel_um = {pixel_um}\n')
+    p = tmp_path / "m.toml"
+    p.write_text("\n".join(lines))
+    return p
+
+
+class FakeFinding:
+    def __init__(self, parameters, uncertainties, sign_degenerate=()):
+        self.parameters, self.uncertainties, self.sign_degenerate = parameters, uncertainties, tuple(sign_degenerate)
+
+
+class FakeDiagnosis:
+    def __init__(self, effect, finding):
+        self._f = {effect: finding}
+
+    def finding(self, effect):
+        return self._f.get(effect)
