@@ -9,7 +9,7 @@ import pytest
 from optics.zernike import zernike_xy
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.effects import LIBRARY
-from pipeline.diagnosis.fitting import Problem, _long_run_s2
+from pipeline.diagnosis.fitting import Problem, long_run_s2
 from pipeline.diagnosis.nominal import thermal_factor
 from pipeline.diagnosis.synth import blank_shape_map, synthetic_surface
 from pipeline.io.registry import write_sag_map
@@ -83,8 +83,8 @@ def test_long_run_variance_inflates_correlated_residuals():
     smooth = np.sin(x / 12.0) * np.sqrt(2.0)
     f = _F("p", x)
     prob = Problem([f], {"p": 1.0}, {"p": float(x.size)})
-    s_white = _long_run_s2(prob, [f], {}, {"p": white}, 3)
-    s_smooth = _long_run_s2(prob, [f], {}, {"p": smooth}, 3)
+    s_white = long_run_s2(prob, [f], {}, {"p": white}, 3)
+    s_smooth = long_run_s2(prob, [f], {}, {"p": smooth}, 3)
     assert s_white == pytest.approx(np.sum(white**2) / (x.size - 3), rel=0.3)
     assert s_smooth > 5 * s_white
 

@@ -91,7 +91,7 @@ def test_exports_round_trip_through_interchange(study):
 
     from pipeline.io.registry import read_sag_map
     from pipeline.io.zernike import read_zernike_list
-    from pipeline.study.dataset import _slug
+    from pipeline.study.dataset import file_slug
 
     out, res = study
     ex = out / "exports"
@@ -101,7 +101,7 @@ def test_exports_round_trip_through_interchange(study):
     assert len([n for n in names if n.endswith("_zernike_fringe.txt")]) == 2
     assert len([n for n in names if n.endswith("_zernike_noll.txt")]) == 2
     (wfr,) = [n for n in names if n.endswith("_wfr.int")]
-    stem = f"case00_{_slug(res['cases'][0].label)}"
+    stem = f"case00_{file_slug(res['cases'][0].label)}"
     assert wfr == f"{stem}_J_m-2_1.25um_wfr.int" and "index.csv" in names
     with xr.open_dataset(out / "study.nc") as ds:
         sag = ds["sag_um"].values[0].astype(float)

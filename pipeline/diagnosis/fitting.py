@@ -26,7 +26,7 @@ the *post-fit* residual is correlated over its own length, which can exceed the
 nominal residual's: ``s^2`` is therefore the larger of the above and the residual's
 long-run variance ``sum_i w_i^2 RSS_i L_i / (N - k)`` (``L_i`` the integral correlation
 length of measurement i's post-fit residual in samples, a Newey-West-type estimate;
-:func:`_long_run_s2`). Mismatch absorbed *into* the parameters is invisible to any
+:func:`long_run_s2`). Mismatch absorbed *into* the parameters is invisible to any
 residual-based estimate; the engine adds in quadrature how far the parameters move when
 a known mismatch the data do not rule out is modelled (the ``plating_gradient`` and
 ``blank_bow`` companions; :func:`pipeline.diagnosis.ranking.mismatch_errors`).
@@ -44,13 +44,13 @@ from scipy.optimize import least_squares
 from .effects import Parameter
 from .noise import effective_samples
 
-__all__ = ["FitOutcome", "Problem", "fit"]
+__all__ = ["FitOutcome", "Problem", "fit", "long_run_s2"]
 
 _DELTA_SCALE_UM = 10.0  # normalisation of the profile offset-shift nuisance
 _DELTA_BOUND_UM = 45.0
 
 
-def _long_run_s2(problem, fws, masks: dict, resid: dict, k: int) -> float:
+def long_run_s2(problem, fws, masks: dict, resid: dict, k: int) -> float:
     """Weighted post-fit residual variance per degree of freedom with each measurement's
     samples counted ``L_i`` times (``L_i`` = its post-fit residual's integral correlation
     length): the long-run variance that the projection ``J^T r`` of a correlated residual
@@ -264,7 +264,7 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
     errors = {}
     if params:
         cost_w = float(np.sum(res_vec**2))
-        s2 = max(cost_w / max(sum(neff.values()) - k, 1.0), _long_run_s2(problem, fws, masks, resid, k))
+        s2 = max(cost_w / max(sum(neff.values()) - k, 1.0), long_run_s2(problem, fws, masks, resid, k))
         J = np.asarray(jac)[:, :len(params)]
         JtJ = J.T @ J
         # Columns with no leverage (the parameter does not touch these data) are unconstrained.

@@ -48,6 +48,7 @@ __all__ = [
     "REPORT_QUILT",
     "REPORT_ZERNIKES",
     "ZERNIKE_APERTURE",
+    "file_slug",
     "fit_cases",
     "study_dataset",
     "wavefront_jobs",
@@ -252,7 +253,9 @@ def write_study_netcdf(ds, path: Path) -> Path:
     return Path(path)
 
 
-def _slug(text: str) -> str:
+def file_slug(text: str) -> str:
+    """``text`` (a case label) as a file-name part: ``/`` becomes ``-``, other runs of
+    characters outside ``[A-Za-z0-9.+-]`` become ``_`` ("case" when nothing is left)."""
     return re.sub(r"[^A-Za-z0-9.+-]+", "_", str(text).replace("/", "-")).strip("_") or "case"
 
 
@@ -277,7 +280,7 @@ def write_exports(out: Path, cases, maps: dict, zfits: list, wavefronts: list) -
     """
     out.mkdir(parents=True, exist_ok=True)
     index = []
-    stem = {c.label: f"case{i:02d}_{_slug(c.label)}" for i, c in enumerate(cases)}
+    stem = {c.label: f"case{i:02d}_{file_slug(c.label)}" for i, c in enumerate(cases)}
     for c, z in zip(cases, zfits):
         s, m = stem[c.label], maps[c.label]
         write_sag_map(m, out / f"{s}_sag.int", kind="SUR")
