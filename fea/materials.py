@@ -157,7 +157,7 @@ NIP_HIGH_P = Material.with_al6061_shape(
         "nanoindentation papers 100-200 GPa; the spread is real (porosity, heat treatment). "
         "60 GPa is the data-sheet mid value; with it the model's thickness nonlinearity "
         "P/V(200 um)/P/V(100 um) is 1.86/1.82/1.82 for polish 100/75/50 % against the paper's "
-        "1.88/1.83/1.86 (default mesh, 2026-11-22). nu = 0.33 (data-sheet range 0.3-0.4). "
+        "1.88/1.83/1.86 (default mesh). nu = 0.33 (data-sheet range 0.3-0.4). "
         "CTE 13e-6/K at room temperature (data sheets 11-14e-6/K); no cryogenic curve is "
         "published, so the 6061 NIST shape is scaled by the RT CTE ratio (0.575): "
         "-0.222 % from 293 K to 80 K, uncertain by ~30 %. The film mismatch stress is therefore "
