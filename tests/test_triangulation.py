@@ -75,6 +75,6 @@ def test_memoised_weights_give_the_values_of_a_fresh_evaluation():
              (x, y, np.hypot(x, y))]
     seen = [linear_on_grid(*c, gx, gy) for c in cases]
     for c, got in zip(cases, seen):
-        triangulation._WEIGHTS.clear()
+        triangulation._weights_of.cache_clear()
         np.testing.assert_array_equal(got, linear_on_grid(*c, gx, gy))
     assert not np.array_equal(seen[0], seen[1], equal_nan=True)

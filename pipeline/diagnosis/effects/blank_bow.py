@@ -3,7 +3,7 @@ tried only where a map is in the data: :mod:`pipeline.diagnosis.effects`)."""
 
 from __future__ import annotations
 
-from collections import OrderedDict
+import functools
 
 import numpy as np
 
@@ -29,25 +29,21 @@ def bow_um(x_mm: np.ndarray, y_mm: np.ndarray, defocus_um: float, spherical_um: 
     return out
 
 
-_BOW_TERMS: OrderedDict = OrderedDict()
-
-
 def _bow_term(n: int, x_mm, y_mm) -> np.ndarray:
     """``zernike_xy(n, 0, x_mm, y_mm, BOW_REF_RADIUS_MM)`` (read-only), memoised on the
-    coordinates' bytes: a fit with the bow free evaluates it on the same grid thousands of
-    times (measured: 6 % of the CPU time of a diagnosis of profiles + map + PSF image); the
-    values are those of a fresh evaluation."""
+    coordinates (:func:`_bow_term_of`)."""
     x, y = np.asarray(x_mm, dtype=float), np.asarray(y_mm, dtype=float)
-    key = (n, x.shape, y.shape, x.tobytes(), y.tobytes())
-    z = _BOW_TERMS.get(key)
-    if z is None:
-        z = zernike_xy(n, 0, x, y, BOW_REF_RADIUS_MM)
-        z.flags.writeable = False
-        _BOW_TERMS[key] = z
-        if len(_BOW_TERMS) > 16:
-            _BOW_TERMS.popitem(last=False)
-    else:
-        _BOW_TERMS.move_to_end(key)
+    return _bow_term_of(n, x.shape, x.tobytes(), y.shape, y.tobytes())
+
+
+@functools.lru_cache(maxsize=16)
+def _bow_term_of(n: int, x_shape: tuple, x_bytes: bytes, y_shape: tuple, y_bytes: bytes) -> np.ndarray:
+    # Memoised on the coordinates' bytes: a fit with the bow free evaluates it on the same grid
+    # thousands of times (measured: 6 % of the CPU time of a diagnosis of profiles + map + PSF
+    # image); the values are those of a fresh evaluation.
+    x, y = np.frombuffer(x_bytes).reshape(x_shape), np.frombuffer(y_bytes).reshape(y_shape)
+    z = zernike_xy(n, 0, x, y, BOW_REF_RADIUS_MM)
+    z.flags.writeable = False
     return z
 
 
