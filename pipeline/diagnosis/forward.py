@@ -265,7 +265,6 @@ class SpectrographImageModel:
         self._grid = nominal.grid()
         self.quilt = quilt_components(nominal)
         self._quilt_at = quilt_parts(self.quilt, *self._grid)
-        self._nulls = self._NULLS
         self._cache: OrderedDict = OrderedDict()
         self._cache_size = cache_size
         self.noise_known = m.noise_rel
@@ -277,7 +276,7 @@ class SpectrographImageModel:
     def _memo(self, p: dict, build):
         """``build(sag, p)`` for the grating's deformed sag, memoised on the physical parameters."""
         k = self.factor(p)
-        key = (round(k, 12),) + tuple(round(float(p.get(q, self._nulls[q])), 12) for q in self._KEYS)
+        key = (round(k, 12),) + tuple(round(float(p.get(q, self._NULLS[q])), 12) for q in self._KEYS)
         hit = self._cache.get(key)
         if hit is not None:
             self._cache.move_to_end(key)
