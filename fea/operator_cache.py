@@ -23,12 +23,22 @@ be the entry's; a missing, corrupt, truncated or inconsistent entry is rebuilt w
 ``key`` member matches and whose arrays read back whole (zip CRC of every member) is a
 complete entry written without the store's sidecar; the sidecar is added to it instead
 of assembling again.
+
+The film operators are large (~690 MB for the default mesh, ~1.3 GB for the finest
+mesh of the convergence study) and a sweep over geometries makes a new set per
+geometry, so the cache is bounded: after each write, the least recently used entries
+(a hit refreshes an entry's time) are deleted until the film operators take at most
+:func:`budget_bytes` (``$CRYOGRATING_OPERATOR_CACHE_MB``, default
+:data:`DEFAULT_BUDGET_MB`). The default holds every group of the default mesh; within
+one process a :class:`fea.model.PreparedBlank` keeps its operators in memory, so an
+eviction only costs a later process an assembly.
 """
 
 from __future__ import annotations
 
 import hashlib
 import io
+import os
 import warnings
 import zipfile
 from pathlib import Path
@@ -39,15 +49,36 @@ import scipy.sparse as sp
 from . import MODEL_VERSION, store
 from .assembly import FilmOperators, shared_csr
 
-__all__ = ["FORMAT_VERSION", "NAMESPACE", "operator_key", "operator_entry", "load_film_ops", "save_film_ops"]
+__all__ = ["FORMAT_VERSION", "NAMESPACE", "DEFAULT_BUDGET_MB", "BUDGET_ENV", "budget_bytes", "operator_key", "operator_entry", "load_film_ops", "save_film_ops"]
 
 #: Bump when the stored arrays or their meaning change; old files then miss.
 FORMAT_VERSION = 1
 #: Store namespace of the film operators.
 NAMESPACE = "fea.operator_cache/film-operators"
 
+#: Largest total size of the stored film operators of one cache directory, MB (10^6 bytes).
+DEFAULT_BUDGET_MB = 1024
+#: Environment variable that sets it.
+BUDGET_ENV = "CRYOGRATING_OPERATOR_CACHE_MB"
+_PAYLOADS = "filmops-*.npz"
+
 _PATTERNED = ("A00", "A00k", "A0C", "A0Ck", "ACC", "ACCk")
 _VECTORS = ("f0", "f0k", "fC", "fCk", "gL0", "gL0k", "gLC", "gLCk")
+
+
+def budget_bytes() -> int:
+    """The film-operator cache's size budget, bytes: ``$CRYOGRATING_OPERATOR_CACHE_MB``
+    (a number >= 0 of MB; 0 keeps only the entry just written) or :data:`DEFAULT_BUDGET_MB`."""
+    raw = os.environ.get(BUDGET_ENV, "").strip()
+    if not raw:
+        return DEFAULT_BUDGET_MB * 10**6
+    try:
+        mb = float(raw)
+    except ValueError:
+        mb = float("nan")
+    if not (mb >= 0 and np.isfinite(mb)):
+        raise ValueError(f"{BUDGET_ENV}={raw!r} must be a number of MB >= 0 (default {DEFAULT_BUDGET_MB})")
+    return int(mb * 10**6)
 
 
 def operator_key(mesh, facets: np.ndarray, youngs_modulus_MPa: float, poisson_ratio: float,
@@ -70,6 +101,7 @@ def operator_entry(cache_dir: Path, mesh, facets: np.ndarray, youngs_modulus_MPa
     Its parameters name what a reader can check by eye (film constants, model version,
     sizes); the key also covers the arrays.
     """
+    budget_bytes()  # a bad budget fails here, before an assembly whose result it would refuse
     key = operator_key(mesh, facets, youngs_modulus_MPa, poisson_ratio, fixed_dofs)
     params = {"youngs_modulus_MPa": float(youngs_modulus_MPa), "poisson_ratio": float(poisson_ratio),
               "model_version": MODEL_VERSION, "mesh_type": type(mesh).__name__,
@@ -98,6 +130,7 @@ def save_film_ops(e: store.Entry, ops: FilmOperators) -> Path | None:
     except (OSError, ValueError) as exc:  # ValueError: the atomic writer's unwritable directory
         warnings.warn(f"film operators not cached in {e.payload.parent}: {exc}", stacklevel=2)
         return None
+    store.prune(e.payload.parent, _PAYLOADS, budget_bytes(), keep=(e.payload,))
     return e.payload
 
 
@@ -130,7 +163,9 @@ def load_film_ops(e: store.Entry) -> FilmOperators | None:
     try:
         fh, _ = store.open_checked(e)
         with fh:
-            return _ops(fh, e)
+            ops = _ops(fh, e)
+        store.touch(e)
+        return ops
     except FileNotFoundError:
         return None
     except store.CacheMiss as exc:

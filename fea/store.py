@@ -54,7 +54,7 @@ from .atomic import atomic_write
 __all__ = [
     "STORE_FORMAT", "CacheMiss", "CacheWarning", "Entry", "entry", "entry_key", "canonical_token",
     "canonical_json", "library_version", "write_bytes", "commit", "read_sidecar", "read_bytes", "open_checked",
-    "verify", "save_arrays", "load_arrays", "warn_rebuild",
+    "verify", "save_arrays", "load_arrays", "warn_rebuild", "touch", "prune",
 ]
 
 #: Layout of the sidecar; bump when its fields change (every entry then rebuilds with a warning).
@@ -357,3 +357,66 @@ def warn_rebuild(e: Entry | Path, why: object, what: str = "cache entry", stackl
     """One-line :class:`CacheWarning`: which file is rebuilt and why."""
     path = e.payload if isinstance(e, Entry) else Path(e)
     warnings.warn(f"rebuilding {what} {path}: {why}", CacheWarning, stacklevel=stacklevel)
+
+
+def touch(e: Entry) -> None:
+    """Mark ``e`` as just used (its payload's modification time is now): :func:`prune`
+    evicts the entries used longest ago first. A read-only cache is left as it is."""
+    try:
+        os.utime(e.payload)
+    except OSError:
+        pass
+
+
+def prune(directory, pattern: str, budget_bytes: int, keep: tuple[Path, ...] = ()) -> list[Path]:
+    """Delete the least recently used entries whose payloads match ``pattern`` in
+    ``directory`` until their payloads take at most ``budget_bytes``; returns the
+    payloads deleted.
+
+    Recency is the payload's modification time (written, or :func:`touch`-ed on a
+    hit). Payloads in ``keep`` (the entry just written) are never deleted, even when
+    they alone exceed the budget. The payload goes first and its sidecar second, so a
+    concurrent reader sees a missing payload (a miss, rebuilt) and never a sidecar's
+    promise of a file that is half gone; a reader that already has the file open keeps
+    reading it. Temporary files of writers in progress start with a dot and never match
+    a pattern that starts with the cache's prefix.
+
+    Parameters
+    ----------
+    directory : path
+        The cache directory.
+    pattern : str
+        Glob of the payloads, e.g. ``"filmops-*.npz"``.
+    budget_bytes : int
+        Largest total size of the matching payloads kept, bytes (>= 0).
+    keep : tuple of Path
+        Payloads never deleted.
+    """
+    if not isinstance(budget_bytes, (int, np.integer)) or isinstance(budget_bytes, bool) or budget_bytes < 0:
+        raise ValueError(f"budget_bytes={budget_bytes!r} must be an int >= 0")
+    keep_names = {Path(k).name for k in keep}
+    found = []
+    for path in Path(directory).glob(pattern):
+        if path.name.startswith(".") or path.suffix == ".json":
+            continue
+        try:
+            st = path.stat()
+        except OSError:  # deleted by another process meanwhile
+            continue
+        found.append((st.st_mtime, st.st_size, path))
+    found.sort(key=lambda t: (t[0], t[2].name), reverse=True)  # newest first
+    total, deleted = 0, []
+    for _, size, path in found:
+        total += size
+        if total <= budget_bytes or path.name in keep_names:
+            continue
+        total -= size
+        for victim in (path, path.with_suffix(".json")):
+            try:
+                victim.unlink()
+            except FileNotFoundError:
+                pass
+            except OSError:  # read-only cache: nothing can be evicted
+                return deleted
+        deleted.append(path)
+    return deleted

@@ -133,3 +133,29 @@ def test_a_flipped_byte_in_any_stored_array_is_rebuilt(mesh, tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert load_film_ops(e) is not None
+
+
+def test_the_cache_keeps_within_its_budget_the_operators_used_last(mesh, tmp_path, monkeypatch):
+    """With a budget of 0 MB only the entry just written stays; the operators a process
+    has in memory are still its own."""
+    from fea.materials import AL6061_T6
+    from fea.operator_cache import BUDGET_ENV
+
+    monkeypatch.setenv(BUDGET_ENV, "0")
+    blank = PreparedBlank(mesh, operator_cache=tmp_path)
+    blank.film_ops("front")
+    (first,) = tmp_path.glob("filmops-*.npz")
+    blank.film_ops("front", film=AL6061_T6)
+    (second,) = tmp_path.glob("filmops-*.npz")
+    assert second != first and not first.with_suffix(".json").exists()
+    assert blank.film_ops("front") is blank.film_ops("front")
+
+
+@pytest.mark.parametrize("raw", ["-5", "lots", "nan", "inf"])
+def test_a_bad_budget_is_refused_before_any_assembly(mesh, tmp_path, monkeypatch, raw):
+    from fea.operator_cache import BUDGET_ENV
+
+    monkeypatch.setenv(BUDGET_ENV, raw)
+    with pytest.raises(ValueError, match=f"{BUDGET_ENV}='{raw}' must be a number of MB >= 0"):
+        PreparedBlank(mesh, operator_cache=tmp_path).film_ops("front")
+    assert not list(tmp_path.iterdir())

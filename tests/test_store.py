@@ -385,3 +385,50 @@ def test_open_checked_checks_the_sidecar_and_the_size_but_not_the_content(tmp_pa
             [z[k] for k in z.files]
     with pytest.raises(FileNotFoundError):
         store.open_checked(store.entry(tmp_path, "ns", {"x": 5.0}))
+
+
+# ----------------------------------------------------------------- size budget
+
+
+def _payload(directory, name, size, mtime):
+    """A payload of ``size`` bytes with its sidecar, last used at ``mtime`` (seconds)."""
+    import os
+
+    path = directory / name
+    path.write_bytes(b"x" * size)
+    path.with_suffix(".json").write_text("{}")
+    os.utime(path, (mtime, mtime))
+    return path
+
+
+def test_prune_keeps_the_most_recently_used_payloads_within_the_budget(tmp_path):
+    old = _payload(tmp_path, "filmops-a.npz", 400, 1_000)
+    mid = _payload(tmp_path, "filmops-b.npz", 400, 2_000)
+    new = _payload(tmp_path, "filmops-c.npz", 400, 3_000)
+    other = _payload(tmp_path, "blank-d.npz", 10_000, 500)  # another cache's: not counted, not deleted
+    writing = tmp_path / ".filmops-e.npz.1234abcd.tmp.npz"  # a writer's temporary file
+    writing.write_bytes(b"x" * 10_000)
+    assert store.prune(tmp_path, "filmops-*.npz", 800) == [old]
+    assert not old.exists() and not old.with_suffix(".json").exists()
+    assert mid.exists() and new.exists() and other.exists() and writing.exists()
+    assert mid.with_suffix(".json").exists()
+
+
+def test_a_hit_makes_an_entry_recent_and_the_entry_just_written_is_kept(tmp_path):
+    import os
+
+    first = _payload(tmp_path, "filmops-a.npz", 400, 1_000)
+    second = _payload(tmp_path, "filmops-b.npz", 400, 2_000)
+    e = store.Entry("ns", {}, first, first.with_suffix(".json"))
+    store.touch(e)  # used now: the newest
+    assert first.stat().st_mtime > second.stat().st_mtime
+    assert store.prune(tmp_path, "filmops-*.npz", 400) == [second]
+    big = _payload(tmp_path, "filmops-c.npz", 5_000, os.stat(first).st_mtime + 10)
+    assert store.prune(tmp_path, "filmops-*.npz", 100, keep=(big,)) == [first]
+    assert big.exists()
+
+
+@pytest.mark.parametrize("budget", [-1, 1.5, "1", True])
+def test_prune_refuses_a_budget_that_is_not_a_byte_count(tmp_path, budget):
+    with pytest.raises(ValueError, match="budget_bytes"):
+        store.prune(tmp_path, "filmops-*.npz", budget)
