@@ -4,9 +4,12 @@
 reader and writer and the module that implements them; ``python -m pipeline.io.registry``
 prints the table. Sag maps are dispatched on the suffix: :func:`read_sag_map` /
 :func:`write_sag_map` (and :func:`load_sag_map` for the CLI's ``--sag FILE``) use
-:data:`SAG_FORMATS`, the ``"sag map"`` rows of :data:`FORMATS`. Other kinds share
-suffixes with sag maps (a CODE V ``ZFR`` deck is an ``.int`` like a ``GRD`` grid), so
-their readers are called by name.
+:data:`SAG_FORMATS` (the ``"sag map"`` rows read and written) and :data:`SAG_READERS`
+(read only: interferometer exports). Where two sag-map formats share a suffix (a Zygo
+MetroPro ``.dat`` and a Zemax Grid Sag ``.dat``) the row with a ``sniff`` test is tried
+first and chosen by the file's content. Other kinds share suffixes with sag maps (a
+CODE V ``ZFR`` deck is an ``.int`` like a ``GRD`` grid), so their readers are called by
+name.
 
 Adding a format: write its reader/writer in a module of this package and add one
 :class:`Format` row below; a sag-map row makes it readable by ``--sag``, diagnosis
@@ -40,8 +43,9 @@ from pipeline.io.plain import (read_sag_csv, read_sag_netcdf, read_sag_npz, writ
                                write_sag_npz)
 from pipeline.io.zemax import read_zemax_grid_sag, read_zemax_zernike, write_zemax_grid_sag, write_zemax_zernike
 from pipeline.io.zernike import read_zernike_list, write_zernike_list
+from pipeline.io.zygo import is_zygo_dat, read_zygo_ascii, read_zygo_dat, read_zygo_datx
 
-__all__ = ["KINDS", "Format", "FORMATS", "SAG_FORMATS", "formats", "format_table", "write_sag_map", "read_sag_map",
+__all__ = ["KINDS", "Format", "FORMATS", "SAG_FORMATS", "SAG_READERS", "formats", "format_table", "write_sag_map", "read_sag_map",
            "load_sag_map"]
 
 #: What a file holds.
@@ -65,6 +69,9 @@ class Format:
         for the other kinds the writer's own signature. None: not read / not written.
     notes : str
         Precision, quantisation or what the reader accepts.
+    sniff : callable or None
+        ``sniff(path) -> bool``: the file is in this format (by its content). A format
+        that shares a suffix with another has one; it is tried before the other.
     """
 
     kind: str
@@ -73,6 +80,7 @@ class Format:
     reader: Callable | None
     writer: Callable | None
     notes: str = ""
+    sniff: Callable | None = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -89,6 +97,12 @@ FORMATS: tuple[Format, ...] = (
     Format("sag map", (".int",), "CODE V grid interferogram (GRD), SUR or WFR", read_codev_int, write_codev_int,
            "16 bit, max|v|/65532"),
     Format("sag map", (".dat",), "Zemax Grid Sag", read_zemax_grid_sag, write_zemax_grid_sag, "12 digits"),
+    Format("sag map", (".dat",), "Zygo MetroPro binary interferogram", read_zygo_dat, None,
+           "counts x S x O x wavelength / R; invalid pixels NaN; told from Zemax by its magic number",
+           sniff=is_zygo_dat),
+    Format("sag map", (".datx",), "Zygo Mx HDF5 interferogram", read_zygo_datx, None, "needs prysm and h5py"),
+    Format("sag map", (".asc",), "Zygo MetroPro ASCII interferogram", read_zygo_ascii, None,
+           "counts x S x O x wavelength / R; invalid pixels NaN"),
     Format("sag map", (".csv",), "x_mm,y_mm,sag_um point table", read_sag_csv, write_sag_csv,
            "12 significant digits; masked or scattered points gridded"),
     Format("sag map", (".nc",), "NetCDF4 sag_um[y_mm, x_mm]", read_sag_netcdf, write_sag_netcdf,
@@ -126,9 +140,19 @@ def format_table() -> str:
     return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows)
 
 
-#: suffix -> (reader(path, **options) -> SagMap, writer(sagmap, path, **options) -> Path)
+#: suffix -> (reader(path, **options) -> SagMap, writer(sagmap, path, **options) -> Path) of the
+#: sag-map formats read and written (for a shared suffix, the one without a ``sniff``)
 SAG_FORMATS: dict[str, tuple[Callable[..., SagMap], Callable[..., Path]]] = {
-    s: (f.reader, f.writer) for f in formats("sag map") for s in f.suffixes}
+    s: (f.reader, f.writer) for f in formats("sag map") if f.writer and not f.sniff for s in f.suffixes}
+#: suffix -> reader of the sag-map formats read only (interferometer exports)
+SAG_READERS: dict[str, Callable[..., SagMap]] = {
+    s: f.reader for f in formats("sag map") if not f.writer and not f.sniff for s in f.suffixes}
+#: suffix -> [(sniff, reader)] tried, in order, before the suffix's own format
+_SNIFFED: dict[str, list] = {}
+for _f in formats("sag map"):
+    if _f.sniff:
+        for _s in _f.suffixes:
+            _SNIFFED.setdefault(_s, []).append((_f.sniff, _f.reader))
 _WRITERS = {w for _, w in SAG_FORMATS.values()}
 
 
@@ -141,13 +165,26 @@ def _check_options(func: Callable, path: Path, options: dict) -> None:
                          f"({path.suffix} files); valid are {params}")
 
 
-def _format_for(path: Path) -> tuple[Callable, Callable]:
+def _format_for(path: Path, writing: bool = True) -> tuple[Callable, Callable]:
     try:
         return SAG_FORMATS[path.suffix.lower()]
     except KeyError:
-        raise ValueError(
-            f"{path}: unknown sag-map format {path.suffix!r}; valid suffixes are {sorted(SAG_FORMATS)}"
-        ) from None
+        if path.suffix.lower() in SAG_READERS:
+            raise ValueError(f"{path}: {path.suffix!r} files are read, not written; write one of "
+                             f"{sorted(SAG_FORMATS)}") from None
+        valid = set(SAG_FORMATS) | (set() if writing else set(SAG_READERS))
+        raise ValueError(f"{path}: unknown sag-map format {path.suffix!r}; valid suffixes are {sorted(valid)}") from None
+
+
+def _reader_for(path: Path) -> Callable:
+    """The reader of ``path``: a content test first where the suffix is shared, then the suffix."""
+    suffix = path.suffix.lower()
+    for sniff, reader in _SNIFFED.get(suffix, ()):
+        if path.exists() and sniff(path):
+            return reader
+    if suffix in SAG_READERS:
+        return SAG_READERS[suffix]
+    return _format_for(path, writing=False)[0]
 
 
 def write_sag_map(sagmap: SagMap, path: str | Path, **options) -> Path:
@@ -178,11 +215,11 @@ def read_sag_map(path: str | Path, **options) -> SagMap:
 
     ``**options`` go to the reader (``extent_mm``/``spacing_mm``, ``quantity``,
     ``wfr_to_sag_factor`` for ``.int``, ``spacing_mm`` for scattered ``.csv``,
-    ``wavelength_um`` for a ``.nc`` in waves); an option the format does not use is
-    refused naming the valid ones.
+    ``wavelength_um`` for a ``.nc`` in waves, ``spacing_mm`` for a Zygo map without a
+    lateral scale); an option the format does not use is refused naming the valid ones.
     """
     path = Path(path)
-    reader = _format_for(path)[0]
+    reader = _reader_for(path)
     _check_options(reader, path, options)
     if not path.exists():
         raise ValueError(f"{path}: file does not exist")
