@@ -245,3 +245,28 @@ def test_a_diagnosis_manifest_takes_a_zygo_map_with_its_pixel_pitch(tmp_path):
     expected = 0.05 * np.cos(2 * np.pi * s.x_mm / 21.0) + 0.01 * s.y_mm / 70
     np.testing.assert_allclose(s.sag_um, expected, atol=0.5 * 0.5 * 632.8e-9 / 131072 * 1e6 + 1e-12)
     assert s.x_mm.size == np.sum(np.hypot(x, y) <= 68.5)
+
+
+def test_a_zygo_datx_file_is_read(tmp_path):
+    """An Mx ``.datx`` written here with h5py in Zygo's layout (``Data/Surface/<frame>`` in
+    fringes with its scale factors, ``Attributes/<frame>`` with the lateral resolution)."""
+    h5py = pytest.importorskip("h5py")
+    pytest.importorskip("prysm.io")
+    truth = _truth_um()
+    wl, S, O = 632.8e-9, 0.5, 1.0
+    fringes = truth * 1e-6 / (S * O * wl)
+    no_data = 1.7976931348623157e308
+    path = tmp_path / "cold.datx"
+    with h5py.File(path, "w") as f:
+        d = f.create_dataset("Data/Surface/{ABCD-0001}", data=np.where(np.isnan(fringes), no_data, fringes))
+        d.attrs["No Data"] = np.array([no_data])
+        d.attrs["Wavelength"] = np.array([wl])
+        d.attrs["Unit"] = np.array([b"Fringes"], dtype=object)
+        d.attrs["Interferometric Scale Factor"] = np.array([S])
+        d.attrs["Obliquity Factor"] = np.array([O])
+        a = f.create_group("Attributes/{ABCD-0001}")
+        a.attrs["Data Context.Lateral Resolution:Value"] = np.array([PITCH_MM * 1e-3])
+        a.attrs["Data Context.Lateral Resolution:Unit"] = np.array([b"Meters"], dtype=object)
+    m = ic.read_sag_map(path)
+    assert m.meta["format"] == "zygo-datx"
+    _check_map(m, truth, tol_um=1e-9)
