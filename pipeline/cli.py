@@ -263,11 +263,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     from pipeline.diagnosis.cli import register as register_diagnosis
     from pipeline.fe_cli import register as register_fe
+    from pipeline.map_cli import register as register_convert
     from pipeline.optics_cli import register as register_optics
 
     register_optics(sub)
     register_diagnosis(sub)
     register_fe(sub)
+    register_convert(sub)
     return p
 
 

@@ -270,3 +270,20 @@ def test_a_zygo_datx_file_is_read(tmp_path):
     m = ic.read_sag_map(path)
     assert m.meta["format"] == "zygo-datx"
     _check_map(m, truth, tol_um=1e-9)
+
+
+def test_cli_convert_turns_an_interferogram_into_a_codev_int_and_refuses_what_it_cannot_read(tmp_path, capsys):
+    from pipeline.cli import main
+
+    truth = _truth_um()
+    src = tmp_path / "cold.asc"
+    src.write_text(_ascii_file(_counts(truth, 632.8e-9, 0.5, 1.0, 131072), res_m=0.0, intensity_buckets=0,
+                               newline="\n"))
+    assert main(["convert", str(src), str(tmp_path / "cold.int"), "--spacing-mm", str(PITCH_MM)]) == 0
+    out = capsys.readouterr().out
+    assert "zygo-ascii" in out and "51 x 41 samples at 0.5 x 0.5 mm" in out
+    back = ic.read_sag_map(tmp_path / "cold.int")
+    step = np.nanmax(np.abs(truth)) / 32766  # the INT file's 16-bit step
+    _check_map(back, truth, tol_um=1.01 * step + 0.5 * 0.5 * 632.8e-9 / 131072 * 1e6)
+    assert main(["convert", str(src), str(tmp_path / "cold.nc")]) == 2
+    assert "no lateral scale" in capsys.readouterr().err
