@@ -16,7 +16,12 @@ figure ``R = nominal - F_x - F_y - C - H``; their sum is the nominal) plus pisto
 The first row is the truth's FEA map alone (refined against the default mesh): the floor
 every family sits on.
 
-    .venv/bin/python benchmarks/truth_span.py [--draws 20] [--seed 1] [--cache-dir DIR]
+With ``--ratios`` it prints instead the truths' own ``quilt_shape`` ratios: the same
+least-squares coefficients of ``F_y``, ``C``, ``H`` and ``R`` over that of ``F_x`` (the
+nominal's are 1), i.e. what a ``quilt_shape`` fit of a noiseless map of the truth returns;
+they say which ranges of the ratios real-looking quilts need.
+
+    .venv/bin/python benchmarks/truth_span.py [--draws 20] [--seed 1] [--cache-dir DIR] [--ratios]
 """
 
 from __future__ import annotations
@@ -57,15 +62,41 @@ def outside_span(t_um: np.ndarray, nominal_um: np.ndarray, A: np.ndarray, mask: 
     return {"outside": res / departure, "resid": res / np.linalg.norm(t0), "distance": d}
 
 
+def quilt_ratios(t_um: np.ndarray, A: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``(F_y, C, H, R)`` coefficients of the truth map over its ``F_x`` coefficient."""
+    c, *_ = np.linalg.lstsq(A, t_um[mask], rcond=None)
+    return c[4:] / c[3]
+
+
+def print_ratios(nominal, fea, A, mask, draws: int, seed: int) -> None:
+    names = ("quilt_fund_xy_ratio", "quilt_cross_ratio", "quilt_harmonics_ratio", "quilt_figure_ratio")
+    print("| family | draws | " + " | ".join(f"`{n}`" for n in names) + " |")
+    print("|---|---|" + "---|" * len(names))
+    rows = {"FEA map alone (refined mesh)": [quilt_ratios(np.where(np.isfinite(fea.sag_um), fea.sag_um, 0.0), A, mask)]}
+    for fam in GRATING_FAMILIES:
+        rows[fam] = [quilt_ratios(np.where(np.isfinite(g.sag_um), g.sag_um, 0.0), A, mask)
+                     for g in (truth_grating(nominal, fea, np.random.default_rng([seed, s]), (fam,))
+                               for s in range(draws))]
+    for fam, rs in rows.items():
+        r = np.array(rs)
+        cells = [f"{np.median(r[:, j]):.2f}" if len(rs) == 1 else
+                 f"{np.median(r[:, j]):.2f} ({r[:, j].min():.2f} … {r[:, j].max():.2f})" for j in range(len(names))]
+        print(f"| `{fam}` | {len(rs)} | " + " | ".join(cells) + " |")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--draws", type=int, default=20)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--cache-dir", default=str(Path.home() / ".cache" / "cryograting" / "diagnosis"))
+    ap.add_argument("--ratios", action="store_true", help="the truths' own quilt_shape ratios instead")
     a = ap.parse_args(argv)
     nominal, fea = campaign_maps(CampaignConfig(), cache_dir=a.cache_dir)
     n = np.where(np.isfinite(nominal.sag_um), nominal.sag_um, 0.0)
     A, mask = span_columns(nominal)
+    if a.ratios:
+        print_ratios(nominal, fea, A, mask, a.draws, a.seed)
+        return
     rows = {"fea_only (refined mesh)": [outside_span(np.where(np.isfinite(fea.sag_um), fea.sag_um, 0.0), n, A, mask)]}
     for fam in GRATING_FAMILIES:
         rows[fam] = [outside_span(np.where(np.isfinite(g.sag_um), g.sag_um, 0.0), n, A, mask)
