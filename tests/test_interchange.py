@@ -324,7 +324,7 @@ def test_read_line_profile(tmp_path):
     ("offset_um,intensity\n0,1\n1,2\n2,1\n3,1\n", r"needs >= 5 samples, found 4"),
     ("offset_um,intensity\n0,1\n1,-2\n2,-1\n3,-1\n4,1\n", r"no flux.* is -3, must be > 0"),
     ("offset_um,intensity\n0,0\n1,0\n2,0\n3,0\n4,0\n", r"no flux"),
-    ("offset_um,intensity\n0,1\n1,2\n1,1\n3,1\n4,1\n", r"line 4: duplicate offset_um 1"),
+    ("offset_um,intensity\n0,1\n1,2\n1,1\n3,1\n4,1\n", r"needs >= 5 distinct offsets, found 4"),
 ])
 def test_read_line_profile_errors(tmp_path, text, pattern):
     with pytest.raises(ValueError, match=r"lsf\.csv.*" + pattern):

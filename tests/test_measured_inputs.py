@@ -330,3 +330,35 @@ def test_utf16_and_undecodable_manifest_named(tmp_path):
     q.write_bytes(("# r\xe9sum\xe9\n" + text).encode("latin-1"))
     with pytest.raises(ValueError, match=r"manifest .*latin\.toml: is not UTF-8 text \(undecodable byte 0xe9"):
         load_manifest(q)
+
+
+def test_tables_as_other_code_writes_them(tmp_path):
+    """Semicolon, tab and whitespace tables, columns in other length units with the unit
+    in brackets, and a profile with two exposures merged (samples at one offset averaged)."""
+    from pipeline.io.measured import read_line_profile
+    from pipeline.io.plain import read_sag_csv
+
+    g = np.arange(-3.0, 3.01, 1.0)
+    X, Y = np.meshgrid(g, g)
+    sag_um = 0.1 * X - 0.05 * Y**2
+    rows = np.column_stack([X.ravel() * 1e-3, Y.ravel() * 1e-3, sag_um.ravel() * 1e3])  # m, m, nm
+    for name, delim in (("semi.csv", ";"), ("tab.txt", "\t"), ("space.dat", "  ")):
+        p = tmp_path / name
+        p.write_text(delim.join(["X [m]", "Y [m]", "height_nm"]).replace("height_nm", "sag (nm)") + "\n"
+                     + "\n".join(delim.join(f"{v:.9g}" for v in r) for r in rows) + "\n")
+        m = read_sag_csv(p)
+        np.testing.assert_allclose(m.x_mm, g, atol=1e-12)
+        np.testing.assert_allclose(m.sag_um, sag_um, atol=1e-9)
+    off = np.arange(-10.0, 10.01, 1.0)
+    a = np.exp(-0.5 * (off / 3) ** 2)
+    b = a + 0.1 * np.cos(off)  # a second exposure at the same offsets
+    p = tmp_path / "merged.csv"
+    p.write_text("Offset (mm),Intensity\n" + "".join(f"{o * 1e-3:.12g},{v:.12g}\n" for o, v in
+                                                      zip(np.r_[off, off], np.r_[a, b])))
+    x, y = read_line_profile(p, normalise=False)
+    np.testing.assert_allclose(x, off, atol=1e-9)
+    np.testing.assert_allclose(y, 0.5 * (a + b), atol=1e-12)
+    bad = tmp_path / "nounit.csv"
+    bad.write_text("x,y,sag\n0,0,1\n1,0,1\n0,1,1\n")
+    with pytest.raises(ValueError, match=r"missing column\(s\) \['x_mm', 'y_mm', 'sag_um'\].*any of nm, um, mm, m"):
+        read_sag_csv(bad)

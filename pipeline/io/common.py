@@ -8,7 +8,10 @@
   found and what is valid.
 * :func:`numbered_lines` — text lines with 1-based line numbers for those messages.
 * :func:`read_text` / :func:`read_csv_columns` — a file's text (UTF-8, or UTF-16/32 with
-  a byte-order mark) and the numeric columns of a CSV with a header, errors by line.
+  a byte-order mark) and the numeric columns of a delimited table with a header, errors by
+  line. Tables other code writes are taken as they come: comma, semicolon, tab or
+  whitespace delimited (told from the header line), and a column in another length unit
+  than the one asked for (``x [m]``, ``sag_nm``, ``Offset (mm)``) converted to it.
 """
 
 from __future__ import annotations
@@ -20,9 +23,12 @@ import os
 import uuid
 from pathlib import Path
 
+import re
+
 import numpy as np
 
 from fea.atomic import atomic_path, atomic_write
+from pipeline.io.gridding import SAG_UNITS_TO_UM
 
 __all__ = ["atomic_write", "atomic_path", "parse_error", "numbered_lines", "read_text",
            "decode_text", "read_csv_columns"]
@@ -66,9 +72,48 @@ def decode_text(raw: bytes, path: str | Path, what: str, strict: bool = False) -
     return text.replace("\r\n", "\n").replace("\r", "\n")  # universal newlines, as open() in text mode
 
 
+def _delimiter(header_line: str) -> str | None:
+    """The table's delimiter, told from its header line: ``,`` ``;`` tab, else None
+    (runs of whitespace)."""
+    for d in (",", ";", "\t"):
+        if d in header_line:
+            return d
+    return None
+
+
+def _split(line: str, delimiter: str | None) -> list[str]:
+    if delimiter is None:  # a unit in brackets stays with its name: "x [mm]  sag (nm)"
+        return re.sub(r"\s+(?=[\[(])", "", line).split()
+    return next(csv.reader([line], delimiter=delimiter), [])
+
+
+def _canonical_header(h: str) -> str:
+    """``"X [mm]"``, ``"x (mm)"``, ``"x mm"`` -> ``"x_mm"``; lower case, unit brackets and
+    spaces turned into one underscore."""
+    h = h.strip().lower()
+    h = re.sub(r"\s*[\[(]\s*([^\])]*?)\s*[\])]\s*$", r"_\1", h)
+    return re.sub(r"\s+", "_", h)
+
+
+def _column(header: list[str], name: str) -> tuple[int, float] | None:
+    """Index of column ``name`` in ``header`` and the factor to ``name``'s unit: the name
+    itself, or ``<base>_<unit>`` in another length unit when ``name`` is ``<base>_<unit>``."""
+    if name in header:
+        return header.index(name), 1.0
+    base, _, unit = name.rpartition("_")
+    if not base or unit not in SAG_UNITS_TO_UM:
+        return None
+    for i, h in enumerate(header):
+        b, _, u = h.rpartition("_")
+        if b == base and u in SAG_UNITS_TO_UM:
+            return i, SAG_UNITS_TO_UM[u] / SAG_UNITS_TO_UM[unit]
+    return None
+
+
 def _fast_csv_columns(text: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray] | None:
-    """NumPy parse of a clean file (header on line 1, no blank or ragged lines); None
-    means "use the line-by-line parser", which is the one that words the errors."""
+    """NumPy parse of a clean comma-separated file with the very column names (header on
+    line 1, no blank or ragged lines); None means "use the line-by-line parser", which is
+    the one that converts units, splits other delimiters and words the errors."""
     if "#" in text:
         return None  # comment lines: the line-by-line parser skips them
     head, _, body = text.partition("\n")
@@ -86,35 +131,42 @@ def _fast_csv_columns(text: str, names: tuple[str, ...]) -> tuple[np.ndarray, np
 
 
 def read_csv_columns(path: Path, what: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """Numeric columns ``names`` of a CSV with a header (names matched case-insensitively,
-    other columns ignored, ``#`` comment lines and blank lines skipped); returns
-    (values[n, k], line numbers[n]). Errors name the file and line."""
+    """Numeric columns ``names`` of a delimited table with a header; returns
+    (values[n, k], line numbers[n]). Errors name the file and line.
+
+    Names match case-insensitively, with ``[unit]``/``(unit)`` read as ``_unit``; a name
+    ``<base>_<unit>`` with a length unit (nm, um, mm, m) also matches ``<base>`` in another
+    length unit, converted. Other columns are ignored, ``#`` comment lines and blank lines
+    skipped; the delimiter (comma, semicolon, tab or whitespace) is the header's."""
     text = read_text(path, what)
     fast = _fast_csv_columns(text, names)
     if fast is not None:
         return fast
-    rows = list(csv.reader(io.StringIO(text)))
-    lineno = [i + 1 for i, r in enumerate(rows)]
-    body = [(n, r) for n, r in zip(lineno, rows)
-            if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]
-    if not body:
+    lines_ = [(n, t) for n, t in numbered_lines(text) if t.strip() and not t.lstrip().startswith("#")]
+    if not lines_:
         raise parse_error(path, None, f"file is empty; expected a header with columns {list(names)}")
-    hline, header = body[0]
-    header = [h.strip().lower() for h in header]
-    missing = [c for c in names if c not in header]
+    hline, htext = lines_[0]
+    delim = _delimiter(htext)
+    header = [_canonical_header(h) for h in _split(htext, delim)]
+    found = {c: _column(header, c) for c in names}
+    missing = [c for c, f in found.items() if f is None]
     if missing:
-        raise parse_error(path, hline, f"missing column(s) {missing}; found header {header}, need {list(names)}")
-    idx = [header.index(c) for c in names]
+        units = "; a length column may carry any of nm, um, mm, m (e.g. x [m], sag_nm)"
+        raise parse_error(path, hline, f"missing column(s) {missing}; found header {header}, need {list(names)}"
+                          + (units if any(c.rpartition("_")[2] in SAG_UNITS_TO_UM for c in missing) else ""))
+    idx = [found[c][0] for c in names]
+    factor = np.array([found[c][1] for c in names])
     vals, lines = [], []
-    for n, r in body[1:]:
+    for n, t in lines_[1:]:
+        r = _split(t, delim)
         if len(r) != len(header):
             raise parse_error(path, n, f"expected {len(header)} values like the header, found {len(r)}")
         try:
             vals.append([float(r[i]) for i in idx])
         except ValueError:
-            raise parse_error(path, n, f"non-numeric value in {','.join(r)!r}") from None
+            raise parse_error(path, n, f"non-numeric value in {t.strip()!r}") from None
         lines.append(n)
-    return np.array(vals, dtype=float).reshape(-1, len(names)), np.array(lines, dtype=int)
+    return np.array(vals, dtype=float).reshape(-1, len(names)) * factor, np.array(lines, dtype=int)
 
 
 def numbered_lines(text: str) -> list[tuple[int, str]]:

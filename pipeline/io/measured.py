@@ -1,7 +1,9 @@
 """Measured spectrograph data: line profiles (``offset_um,intensity``) and point-source
 images (``x_um,y_um,intensity``), read the way laboratories deliver them — counts in any
 normalisation, a pedestal or background-subtracted negative samples, any grid, any row
-order. Only non-finite values, duplicate samples and a total flux <= 0 are refused.
+order, any length unit and delimiter (:func:`pipeline.io.common.read_csv_columns`); a
+profile's samples at one offset are averaged. Only non-finite values, duplicate image
+points and a total flux <= 0 are refused.
 """
 
 from __future__ import annotations
@@ -21,8 +23,10 @@ def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndar
 
     Measured profiles come in counts (any normalisation), background-subtracted (so
     with negative noise samples) or on a constant pedestal, on any grid of offsets
-    (non-uniform, any range, line centred anywhere) and in any row order: all are
-    accepted. Flux, background and centring are nuisances of the diagnosis fit.
+    (non-uniform, any range, line centred anywhere), in any row order and with several
+    samples at one offset (exposures merged into one table: they are averaged): all are
+    accepted. Flux, background and centring are nuisances of the diagnosis fit. The
+    offsets may be in nm, µm, mm or m (``offset_nm``, ``Offset [mm]``, ...; converted).
 
     Parameters
     ----------
@@ -42,7 +46,7 @@ def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndar
     ------
     ValueError
         Naming file and (where it applies) line: missing columns, non-numeric or
-        non-finite values, fewer than 5 samples, duplicate offsets, total flux <= 0.
+        non-finite values, fewer than 5 distinct offsets, total flux <= 0.
     """
     path = Path(path)
     v, lines = read_csv_columns(path, "line profile", ("offset_um", "intensity"))
@@ -51,11 +55,11 @@ def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndar
     nonfinite = ~np.isfinite(v).all(axis=1)
     if nonfinite.any():
         raise parse_error(path, int(lines[nonfinite][0]), "offset_um and intensity must be finite numbers")
-    order = np.argsort(v[:, 0], kind="stable")
-    x, y, ln = v[order, 0], v[order, 1], lines[order]
-    dup = np.flatnonzero(np.diff(x) == 0)
-    if dup.size:
-        raise parse_error(path, int(ln[dup[0] + 1]), f"duplicate offset_um {x[dup[0]]:g}")
+    # samples at one offset (exposures merged into one table) are averaged
+    x, inverse = np.unique(v[:, 0], return_inverse=True)
+    y = np.bincount(inverse, weights=v[:, 1]) / np.bincount(inverse)
+    if x.size < 5:
+        raise parse_error(path, None, f"needs >= 5 distinct offsets, found {x.size}")
     flux = float(np.trapezoid(y, x))
     if not flux > 0:
         raise parse_error(path, None, f"no flux: the total flux (integral of intensity over offset_um) "
