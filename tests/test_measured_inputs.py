@@ -362,3 +362,28 @@ def test_tables_as_other_code_writes_them(tmp_path):
     bad.write_text("x,y,sag\n0,0,1\n1,0,1\n0,1,1\n")
     with pytest.raises(ValueError, match=r"missing column\(s\) \['x_mm', 'y_mm', 'sag_um'\].*any of nm, um, mm, m"):
         read_sag_csv(bad)
+
+
+def test_a_profile_in_detector_pixels_is_read_at_the_models_pixel(tmp_path):
+    """A spectrum extracted on the detector: offsets in pixels (column ``Pixel``, the line
+    near pixel 1024), counts. The reader needs the pitch; the manifest gives the model's."""
+    from optics.grating import SPIFFI
+    from pipeline.io.measured import read_line_profile
+
+    px = np.arange(1010.0, 1040.0, 0.25)
+    counts = 200 + 5000 * np.exp(-0.5 * ((px - 1024.3) / 1.1) ** 2)
+    f = tmp_path / "extracted.csv"
+    f.write_text("Pixel,Counts,intensity\n" + "".join(f"{p:g},{c:.3f},{c:.3f}\n" for p, c in zip(px, counts)))
+    with pytest.raises(ValueError, match=r"detector pixels \(column 'pixel'\) need pixel_um"):
+        read_line_profile(f)
+    x, _ = read_line_profile(f, pixel_um=18.0)
+    np.testing.assert_allclose(x, px * 18.0)
+    (p,) = load_data(parse_manifest({"measurement": [_profile_entry(f)]}))
+    assert SPIFFI.pixel_um == 18.0
+    # recentred on the line: the peak sits at offset 0 within a quarter pixel
+    assert abs(p.offset_um[np.argmax(p.intensity)]) <= 0.25 * SPIFFI.pixel_um
+    np.testing.assert_allclose(np.diff(p.offset_um), 0.25 * SPIFFI.pixel_um)
+    none = tmp_path / "none.csv"
+    none.write_text("wavelength,intensity\n" + "".join(f"{p:g},1\n" for p in px))
+    with pytest.raises(ValueError, match=r"missing column\(s\) \['offset_um'\].*'offset_px' or 'pixel'"):
+        read_line_profile(none)

@@ -21,7 +21,7 @@ A manifest names the nominal simulation and the measurements it is compared with
     # extent_mm = [-68.5, 68.5, -60, 60]  (first/last sample centres x0, x1, y0, y1, mm)
 
     [[measurement]]
-    kind = "line_profile"     # CSV offset_um,intensity
+    kind = "line_profile"     # CSV offset_um,intensity (offset in nm/mm, or offset_px in 18 µm pixels)
     file = "J_1p25_250mas.csv"
     grating = "J"
     order = -2
@@ -480,8 +480,11 @@ def recentre(coords: np.ndarray, unit_peak: np.ndarray, beyond_um: float) -> flo
 def _read_profile(m: Measurement) -> ProfileData:
     from pipeline.io.measured import read_line_profile
 
+    from optics.grating import SPIFFI
+
     try:
-        u, y = read_line_profile(m.file, normalise=False)
+        # offsets in detector pixels are the model's pixels
+        u, y = read_line_profile(m.file, normalise=False, pixel_um=SPIFFI.pixel_um)
     except ValueError as exc:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
     if u.size < 10:

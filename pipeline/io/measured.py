@@ -15,10 +15,37 @@ import numpy as np
 
 from pipeline.io.common import atomic_write, parse_error, read_csv_columns
 
-__all__ = ["read_line_profile", "read_psf_image", "write_line_profile_csv", "write_psf_image_csv"]
+__all__ = ["PIXEL_OFFSET_COLUMNS", "read_line_profile", "read_psf_image", "write_line_profile_csv", "write_psf_image_csv"]
 
 
-def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndarray, np.ndarray]:
+#: Column names of offsets given in detector pixels (after ``[px]`` -> ``_px``).
+PIXEL_OFFSET_COLUMNS = ("offset_px", "offset_pixel", "offset_pix", "pixel", "px")
+
+
+def _profile_columns(path: Path, pixel_um: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """``offset_um, intensity`` of a profile table, the offset in a length unit or in
+    detector pixels (times ``pixel_um``)."""
+    try:
+        return read_csv_columns(path, "line profile", ("offset_um", "intensity"))
+    except ValueError as exc:
+        if "missing column" not in str(exc):
+            raise
+        first = exc
+    for name in PIXEL_OFFSET_COLUMNS:
+        try:
+            v, lines = read_csv_columns(path, "line profile", (name, "intensity"))
+        except ValueError:
+            continue
+        if pixel_um is None or not (np.isfinite(pixel_um) and pixel_um > 0):
+            raise parse_error(path, None, f"offsets in detector pixels (column {name!r}) need pixel_um, the "
+                                          f"pixel pitch in µm (> 0); got pixel_um={pixel_um!r}")
+        return v * np.array([pixel_um, 1.0]), lines
+    raise ValueError(f"{first}; offsets in detector pixels may be a column {PIXEL_OFFSET_COLUMNS[0]!r} "
+                     "or 'pixel'") from None
+
+
+def read_line_profile(path: str | Path, normalise: bool = True,
+                      pixel_um: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Read a measured line profile from a CSV with columns ``offset_um,intensity``.
 
     Measured profiles come in counts (any normalisation), background-subtracted (so
@@ -36,6 +63,10 @@ def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndar
     normalise : bool
         Divide the intensity by its total flux (trapezoid rule over ``offset_um``),
         the unit-area normalisation of :mod:`optics.imaging` profiles.
+    pixel_um : float, optional
+        Detector pixel pitch (µm) that turns offsets given in pixels (a column
+        ``offset_px``, ``Offset [px]`` or ``pixel``) into µm; such a file without it is
+        refused naming it.
 
     Returns
     -------
@@ -49,7 +80,7 @@ def read_line_profile(path: str | Path, normalise: bool = True) -> tuple[np.ndar
         non-finite values, fewer than 5 distinct offsets, total flux <= 0.
     """
     path = Path(path)
-    v, lines = read_csv_columns(path, "line profile", ("offset_um", "intensity"))
+    v, lines = _profile_columns(path, pixel_um)
     if v.shape[0] < 5:
         raise parse_error(path, None, f"needs >= 5 samples, found {v.shape[0]}")
     nonfinite = ~np.isfinite(v).all(axis=1)
