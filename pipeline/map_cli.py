@@ -1,11 +1,15 @@
-"""``cryograting convert``: a sag map from one format into another (an interferometer's
-export into a CODE V INT or a Zemax Grid Sag, a CODE V grid into NetCDF, ...)."""
+"""Commands on one sag map of any readable format: ``cryograting convert`` (into another
+format: an interferometer's export into a CODE V INT or a Zemax Grid Sag, ...) and
+``cryograting fit`` (Zernike or quilt-Fourier coefficients of the map over a region)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["register", "describe"]
+__all__ = ["register", "describe", "parse_basis", "fit_table"]
+
+#: ``--basis`` families: Zernike in a single-index convention (count of terms), or the quilt's Fourier series.
+BASES = ("zernike-noll", "zernike-fringe", "fourier")
 
 
 def describe(sagmap) -> str:
@@ -29,8 +33,75 @@ def _cmd_convert(a) -> int:
     return 0
 
 
+def parse_basis(text: str) -> tuple[str, int]:
+    """``"zernike-noll:37"`` -> ``("zernike-noll", 37)``; ``"fourier"`` -> ``("fourier", 3)``
+    (harmonics); the count defaults to 37 Zernike terms or 3 harmonics."""
+    name, _, count = str(text).strip().lower().partition(":")
+    if name not in BASES:
+        raise ValueError(f"--basis {text!r}: unknown basis {name!r}; valid: {', '.join(BASES)} "
+                         "(with :N, e.g. zernike-fringe:37, fourier:3)")
+    default, lo, hi = (3, 1, 10) if name == "fourier" else (37, 1, 231)
+    try:
+        n = int(count) if count else default
+    except ValueError:
+        n = -1
+    if not lo <= n <= hi:
+        raise ValueError(f"--basis {text!r}: the count must be an integer in [{lo}, {hi}]")
+    return name, n
+
+
+def fit_table(sagmap, basis: str, region: str):
+    """The fit of ``sagmap`` over ``region`` in ``basis`` (:func:`parse_basis`): the fit
+    and its rows ``(term, coefficient_um, phase_deg or None)``: Zernike coefficients
+    RMS-normalised for Noll and unnormalised (CODE V / Zemax Fringe) for Fringe; Fourier
+    terms ``i=I j=J`` of frequency ``(I / 21 mm, J / 18 mm)`` with amplitude and phase
+    (:class:`optics.fitting.FourierFit`), after piston and tilts."""
+    import numpy as np
+
+    from optics.fitting import fit_fourier, fit_zernike_map
+    from optics.zernike import nm_to_fringe, nm_to_noll
+
+    name, n = parse_basis(basis)
+    if name == "fourier":
+        fit = fit_fourier(sagmap, harmonics=n, aperture=region)
+        rows = [("piston", fit.piston_um, None), ("tilt x (um/mm)", fit.slope_um_per_mm[0], None),
+                ("tilt y (um/mm)", fit.slope_um_per_mm[1], None)]
+        rows += [(f"i={i} j={j}", fit.amplitude_um[(i, j)], float(np.degrees(fit.phase_rad[(i, j)])))
+                 for (i, j) in fit.components]
+        return fit, rows
+    index = name.split("-")[1]
+    to_index = nm_to_noll if index == "noll" else nm_to_fringe
+    fit = fit_zernike_map(sagmap, terms=n, aperture=region, norm=index == "noll", index=index)
+    rows = [(f"Z{j} (n={nm[0]} m={nm[1]})", c, None)
+            for j, nm, c in sorted((to_index(*nm), nm, c) for nm, c in fit.coefficients.items())]
+    return fit, rows
+
+
+def _cmd_fit(a) -> int:
+    from pipeline.io.common import atomic_write
+    from pipeline.io.registry import read_sag_map
+
+    options = {"spacing_mm": a.spacing_mm} if a.spacing_mm is not None else {}
+    sagmap = read_sag_map(a.map, **options)
+    fit, rows = fit_table(sagmap, a.basis, a.region)
+    print(f"map:      {describe(sagmap)}")
+    extra = (f", disc r = {fit.radius_mm:g} mm about ({fit.center_mm[0]:g}, {fit.center_mm[1]:g}) mm"
+             if hasattr(fit, "radius_mm") else f", periods {fit.period_x_mm:g} x {fit.period_y_mm:g} mm")
+    print(f"fit:      {a.basis} over {fit.aperture!r} ({fit.n_points} samples{extra})")
+    print(f"residual: RMS {fit.residual_rms_um:.5f} µm, P/V {fit.residual_pv_um:.5f} µm; "
+          f"captured {fit.captured_fraction:.2%} of the variance")
+    for term, c, ph in rows:
+        print(f"  {term:22s} {c:+.6f}" + ("" if ph is None else f"   phase {ph:+8.2f} deg"))
+    if a.out:
+        with atomic_write(Path(a.out)) as fh:
+            fh.write("term,coefficient_um,phase_deg\n")
+            fh.writelines(f"{t},{c!r},{'' if ph is None else repr(ph)}\n" for t, c, ph in rows)
+        print(f"written:  {Path(a.out)}")
+    return 0
+
+
 def register(sub) -> None:
-    """Add the ``convert`` subcommand to the ``cryograting`` sub-parsers."""
+    """Add the ``convert`` and ``fit`` subcommands to the ``cryograting`` sub-parsers."""
     q = sub.add_parser("convert", help="a sag map from one format into another (formats by suffix: "
                        "python -m pipeline.io.registry lists them)")
     q.add_argument("input", metavar="IN", help="sag map: .int .dat .csv .nc .npz, or a Zygo .asc/.dat/.datx")
@@ -40,3 +111,14 @@ def register(sub) -> None:
                    "without lateral calibration, scattered CSV points)")
     q.add_argument("--wavelength-um", type=float, default=None, help="wavelength of a NetCDF map in waves (µm)")
     q.set_defaults(func=_cmd_convert)
+
+    q = sub.add_parser("fit", help="Zernike or quilt-Fourier coefficients of a sag map (any readable format)")
+    q.add_argument("map", metavar="MAP", help="sag map: .int .dat .csv .nc .npz, or a Zygo .asc/.dat/.datx")
+    q.add_argument("--basis", default="zernike-fringe:37",
+                   help="zernike-noll:N (RMS-normalised), zernike-fringe:N (unnormalised, as CODE V ZFR) or "
+                   "fourier:H (the quilt's harmonics up to H at 21 x 18 mm); default zernike-fringe:37")
+    q.add_argument("--region", default="full", help="center (82 x 72 mm), interferometer (137 mm disc), pupil "
+                   "(110 mm disc) or full; default full")
+    q.add_argument("--spacing-mm", type=float, default=None, help="sample pitch (mm) of a map without one")
+    q.add_argument("--out", default=None, help="CSV of the coefficients (term,coefficient_um,phase_deg)")
+    q.set_defaults(func=_cmd_fit)

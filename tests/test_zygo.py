@@ -287,3 +287,38 @@ def test_cli_convert_turns_an_interferogram_into_a_codev_int_and_refuses_what_it
     _check_map(back, truth, tol_um=1.01 * step + 0.5 * 0.5 * 632.8e-9 / 131072 * 1e6)
     assert main(["convert", str(src), str(tmp_path / "cold.nc")]) == 2
     assert "no lateral scale" in capsys.readouterr().err
+
+
+def test_cli_fit_gives_the_zernike_and_quilt_terms_put_into_a_measured_map(tmp_path, capsys):
+    """A Zygo export of known Fringe Zernike terms (unnormalised: Z5 = rho^2 cos 2theta,
+    Z9 = 6 rho^4 - 6 rho^2 + 1) plus a quilt: the fit returns the values put in."""
+    from pipeline.cli import main
+
+    n, pitch = 121, 1.0
+    r, c = np.mgrid[0:n, 0:n]
+    x, y = (c - 60) * pitch, (60 - r) * pitch
+    R = 60.0
+    rho2, cos2t = (x**2 + y**2) / R**2, np.where(x**2 + y**2 > 0, (x**2 - y**2) / np.maximum(x**2 + y**2, 1e-300), 1)
+    truth = 0.08 * rho2 * cos2t + 0.03 * (6 * rho2**2 - 6 * rho2 + 1)
+    truth = np.where(rho2 <= 1.0, truth, np.nan)
+    src = tmp_path / "m.asc"
+    src.write_text(_ascii_file(_counts(truth, 632.8e-9, 0.5, 1.0, 131072), res_m=pitch * 1e-3, intensity_buckets=0,
+                               newline="\n"))
+    out = tmp_path / "z.csv"
+    assert main(["fit", str(src), "--basis", "zernike-fringe:16", "--out", str(out)]) == 0
+    table = {row.split(",")[0]: float(row.split(",")[1]) for row in out.read_text().splitlines()[1:]}
+    assert table["Z5 (n=2 m=2)"] == pytest.approx(0.08, abs=2e-4)
+    assert table["Z9 (n=4 m=0)"] == pytest.approx(0.03, abs=2e-4)
+    assert abs(table["Z4 (n=2 m=0)"]) < 2e-4 and abs(table["Z6 (n=2 m=-2)"]) < 2e-4
+    assert "captured" in capsys.readouterr().out
+    for bad, msg in (("legendre:5", "unknown basis 'legendre'"), ("zernike-noll:0", "integer in [1, 231]")):
+        assert main(["fit", str(src), "--basis", bad]) == 2
+        assert msg in capsys.readouterr().err
+    quilt = tmp_path / "q.asc"
+    q = np.where(rho2 <= 1.0, 0.05 * np.cos(2 * np.pi * x / 21.0) + 0.02 * np.cos(2 * np.pi * y / 18.0), np.nan)
+    quilt.write_text(_ascii_file(_counts(q, 632.8e-9, 0.5, 1.0, 131072), res_m=pitch * 1e-3, intensity_buckets=0,
+                                 newline="\n"))
+    assert main(["fit", str(quilt), "--basis", "fourier:2", "--out", str(out)]) == 0
+    table = {row.split(",")[0]: float(row.split(",")[1]) for row in out.read_text().splitlines()[1:]}
+    assert table["i=1 j=0"] == pytest.approx(0.05, abs=1e-5) and table["i=0 j=1"] == pytest.approx(0.02, abs=1e-5)
+    assert abs(table["i=1 j=1"]) < 1e-5 and abs(table["i=2 j=0"]) < 1e-5
