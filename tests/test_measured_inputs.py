@@ -387,3 +387,25 @@ def test_a_profile_in_detector_pixels_is_read_at_the_models_pixel(tmp_path):
     none.write_text("wavelength,intensity\n" + "".join(f"{p:g},1\n" for p in px))
     with pytest.raises(ValueError, match=r"missing column\(s\) \['offset_um'\].*'offset_px' or 'pixel'"):
         read_line_profile(none)
+
+
+def test_a_profile_on_a_wavelength_axis_lands_on_the_models_detector_axis(tmp_path):
+    """An extracted spectrum in nm: converted with the grating equation's dispersion at the
+    line, computed here from the grating's constants, signed (the J order is negative, so a
+    shoulder on the short-wavelength side is at +offset)."""
+    from optics.grating import GRATINGS, SPIFFI
+
+    g, wl_um, order = GRATINGS["J"], 1.25, -2
+    sin_b = order * wl_um / g.groove_spacing_um - np.sin(np.radians(g.incidence_deg))
+    d_um_per_um = SPIFFI.camera_focal_mm * 1e3 * order / (g.groove_spacing_um * np.sqrt(1 - sin_b**2))
+    assert d_um_per_um < 0
+    o = np.arange(-60.0, 60.01, 1.5)
+    shape = np.exp(-0.5 * (o / 8) ** 2) + 0.3 * np.exp(-0.5 * ((o - 15) / 5) ** 2)  # shoulder at +15 µm
+    lam_nm = (wl_um + o / d_um_per_um) * 1e3
+    f = tmp_path / "spectrum.csv"
+    f.write_text("Wavelength [nm],intensity\n" + "".join(f"{lm:.9f},{1e4 * v:.6f}\n" for lm, v in zip(lam_nm, shape)))
+    (p,) = load_data(parse_manifest({"measurement": [_profile_entry(f, order=order)]}))
+    np.testing.assert_allclose(np.diff(p.offset_um), 1.5, rtol=1e-5)
+    k = int(np.argmax(p.intensity))
+    shoulder = p.intensity[k + 10] - p.intensity[k - 10]  # +15 µm against -15 µm
+    assert shoulder > 0.2

@@ -21,7 +21,8 @@ A manifest names the nominal simulation and the measurements it is compared with
     # extent_mm = [-68.5, 68.5, -60, 60]  (first/last sample centres x0, x1, y0, y1, mm)
 
     [[measurement]]
-    kind = "line_profile"     # CSV offset_um,intensity (offset in nm/mm, or offset_px in 18 µm pixels)
+    kind = "line_profile"     # CSV offset_um,intensity (offset in nm/mm, offset_px in 18 µm pixels,
+                              # or wavelength_nm through the grating's dispersion at the line)
     file = "J_1p25_250mas.csv"
     grating = "J"
     order = -2
@@ -480,11 +481,14 @@ def recentre(coords: np.ndarray, unit_peak: np.ndarray, beyond_um: float) -> flo
 def _read_profile(m: Measurement) -> ProfileData:
     from pipeline.io.measured import read_line_profile
 
-    from optics.grating import SPIFFI
+    from optics.grating import GRATINGS, SPIFFI
 
+    # offsets in detector pixels are the model's pixels; a wavelength axis goes through the
+    # model's own signed dispersion at the line (optics.pupil: +offset is the image of +x_g)
+    g = GRATINGS[str(m.grating).upper().replace("+", "")]
+    dispersion = float(g.angular_dispersion_rad_per_um(m.wavelength_um, m.order)) * SPIFFI.camera_focal_mm * 1e3
     try:
-        # offsets in detector pixels are the model's pixels
-        u, y = read_line_profile(m.file, normalise=False, pixel_um=SPIFFI.pixel_um)
+        u, y = read_line_profile(m.file, normalise=False, pixel_um=SPIFFI.pixel_um, dispersion_um_per_um=dispersion)
     except ValueError as exc:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
     if u.size < 10:

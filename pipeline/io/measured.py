@@ -15,16 +15,22 @@ import numpy as np
 
 from pipeline.io.common import atomic_write, parse_error, read_csv_columns
 
-__all__ = ["PIXEL_OFFSET_COLUMNS", "read_line_profile", "read_psf_image", "write_line_profile_csv", "write_psf_image_csv"]
+__all__ = ["PIXEL_OFFSET_COLUMNS", "WAVELENGTH_COLUMNS", "read_line_profile", "read_psf_image", "write_line_profile_csv", "write_psf_image_csv"]
 
 
 #: Column names of offsets given in detector pixels (after ``[px]`` -> ``_px``).
 PIXEL_OFFSET_COLUMNS = ("offset_px", "offset_pixel", "offset_pix", "pixel", "px")
 
 
-def _profile_columns(path: Path, pixel_um: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """``offset_um, intensity`` of a profile table, the offset in a length unit or in
-    detector pixels (times ``pixel_um``)."""
+#: Column names of a profile's wavelength axis (any length unit: ``wavelength_nm``, ``lambda [nm]``).
+WAVELENGTH_COLUMNS = ("wavelength_um", "lambda_um", "wave_um")
+
+
+def _profile_columns(path: Path, pixel_um: float | None,
+                     dispersion_um_per_um: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``offset_um, intensity`` of a profile table, the offset in a length unit, in
+    detector pixels (times ``pixel_um``) or a wavelength (times ``dispersion_um_per_um``,
+    about the median wavelength)."""
     try:
         return read_csv_columns(path, "line profile", ("offset_um", "intensity"))
     except ValueError as exc:
@@ -40,12 +46,23 @@ def _profile_columns(path: Path, pixel_um: float | None) -> tuple[np.ndarray, np
             raise parse_error(path, None, f"offsets in detector pixels (column {name!r}) need pixel_um, the "
                                           f"pixel pitch in µm (> 0); got pixel_um={pixel_um!r}")
         return v * np.array([pixel_um, 1.0]), lines
+    for name in WAVELENGTH_COLUMNS:
+        try:
+            v, lines = read_csv_columns(path, "line profile", (name, "intensity"))
+        except ValueError:
+            continue
+        if dispersion_um_per_um is None or not (np.isfinite(dispersion_um_per_um) and dispersion_um_per_um != 0):
+            raise parse_error(path, None, f"a wavelength axis (column {name!r}) needs the linear dispersion "
+                                          f"(detector µm per µm of wavelength, signed); got {dispersion_um_per_um!r}")
+        v = v.copy()
+        v[:, 0] = (v[:, 0] - np.median(v[:, 0])) * dispersion_um_per_um
+        return v, lines
     raise ValueError(f"{first}; offsets in detector pixels may be a column {PIXEL_OFFSET_COLUMNS[0]!r} "
-                     "or 'pixel'") from None
+                     f"or 'pixel', a wavelength axis {WAVELENGTH_COLUMNS[0]!r} (any length unit)") from None
 
 
-def read_line_profile(path: str | Path, normalise: bool = True,
-                      pixel_um: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+def read_line_profile(path: str | Path, normalise: bool = True, pixel_um: float | None = None,
+                      dispersion_um_per_um: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Read a measured line profile from a CSV with columns ``offset_um,intensity``.
 
     Measured profiles come in counts (any normalisation), background-subtracted (so
@@ -67,6 +84,11 @@ def read_line_profile(path: str | Path, normalise: bool = True,
         Detector pixel pitch (µm) that turns offsets given in pixels (a column
         ``offset_px``, ``Offset [px]`` or ``pixel``) into µm; such a file without it is
         refused naming it.
+    dispersion_um_per_um : float, optional
+        Signed linear dispersion, detector offset (µm) per µm of wavelength, that turns a
+        wavelength axis (``wavelength_nm``, ``Wavelength [um]``, ``lambda_nm``) into offsets
+        about its median wavelength (for the SPIFFI orders it is negative: longer
+        wavelengths land at more negative offsets, :mod:`optics.pupil`).
 
     Returns
     -------
@@ -80,7 +102,7 @@ def read_line_profile(path: str | Path, normalise: bool = True,
         non-finite values, fewer than 5 distinct offsets, total flux <= 0.
     """
     path = Path(path)
-    v, lines = _profile_columns(path, pixel_um)
+    v, lines = _profile_columns(path, pixel_um, dispersion_um_per_um)
     if v.shape[0] < 5:
         raise parse_error(path, None, f"needs >= 5 samples, found {v.shape[0]}")
     nonfinite = ~np.isfinite(v).all(axis=1)
