@@ -276,6 +276,48 @@ def test_companion_not_in_truth_is_a_false_attribution():
     assert score_case("explained", best(("blank_bow",)), "ool_stray") == (False, ["blank_bow"])
 
 
+def test_a_rescaling_is_part_of_a_truth_whose_x_fundamental_differs():
+    """In the diagnosis's amplitude convention (the rescalings measure the x fundamental),
+    a truth whose x fundamental is 6 % above the nominal's carries an amplitude change;
+    within the amplitude's 5 % floor it does not; nothing else becomes allowed."""
+    from pipeline.diagnosis.campaign import rescalings_present, score_case_fundamental
+    from pipeline.diagnosis.engine import Finding
+
+    def best(effects, companions=("quilt_shape",), degenerate=()):
+        return Finding("+".join(effects), effects, {}, {}, 0.0, -50.0, 1.0, 0.5, 0.5, 0.5, companions=companions,
+                       degenerate_with=degenerate)
+
+    assert rescalings_present(1.06) == ("amplitude_scale", "temperature")
+    assert rescalings_present(0.97) == () and rescalings_present(None) == ()
+    pair = best(("amplitude_scale", "pupil_shift"))
+    q = ["quilt_shape"]
+    assert score_case_fundamental("explained", pair, "pupil_shift", q, 1.06)
+    assert not score_case_fundamental("explained", pair, "pupil_shift", q, 1.03)
+    assert not score_case_fundamental("explained", best(("amplitude_scale",)), "pupil_shift", q, 1.20)
+    assert not score_case_fundamental("explained", best(("slit_width", "pupil_shift")), "pupil_shift", q, 1.20)
+    assert not score_case_fundamental("explained", best(("pupil_shift",), ("blank_bow",)), "pupil_shift", q, 1.2)
+    assert not score_case_fundamental("unexplained", pair, "pupil_shift", q, 1.06)
+    assert score_case_fundamental("explained", best(("pupil_shift",)), "pupil_shift", q, 1.0)
+    assert score_case_fundamental("explained", best(("temperature",), degenerate=("amplitude_scale",)),
+                                  "amplitude_scale", q, 1.0)
+
+
+def test_the_x_fundamental_ratio_of_a_truth_is_its_21_mm_amplitude_over_the_nominals():
+    """Hand-made maps: a nominal quilt and a truth whose x fundamental is 1.15x the
+    nominal's, whose y fundamental and harmonics differ, and that carries a tilt and a
+    shifted-phase component (projected out)."""
+    from pipeline.diagnosis.truth.gratings import fundamental_x_ratio
+
+    x, y = np.arange(-60.0, 60.01, 1.0), np.arange(-50.0, 50.01, 1.0)
+    X, Y = np.meshgrid(x, y)
+    cx, cy = np.cos(2 * np.pi * X / 21.0), np.cos(2 * np.pi * Y / 18.0)
+    nominal = 0.05 * cx + 0.04 * cy + 0.01 * np.cos(4 * np.pi * X / 21.0)
+    truth = (0.0575 * cx + 0.02 * cy + 0.02 * np.cos(4 * np.pi * X / 21.0) + 0.003 * X / 60
+             + 0.01 * np.sin(2 * np.pi * X / 21.0))
+    assert fundamental_x_ratio(x, y, truth, nominal) == pytest.approx(1.15, abs=1e-9)
+    assert fundamental_x_ratio(x, y, nominal, nominal) == pytest.approx(1.0, abs=1e-12)
+
+
 def test_truth_option_and_case_types():
     from pipeline.diagnosis.campaign import CASE_TYPES, CampaignConfig, parse_types
     from pipeline.diagnosis.truth import CASE_TYPES as INDEPENDENT

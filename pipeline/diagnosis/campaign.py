@@ -31,7 +31,12 @@ finding adopts that the truth does not carry (the injected effect, and the truth
 gradient for the model truth's ``"companions"`` discrepancy) is a false attribution:
 the case is not correct, and the confusion matrix counts it as ``<top>+<companion>``.
 The summary gives the three scores per measurement kind (``by_measurement``: map only,
-profiles only, profiles + map).
+profiles only, profiles + map). Beside the correct top effect it gives the same count in
+the diagnosis's own amplitude convention (``correct_top_fundamental``,
+:func:`score_case_fundamental`): an independent truth is normalised to the nominal as a
+whole, so its x fundamental, which the rescalings measure, may differ from the nominal's;
+where it does by more than the amplitude's floor, a rescaling named beside the injected
+effect is part of the truth, not a false attribution.
 
 The model discrepancy (``CampaignConfig.discrepancy``): ``"unmodelled"`` (default) is a
 0.01 µm RMS trefoil/tetrafoil/pentafoil surface error (:func:`~.synth.unmodelled_shape`),
@@ -378,6 +383,35 @@ def recovery_errors(d, effect: str, truth: dict) -> dict | None:
     return {"per_parameter": per, "vector": vec, "within_2sigma": bool(sig_ok)}
 
 
+def rescalings_present(fundamental_x_ratio: float | None) -> tuple[str, ...]:
+    """The rescaling effects an independent truth carries in the diagnosis's own amplitude
+    convention: the rescalings measure the quilt's x fundamental (what a line profile
+    sees), so a truth whose x fundamental differs from the nominal's by more than the
+    amplitude's floor carries an amplitude change, though its whole map is normalised to
+    the nominal (``k = 1``, :mod:`.truth.gratings`). Empty without a ratio."""
+    if fundamental_x_ratio is None:
+        return ()
+    floor = LIBRARY["amplitude_scale"].parameters[0].floor
+    if abs(float(fundamental_x_ratio) - 1.0) <= floor:
+        return ()
+    return tuple(name for name, e in LIBRARY.items() if e.rescales)
+
+
+def score_case_fundamental(verdict: str, best, effect: str, present=(), fundamental_x_ratio=None) -> bool:
+    """Correct in the diagnosis's amplitude convention: as :func:`score_case`, and also a
+    top finding that names the injected effect beside a rescaling the truth carries by
+    :func:`rescalings_present` (for a rescaling truth, the same rescaling)."""
+    if score_case(verdict, best, effect, present)[0]:
+        return True
+    rescaled = rescalings_present(fundamental_x_ratio)
+    allowed = {effect, *present, *rescaled}
+    if verdict != "explained" or best is None or effect not in LIBRARY or not rescaled:
+        return False
+    false = [c for c in best.companions if c not in allowed]
+    names = effect in best.effects or effect in best.degenerate_with
+    return bool(names and set(best.effects) <= allowed and not false)
+
+
 def score_case(verdict: str, best, effect: str, present=()) -> tuple[bool, list[str]]:
     """(correct, false companions) of one case whose injected effect is ``effect`` and
     whose truth also carries the library effects ``present``.
@@ -416,19 +450,24 @@ def run_case(args) -> dict:
             return {"index": index, "kind": kind, "effect": effect, "truth": truth, "truth_info": truth_info,
                     "truth_present": list(present), "measurement": _measurement_kind(kind, cfg),
                     "false_companions": [], "verdict": "refused", "refusal": str(exc), "top": None,
-                    "correct": False, "recovery_error": None, "recovery_error_vector": None,
+                    "correct": False, "correct_fundamental": False, "recovery_error": None,
+                    "recovery_error_vector": None,
                     "within_2sigma": None, "seconds": time.perf_counter() - t0}
     best = d.best
     own = d.finding(effect) if effect in LIBRARY else None  # the injected effect's own fit
     rec = recovery_errors(d, effect, truth)
     correct, false_companions = score_case(d.verdict, best, effect, present)
+    fx = (truth_info or {}).get("fundamental_x_ratio")
+    correct_fundamental = score_case_fundamental(d.verdict, best, effect, present, fx)
     return {"index": index, "kind": kind, "effect": effect, "truth": truth, "truth_info": truth_info,
             "truth_present": list(present), "measurement": _measurement_kind(kind, cfg),
             "false_companions": false_companions, "verdict": d.verdict,
             "top": best.effect if best else None, "top_degenerate_with": list(best.degenerate_with) if best else [],
             "top_delta_bic": best.delta_bic if best else None, "top_shrink": best.shrink_fraction if best else None,
             "top_heldout_shrink": best.heldout_shrink_fraction if best else None,
-            "correct": correct, "recovery_error": rec["per_parameter"] if rec else None,
+            "correct": correct, "correct_fundamental": correct_fundamental,
+            "rescalings_present": list(rescalings_present(fx)),
+            "recovery_error": rec["per_parameter"] if rec else None,
             "recovery_error_vector": rec["vector"] if rec else None,
             "within_2sigma": rec["within_2sigma"] if rec else None,
             "uncertainties": own.uncertainties if own else None,
@@ -459,6 +498,7 @@ def _scores(rows: list[dict]) -> dict:
     ool = [r for r in rows if r["effect"] not in LIBRARY]
     return {"n_library": len(lib), "n_ool": len(ool),
             "correct_top": sum(r["correct"] for r in lib),
+            "correct_top_fundamental": sum(bool(r.get("correct_fundamental")) for r in lib),
             "recovered_20pct": sum(r["recovery_error"] is not None and r["recovery_error"] <= 0.2 for r in lib),
             "ool_unexplained": sum(r["verdict"] != "explained" for r in ool),
             "false_companion_cases": sum(bool(r.get("false_companions")) for r in rows)}

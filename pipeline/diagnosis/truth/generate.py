@@ -23,7 +23,7 @@ from ..nominal import thermal_factor
 from .abbe import GRATINGS, RELATIVE_NA, AbbeSettings, abbe_line_profile, zernike_noll
 from .detector import measure_profile
 from .families import PROFILE_OOL, SURFACE_OOL, draw_profile_ool, draw_surface_ool
-from .gratings import GratingTruth, mixed_grating, sag_function
+from .gratings import GratingTruth, fundamental_x_ratio, mixed_grating, sag_function
 from .lattice import pocket_jitter, sharp_ribs
 
 #: cold temperature of the nominal map (K): the FEA case's default
@@ -114,7 +114,8 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
         raise ValueError("the independent truth makes no point-source images; use truth='model' with psf_image")
     g = truth_grating(nominal, fea, rng, getattr(cfg, "truth_families", FAMILIES))
     sim = {**NOMINAL_SIMULATION, "mesh": cfg.nominal_mesh}
-    meta = {"family": g.family, "mix": g.mix, "harmonic_distance": g.distance, **g.params}
+    meta = {"family": g.family, "mix": g.mix, "harmonic_distance": g.distance,
+            "fundamental_x_ratio": fundamental_x_ratio(g.x_mm, g.y_mm, g.sag_um, nominal.sag_um), **g.params}
     truth: dict = {}
     if kind == "surface":
         scale, T, extra, reg = 1.0, SURFACE_T_K, None, None

@@ -17,6 +17,7 @@ import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
 __all__ = ["PERIOD_X_MM", "PERIOD_Y_MM", "CENTRAL_HALF_MM", "GratingTruth", "central", "harmonic_distance",
+           "fundamental_x_ratio",
            "fitted_quilts", "mix_to_distance", "mixed_grating", "sag_function"]
 
 PERIOD_X_MM, PERIOD_Y_MM = 21.0, 18.0
@@ -55,6 +56,31 @@ def harmonic_distance(truth_um: np.ndarray, nominal_um: np.ndarray, mask: np.nda
     n = nominal_um[mask] - nominal_um[mask].mean()
     k = float(t @ n / (n @ n))
     return float(np.linalg.norm(t - k * n) / np.linalg.norm(k * n)), k
+
+
+def _low_harmonics(x_mm, y_mm, sag_um, mask) -> np.ndarray:
+    """Least-squares coefficients of piston, tilts and the quilt's low harmonics (1, 0),
+    (0, 1), (1, ±1), (2, 0), (0, 2) (cos and sin each) over ``mask``."""
+    X, Y = np.meshgrid(x_mm, y_mm)
+    kx, ky = 2 * np.pi / PERIOD_X_MM, 2 * np.pi / PERIOD_Y_MM
+    cols = [np.ones_like(X), X, Y]
+    for i, j in ((1, 0), (0, 1), (1, 1), (1, -1), (2, 0), (0, 2)):
+        arg = i * kx * X + j * ky * Y
+        cols += [np.cos(arg), np.sin(arg)]
+    ok = mask & np.isfinite(sag_um)
+    A = np.column_stack([c[ok] for c in cols])
+    return np.linalg.lstsq(A, sag_um[ok], rcond=None)[0]
+
+
+def fundamental_x_ratio(x_mm, y_mm, truth_um, nominal_um) -> float:
+    """Amplitude of the truth's x fundamental (21 mm, along the dispersion) over the
+    nominal's, the truth's component projected on the nominal's phase, over the central
+    region: the quilt amplitude a line profile measures (the paper's conclusion), which
+    the normalisation of the whole map to the nominal (``k = 1``) leaves free."""
+    mask = central(np.asarray(x_mm), np.asarray(y_mm))
+    t = _low_harmonics(x_mm, y_mm, np.asarray(truth_um, float), mask)[3:5]
+    n = _low_harmonics(x_mm, y_mm, np.asarray(nominal_um, float), mask)[3:5]
+    return float(t @ n / (n @ n))
 
 
 def fitted_quilts(x_mm: np.ndarray, y_mm: np.ndarray, fea_um: np.ndarray) -> dict[str, np.ndarray]:
