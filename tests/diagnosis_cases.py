@@ -45,17 +45,20 @@ def surface_case(tmp_path, extra=None, seed=0, scale=1.0):
     return surface_manifest(tmp_path)
 
 
-def profile_image_case(tmp_path, params, psf=True, pixel_um=0.0, seed=3):
+def profile_image_case(tmp_path, params, psf=True, pixel_um=0.0, seed=3, scale=1.0):
+    """Manifest of J profiles at 250 and 25 mas (and a PSF image) of the nominal quilt times
+    ``scale`` with the effect parameters ``params``; the nominal is written unscaled."""
     nom = nominal_map(tmp_path)
+    truth = nom if scale == 1.0 else nom.with_sag(scale * nom.sag_um)
     rng = np.random.default_rng(seed)
     lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
     for ps in (250, 25):
-        u, y, _ = synthetic_profile("J", 1.25, -2, ps, nom, rng, params=params, noise_rel=0.01)
+        u, y, _ = synthetic_profile("J", 1.25, -2, ps, truth, rng, params=params, noise_rel=0.01)
         write_line_profile_csv(tmp_path / f"p{ps}.csv", u, y)
         lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{ps}.csv"\ngrating = "J"\norder = -2\n'
                      f'wavelength_um = 1.25\npixel_scale_mas = {ps}\n')
     if psf:
-        x, y, v, _ = synthetic_psf_image("J", 1.25, -2, nom, rng, params=params, noise_rel=0.01, pixel_um=pixel_um,
+        x, y, v, _ = synthetic_psf_image("J", 1.25, -2, truth, rng, params=params, noise_rel=0.01, pixel_um=pixel_um,
                                          step_um=1.0, half_range_um=30.0)
         write_psf_image_csv(tmp_path / "psf.csv", x, y, v)
         lines.append(f'[[measurement]]\nkind = "psf_image"\nfile = "psf.csv"\ngrating = "J"\norder = -2\n'

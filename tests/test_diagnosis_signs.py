@@ -89,3 +89,15 @@ def test_pair_slots_keep_one_rescaling_effect():
     assert [f.effect for f in pair_singles(findings, 1)] == ["temperature"]
     findings[1] = _single("amplitude_scale", -130.0)  # the better rescaling one is kept, whichever it is
     assert [f.effect for f in pair_singles(findings, 3)] == ["amplitude_scale", "pupil_shift", "collimator_wfe"]
+
+
+def test_a_temperature_whose_mirror_has_no_physical_state_keeps_its_sign(tmp_path):
+    """Profiles of a blank deformed to 0.67x (a warmer grating: the temperature fit lands
+    near +70 K above the stated 80 K). Its sign test mirrors the offset about 0, to a few K
+    above absolute zero, below the materials' strain data: no state of the other sign
+    exists, so the sign stands and the diagnosis is made (it used to be refused with the
+    materials' range error)."""
+    d = diagnose(profile_image_case(tmp_path, {}, psf=False, scale=0.67), effects=("temperature",), heldout=False)
+    f = d.finding("temperature")
+    assert f.parameters["temperature_offset_K"] > 40.0
+    assert "temperature_offset_K" not in f.sign_degenerate

@@ -10,6 +10,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from fea.errors import ParameterError
+
 from .criteria import Criteria
 from .effects import LIBRARY
 from .error_model import sign_is_claimed
@@ -121,7 +123,14 @@ def _sign_test(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, eff
         # sign), and the mirror's cost is the test.
         mirror = 2.0 * q.origin - v
         others = tuple(o for o in params if o.name != name)
-        flip = fit(prob, others, fixed={name: mirror}, start={o.name: start[o.name] for o in others if o.name in start})
+        try:
+            flip = fit(prob, others, fixed={name: mirror},
+                       start={o.name: start[o.name] for o in others if o.name in start})
+        except ParameterError:
+            # The mirror has no physical state (a temperature offset mirrored below the
+            # materials' data, a few K above absolute zero): no state of the other sign
+            # can explain the data, so the sign stands.
+            continue
         cflip = flip.weighted_rss(prob.weights)
         if prob.absolute:  # two-part error model: the flip must cost more than the errors could
             if not sign_is_claimed(prob, fo, flip, predictions(prob, fo), predictions(prob, flip)):
