@@ -6,6 +6,7 @@ injection-recovery campaign. Writes the per-case rows and the summary as JSON (`
         [--profiles extended|minimal] [--no-scenarios] [--out FILE] [--progress FILE.jsonl] [--profile-map-K K]
         [--psf-image] [--types KIND:EFFECT,...] [--discrepancy unmodelled|companions]
         [--n-eff-from nominal|best_fit] [--truth independent|model] [--truth-families FAM,...]
+        [--error-model n_eff|two_part]
 
 ``--progress``: every finished case is appended there as a JSON line (partial results
 survive an interrupted run). ``--profiles``: the campaign's line-profile measurement set
@@ -25,6 +26,7 @@ from pathlib import Path
 
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.engine import N_EFF_SOURCES, Criteria
+from pipeline.diagnosis.error_model import ERROR_MODELS
 from pipeline.diagnosis.campaign import (DISCREPANCIES, PROFILE_SETS, PSF_IMAGE_SPEC, TRUTHS, CampaignConfig, parse_types,
                                          run_campaign)
 
@@ -54,8 +56,10 @@ def main(argv=None):
                     help="campaign truth generator (CampaignConfig.truth; benchmarks/truth_families.md)")
     ap.add_argument("--truth-families", default="sum_mix,product_mix",
                     help="independent truth's grating families, comma-separated (benchmarks/truth_families.md)")
+    ap.add_argument("--error-model", default="n_eff", choices=ERROR_MODELS,
+                    help="the score's error model (Criteria.error_model)")
     a = ap.parse_args(argv)
-    criteria = dataclasses.replace(CampaignConfig.criteria, n_eff_from=a.n_eff_from)
+    criteria = dataclasses.replace(CampaignConfig.criteria, n_eff_from=a.n_eff_from, error_model=a.error_model)
     out = {"scenarios": {}}
     for name in () if a.no_scenarios else ("cryo_astigmatism", "j_repolished", "hk_amplitude"):
         t = time.perf_counter()
