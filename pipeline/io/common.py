@@ -31,7 +31,7 @@ from fea.atomic import atomic_path, atomic_write
 from pipeline.io.gridding import SAG_UNITS_TO_UM
 
 __all__ = ["atomic_write", "atomic_path", "parse_error", "numbered_lines", "read_text",
-           "decode_text", "read_csv_columns"]
+           "decode_text", "read_csv_columns", "read_csv_choices"]
 
 
 def parse_error(path: str | Path, line: int | None, message: str) -> ValueError:
@@ -138,24 +138,37 @@ def read_csv_columns(path: Path, what: str, names: tuple[str, ...]) -> tuple[np.
     ``<base>_<unit>`` with a length unit (nm, um, mm, m) also matches ``<base>`` in another
     length unit, converted. Other columns are ignored, ``#`` comment lines and blank lines
     skipped; the delimiter (comma, semicolon, tab or whitespace) is the header's."""
+    v, lines, _ = read_csv_choices(path, what, tuple((n,) for n in names))
+    return v, lines
+
+
+def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...],
+                     hint: str = "") -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """As :func:`read_csv_columns`, each column being the first of several alternative
+    names that the header has (e.g. an offset in µm, else in pixels); returns (values[n, k]
+    in the chosen names' units, line numbers[n], the chosen names). The file is read once.
+    ``hint`` is added to the error when a column is missing."""
     text = read_text(path, what)
-    fast = _fast_csv_columns(text, names)
-    if fast is not None:
-        return fast
     lines_ = [(n, t) for n, t in numbered_lines(text) if t.strip() and not t.lstrip().startswith("#")]
+    names = [alts[0] for alts in choices]
     if not lines_:
-        raise parse_error(path, None, f"file is empty; expected a header with columns {list(names)}")
+        raise parse_error(path, None, f"file is empty; expected a header with columns {names}")
     hline, htext = lines_[0]
     delim = _delimiter(htext)
     header = [_canonical_header(h) for h in _split(htext, delim)]
-    found = {c: _column(header, c) for c in names}
-    missing = [c for c, f in found.items() if f is None]
+    found = [next(((a, f) for a in alts if (f := _column(header, a)) is not None), None) for alts in choices]
+    missing = [n for n, f in zip(names, found) if f is None]
     if missing:
         units = "; a length column may carry any of nm, um, mm, m (e.g. x [m], sag_nm)"
-        raise parse_error(path, hline, f"missing column(s) {missing}; found header {header}, need {list(names)}"
-                          + (units if any(c.rpartition("_")[2] in SAG_UNITS_TO_UM for c in missing) else ""))
-    idx = [found[c][0] for c in names]
-    factor = np.array([found[c][1] for c in names])
+        raise parse_error(path, hline, f"missing column(s) {missing}; found header {header}, need {names}"
+                          + (units if any(c.rpartition("_")[2] in SAG_UNITS_TO_UM for c in missing) else "")
+                          + (f"; {hint}" if hint else ""))
+    chosen = tuple(a for a, _ in found)
+    fast = _fast_csv_columns(text, chosen) if all(f == 1.0 for _, (_, f) in found) else None
+    if fast is not None:
+        return (*fast, chosen)
+    idx = [i for _, (i, _) in found]
+    factor = np.array([f for _, (_, f) in found])
     vals, lines = [], []
     for n, t in lines_[1:]:
         r = _split(t, delim)
@@ -166,7 +179,7 @@ def read_csv_columns(path: Path, what: str, names: tuple[str, ...]) -> tuple[np.
         except ValueError:
             raise parse_error(path, n, f"non-numeric value in {t.strip()!r}") from None
         lines.append(n)
-    return np.array(vals, dtype=float).reshape(-1, len(names)) * factor, np.array(lines, dtype=int)
+    return np.array(vals, dtype=float).reshape(-1, len(choices)) * factor, np.array(lines, dtype=int), chosen
 
 
 def numbered_lines(text: str) -> list[tuple[int, str]]:

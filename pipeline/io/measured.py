@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.io.common import atomic_write, parse_error, read_csv_columns
+from pipeline.io.common import atomic_write, parse_error, read_csv_choices, read_csv_columns
 
 __all__ = ["PIXEL_OFFSET_COLUMNS", "WAVELENGTH_COLUMNS", "read_line_profile", "read_psf_image", "write_line_profile_csv", "write_psf_image_csv"]
 
@@ -31,34 +31,21 @@ def _profile_columns(path: Path, pixel_um: float | None,
     """``offset_um, intensity`` of a profile table, the offset in a length unit, in
     detector pixels (times ``pixel_um``) or a wavelength (times ``dispersion_um_per_um``,
     about the median wavelength)."""
-    try:
-        return read_csv_columns(path, "line profile", ("offset_um", "intensity"))
-    except ValueError as exc:
-        if "missing column" not in str(exc):
-            raise
-        first = exc
-    for name in PIXEL_OFFSET_COLUMNS:
-        try:
-            v, lines = read_csv_columns(path, "line profile", (name, "intensity"))
-        except ValueError:
-            continue
+    hint = (f"offsets in detector pixels may be a column {PIXEL_OFFSET_COLUMNS[0]!r} or 'pixel', a wavelength "
+            f"axis {WAVELENGTH_COLUMNS[0]!r} (any length unit)")
+    v, lines, (name, _) = read_csv_choices(
+        path, "line profile", (("offset_um", *PIXEL_OFFSET_COLUMNS, *WAVELENGTH_COLUMNS), ("intensity",)), hint)
+    if name in PIXEL_OFFSET_COLUMNS:
         if pixel_um is None or not (np.isfinite(pixel_um) and pixel_um > 0):
             raise parse_error(path, None, f"offsets in detector pixels (column {name!r}) need pixel_um, the "
                                           f"pixel pitch in µm (> 0); got pixel_um={pixel_um!r}")
-        return v * np.array([pixel_um, 1.0]), lines
-    for name in WAVELENGTH_COLUMNS:
-        try:
-            v, lines = read_csv_columns(path, "line profile", (name, "intensity"))
-        except ValueError:
-            continue
+        v[:, 0] *= pixel_um
+    elif name in WAVELENGTH_COLUMNS:
         if dispersion_um_per_um is None or not (np.isfinite(dispersion_um_per_um) and dispersion_um_per_um != 0):
             raise parse_error(path, None, f"a wavelength axis (column {name!r}) needs the linear dispersion "
                                           f"(detector µm per µm of wavelength, signed); got {dispersion_um_per_um!r}")
-        v = v.copy()
         v[:, 0] = (v[:, 0] - np.median(v[:, 0])) * dispersion_um_per_um
-        return v, lines
-    raise ValueError(f"{first}; offsets in detector pixels may be a column {PIXEL_OFFSET_COLUMNS[0]!r} "
-                     f"or 'pixel', a wavelength axis {WAVELENGTH_COLUMNS[0]!r} (any length unit)") from None
+    return v, lines
 
 
 def read_line_profile(path: str | Path, normalise: bool = True, pixel_um: float | None = None,
