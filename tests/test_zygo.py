@@ -128,6 +128,7 @@ def test_bad_ascii_files_are_refused_with_the_line(tmp_path):
         "short": ("\n".join(lines[:6]), "ends inside its 14-line header"),
         "scale": ("\n".join(lines[:7] + ["0 0.5 x 0 1 1 0.0005 1"] + lines[8:]), r"line 8: WavelengthIn='x'"),
         "count": (good.replace("#\n", "#\n1 2 3\n#\n", 1), r"phase block holds 3 values; .* = 143 expected"),
+        "width": ("\n".join(lines[:3] + ["12 7 inf 11"] + lines[4:]), r"line 4: PhaseWidth='inf' must be an integer"),
         "zero S": ("\n".join(lines[:7] + ["0 0 6.328e-07 0 1 1 0.0005 1"] + lines[8:]), "IntfScaleFactor=0.0 must be > 0"),
     }
     for name, (text, match) in cases.items():

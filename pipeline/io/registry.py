@@ -180,7 +180,7 @@ def _reader_for(path: Path) -> Callable:
     """The reader of ``path``: a content test first where the suffix is shared, then the suffix."""
     suffix = path.suffix.lower()
     for sniff, reader in _SNIFFED.get(suffix, ()):
-        if path.exists() and sniff(path):
+        if sniff(path):  # a missing file is no format's: read_sag_map then names it
             return reader
     if suffix in SAG_READERS:
         return SAG_READERS[suffix]

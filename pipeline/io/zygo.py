@@ -189,10 +189,16 @@ def _header_tokens(path: Path, lines: list[str], k: int, n: int, what: str) -> l
 
 
 def _number(path: Path, k: int, token: str, name: str, kind=float):
+    """Header field ``name`` of line ``k`` as a float, or (``kind=int``) as an integer."""
     try:
-        return kind(float(token)) if kind is int else float(token)
+        v = float(token)
     except ValueError:
         raise parse_error(path, k, f"{name}={token!r} is not a number") from None
+    if kind is int:
+        if not (np.isfinite(v) and v == int(v)):
+            raise parse_error(path, k, f"{name}={token!r} must be an integer")
+        return int(v)
+    return v
 
 
 def read_zygo_ascii(path: str | Path, spacing_mm: float | None = None) -> SagMap:
