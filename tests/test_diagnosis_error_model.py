@@ -9,7 +9,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.engine import Criteria
-from pipeline.diagnosis.error_model import SIGN_Z, sign_is_claimed
+from pipeline.diagnosis.error_model import ERROR_MODELS, SIGN_Z, model_for_kinds, sign_is_claimed
 from pipeline.diagnosis.noise import two_part_errors
 from optics.zernike import zernike_xy
 
@@ -75,3 +75,44 @@ def test_two_part_diagnosis_of_an_astigmatic_map(tmp_path):
     assert d.best.parameters["astig_45_um"] == pytest.approx(0.08, rel=0.1)
     e = d.baseline["errors"]["map"]
     assert e["sigma_w"] == pytest.approx(0.01, rel=0.2) and e["sigma_m"] > 0 and e["corr_samples"] > 1
+
+
+def test_error_model_by_kind():
+    """``by_kind`` is the two-part model where a line profile is measured, the effective
+    sample counts elsewhere; the other models are themselves; an unknown name is refused."""
+    assert model_for_kinds("by_kind", {"line_profile"}) == "two_part"
+    assert model_for_kinds("by_kind", {"line_profile", "surface"}) == "two_part"
+    assert model_for_kinds("by_kind", {"surface"}) == "n_eff"
+    assert model_for_kinds("by_kind", {"psf_image"}) == "n_eff"
+    for m in ("n_eff", "two_part"):
+        assert model_for_kinds(m, {"surface"}) == m == model_for_kinds(m, {"line_profile"})
+    with pytest.raises(ValueError, match="error_model='gls'"):
+        model_for_kinds("gls", {"surface"})
+
+
+def test_cli_offers_every_error_model(capsys):
+    """The CLI's choices (a literal, to keep ``cryograting --help`` free of the diagnosis's
+    imports) are the engine's models: each is accepted, another name is refused."""
+    import argparse
+
+    from pipeline.diagnosis.cli import register
+
+    sub = argparse.ArgumentParser().add_subparsers()
+    p = register(sub)
+    for m in ERROR_MODELS:
+        assert p.parse_args(["m.toml", "--out", "o", "--error-model", m]).error_model == m
+    with pytest.raises(SystemExit):
+        p.parse_args(["m.toml", "--out", "o", "--error-model", "gls"])
+    assert "invalid choice: 'gls'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_by_kind_diagnosis_of_a_map_is_the_n_eff_one(tmp_path):
+    """A map alone under ``by_kind``: the same findings as ``n_eff``, and the record says
+    which model scored it."""
+    p = surface_case(tmp_path, lambda x, y: 0.08 * zernike_xy(2, -2, x, y, 68.5))
+    a = diagnose(p, criteria=Criteria(error_model="by_kind"), heldout=False)
+    b = diagnose(p, criteria=Criteria(), heldout=False)
+    assert a.baseline["error_model"] == "by_kind" and a.baseline["error_model_used"] == "n_eff"
+    assert [(f.effect, f.delta_bic) for f in a.findings] == [(f.effect, f.delta_bic) for f in b.findings]
+    assert a.baseline["errors"] == {}

@@ -81,9 +81,10 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                    help="residual whose correlation sets the effective samples the score counts: nominal "
                         "(conservative, default) or best_fit (the best finding's residual: an optimistic bound on "
                         "the evidence; fits and error bars unchanged)")
-    p.add_argument("--error-model", default="n_eff", choices=("n_eff", "two_part"),
+    p.add_argument("--error-model", default="n_eff", choices=("n_eff", "two_part", "by_kind"),
                    help="n_eff (default): effective-sample counts; two_part: white noise plus a smooth mismatch "
-                        "measured from the post-fit residual (chi^2 score; pipeline/diagnosis/error_model.py)")
+                        "measured from the post-fit residual (chi^2 score; pipeline/diagnosis/error_model.py); "
+                        "by_kind: two_part when a line profile is among the measurements, n_eff otherwise")
     p.add_argument("--validate", action="store_true", help="run the injection-recovery campaign instead")
     p.add_argument("--cases", type=int, default=200, help="campaign cases (with --validate)")
     p.add_argument("--seed", type=int, default=1, help="campaign seed (with --validate)")

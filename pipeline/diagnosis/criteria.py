@@ -33,7 +33,8 @@ class Criteria:
     n_eff_from: str = "nominal"
     #: "n_eff": effective-sample counts (``n_eff_from``); "two_part": white noise plus a
     #: smooth mismatch measured from the post-fit residual (:mod:`.error_model`; then
-    #: ``n_eff_from`` is not used).
+    #: ``n_eff_from`` is not used); "by_kind": "two_part" when a line profile is among the
+    #: measurements, "n_eff" otherwise (:func:`.error_model.model_for_kinds`).
     error_model: str = "n_eff"
 
     def __post_init__(self) -> None:

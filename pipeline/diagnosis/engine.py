@@ -20,7 +20,7 @@ from .criteria import N_EFF_SOURCES, Criteria
 from .effects import (LIBRARY, SummaryContext, applicable_effects, library_rows, parameter_spec, parameter_units,
                       physical_summary)
 from .amplitude_or_shape import amplitude_degeneracies
-from .error_model import errors_summary, measure_errors, two_part_problem, weights_settled
+from .error_model import errors_summary, measure_errors, model_for_kinds, two_part_problem, weights_settled
 from .finding import Finding, all_effects
 from .fitting import FitOutcome, Problem, fit
 from .forward import ProfileForward, SurfaceForward
@@ -225,13 +225,14 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     kinds = {f.kind for f in prob.forwards}
     cands = applicable_effects(kinds, effects)
     memo, errors = {}, {}
-    if criteria.error_model == "two_part":
+    model = model_for_kinds(criteria.error_model, kinds)
+    if model == "two_part":
         base_prob = prob
         errors = measure_errors(base_prob, nom)  # first pass: the nominal residual (signal counts as mismatch)
         prob = two_part_problem(base_prob, errors)
         nom = fit(prob, ())
     findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo)
-    if criteria.error_model == "two_part":
+    if model == "two_part":
         for _ in range(_N_EFF_PASSES):
             errs = measure_errors(base_prob, fits[findings[0].effect])
             new = two_part_problem(base_prob, errs)
@@ -302,7 +303,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     baseline = {"bic": nom.bic(prob.weights), "offset_shift_um": nom.deltas_um,
                 "noise": dict(prob.noise), "n": dict(nom.n), "n_eff": dict(prob.n_eff),
                 "n_count": dict(prob.n_count or prob.n_eff), "n_eff_from": criteria.n_eff_from,
-                "error_model": criteria.error_model, "errors": errors_summary(errors),
+                "error_model": criteria.error_model, "error_model_used": model, "errors": errors_summary(errors),
                 "weights": dict(prob.weights), "nominal_map": nominal.label}
     ms = tuple({"name": m.name, "kind": m.kind, "file": str(m.file), "blank": m.blank, "grating": m.grating,
                 "wavelength_um": m.wavelength_um, "pixel_scale_mas": m.pixel_scale_mas,

@@ -54,12 +54,29 @@ import numpy as np
 from .fitting import FitOutcome, Problem
 from .noise import two_part_errors
 
-__all__ = ["ERROR_MODELS", "SIGN_Z", "measure_errors", "two_part_problem", "weights_settled", "sign_is_claimed",
+__all__ = ["ERROR_MODELS", "SIGN_Z", "model_for_kinds", "measure_errors", "two_part_problem", "weights_settled", "sign_is_claimed",
            "errors_summary"]
 
-ERROR_MODELS = ("n_eff", "two_part")
+ERROR_MODELS = ("n_eff", "two_part", "by_kind")
+#: Measurement kinds on which ``"by_kind"`` scores with the two-part model.
+TWO_PART_KINDS = frozenset({"line_profile"})
 #: Standard deviations by which a flip's cost must exceed what the errors could do.
 SIGN_Z = 2.0
+
+
+def model_for_kinds(error_model: str, kinds) -> str:
+    """The error model a diagnosis of measurements of ``kinds`` is scored with:
+    ``error_model`` itself, except ``"by_kind"``, which is ``"two_part"`` when a line
+    profile is among the measurements and ``"n_eff"`` otherwise (maps, PSF images).
+
+    Why: measured on independent truths, the two-part model names the injected effect on
+    line profiles far more often than the effective-sample counts, and less often on maps
+    alone (``benchmarks/results_error_model_by_kind.md``)."""
+    if error_model not in ERROR_MODELS:
+        raise ValueError(f"error_model={error_model!r} must be one of {ERROR_MODELS}")
+    if error_model != "by_kind":
+        return error_model
+    return "two_part" if TWO_PART_KINDS & set(kinds) else "n_eff"
 
 
 def _residual(f, fo: FitOutcome) -> np.ndarray:
