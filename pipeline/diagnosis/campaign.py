@@ -407,9 +407,14 @@ def score_case_fundamental(verdict: str, best, effect: str, present=(), fundamen
     allowed = {effect, *present, *rescaled}
     if verdict != "explained" or best is None or effect not in LIBRARY or not rescaled:
         return False
-    false = [c for c in best.companions if c not in allowed]
+    false = _false_companions(best, allowed)
     names = effect in best.effects or effect in best.degenerate_with
     return bool(names and set(best.effects) <= allowed and not false)
+
+
+def _false_companions(best, allowed) -> list[str]:
+    """The companions of the top finding ``best`` that are not among the ``allowed`` effects."""
+    return [c for c in best.companions if c not in allowed]
 
 
 def score_case(verdict: str, best, effect: str, present=()) -> tuple[bool, list[str]]:
@@ -421,7 +426,7 @@ def score_case(verdict: str, best, effect: str, present=()) -> tuple[bool, list[
     truth does not carry. Such companions of an ``explained`` top finding are returned as
     false attributions, for any case (an ``unexplained`` verdict attributes nothing)."""
     explained = verdict == "explained" and best is not None
-    false = [c for c in best.companions if c != effect and c not in present] if explained else []
+    false = _false_companions(best, {effect, *present}) if explained else []
     correct = bool(effect in LIBRARY and verdict == "explained" and best is not None
                    and (best.effects == (effect,) or effect in best.degenerate_with) and not false)
     return correct, false
