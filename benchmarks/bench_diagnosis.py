@@ -6,7 +6,7 @@ injection-recovery campaign. Writes the per-case rows and the summary as JSON (`
         [--profiles extended|minimal] [--no-scenarios] [--out FILE] [--progress FILE.jsonl] [--profile-map-K K]
         [--psf-image] [--types KIND:EFFECT,...] [--discrepancy unmodelled|companions]
         [--n-eff-from nominal|best_fit] [--truth independent|model] [--truth-families FAM,...]
-        [--error-model n_eff|two_part]
+        [--error-model by_kind|n_eff|two_part]
 
 ``--progress``: every finished case is appended there as a JSON line (partial results
 survive an interrupted run). ``--profiles``: the campaign's line-profile measurement set
@@ -56,7 +56,7 @@ def main(argv=None):
                     help="campaign truth generator (CampaignConfig.truth; benchmarks/truth_families.md)")
     ap.add_argument("--truth-families", default="sum_mix,product_mix",
                     help="independent truth's grating families, comma-separated (benchmarks/truth_families.md)")
-    ap.add_argument("--error-model", default="n_eff", choices=ERROR_MODELS,
+    ap.add_argument("--error-model", default=Criteria().error_model, choices=ERROR_MODELS,
                     help="the score's error model (Criteria.error_model)")
     a = ap.parse_args(argv)
     criteria = dataclasses.replace(CampaignConfig.criteria, n_eff_from=a.n_eff_from, error_model=a.error_model)

@@ -40,8 +40,19 @@ recovers profile parameters closer (collimator WFE error 0.64 -> 0.38, pupil shi
 map's out-of-library bump to ``blank_bow`` (the same count), it costs 2.7x the time (every
 candidate is refitted with the new weights), and it ranks pairs that take up a smooth part
 of the truth's quilt mismatch first (``tests/test_diagnosis.py``: the astigmatism and
-registration cases become ``astigmatism+amplitude_scale`` and a registration pair). It is
-therefore an option; the default stays ``n_eff``.
+registration cases become ``astigmatism+amplitude_scale`` and a registration pair).
+
+On independent truths (quilts 5-30 % from the FEA's, ``benchmarks/results_frozen_campaign.md``)
+the balance differs by measurement kind: on line profiles ``two_part`` names the injected
+effect in 12 of 15 cases of a frozen run against 4-7 of 15 for ``n_eff``, and 9 of 15
+against 7 of 15 with a map beside the profiles (development seeds,
+``benchmarks/results_error_model_by_kind.md``), while on maps alone it falls to 7 of 12
+against 10 of 12. ``"by_kind"`` (:func:`model_for_kinds`) therefore scores with
+``two_part`` wherever a line profile is measured and with ``n_eff`` on maps and PSF images.
+The default stays ``n_eff``: on the paper's J scenario (``pipeline/scenarios/j_repolished``,
+a larger quilt amplitude *and* a 4 mm pupil shift, the paper's section 5.3) ``two_part`` names
+the amplitude alone (the pair no longer beats it by ``Criteria.pair_extra_bic``). The
+independent campaigns inject one effect per case, so they cannot see this.
 """
 
 from __future__ import annotations
