@@ -18,7 +18,7 @@ from pipeline.diagnosis.campaign import recovery_errors
 from pipeline.diagnosis.effects import parameter_spec
 from pipeline.diagnosis.finding import Finding
 from pipeline.diagnosis.forward import profile_curve
-from pipeline.diagnosis.ranking import pair_singles
+from pipeline.diagnosis.ranking import pair_singles, pairs_to_fit
 
 from diagnosis_cases import FakeDiagnosis, FakeFinding, profile_image_case
 
@@ -89,6 +89,23 @@ def test_pair_slots_keep_one_rescaling_effect():
     assert [f.effect for f in pair_singles(findings, 1)] == ["temperature"]
     findings[1] = _single("amplitude_scale", -130.0)  # the better rescaling one is kept, whichever it is
     assert [f.effect for f in pair_singles(findings, 3)] == ["amplitude_scale", "pupil_shift", "collimator_wfe"]
+
+
+def test_pairs_are_formed_among_the_best_and_from_the_best_with_every_other():
+    """Pairs among the ``n`` best eligible singles, and the best one with each further
+    eligible single (one forward-selection step), better single first; none for n < 2;
+    the second rescaling effect, background-only and not-significant singles never pair."""
+    findings = [_single("temperature", -120.0), _single("amplitude_scale", -130.0), _single("pupil_shift", -40.0),
+                _single("collimator_wfe", -80.0), _single("slit_width", -90.0), _single("quilt_shape", -500.0),
+                _single("blank_bow", -10.0, significant=False)]
+    pairs = [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2)]
+    assert pairs == [("amplitude_scale", "slit_width"), ("amplitude_scale", "collimator_wfe"),
+                     ("amplitude_scale", "pupil_shift")]
+    pairs3 = [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 3)]
+    assert pairs3[:3] == [("amplitude_scale", "slit_width"), ("amplitude_scale", "collimator_wfe"),
+                          ("slit_width", "collimator_wfe")]
+    assert pairs3[3:] == [("amplitude_scale", "pupil_shift")]
+    assert pairs_to_fit(findings, 1) == [] and pairs_to_fit(findings[:1], 3) == []
 
 
 def test_a_temperature_whose_mirror_has_no_physical_state_keeps_its_sign(tmp_path):

@@ -13,6 +13,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from diagnosis_cases import FakeDiagnosis, FakeFinding
 from optics.lineprofile import LsfSettings, line_profile
 from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM as COLL
 from optics.sagmap import quilt_sag_map
@@ -274,6 +275,75 @@ def test_companion_not_in_truth_is_a_false_attribution():
     assert score_case("unexplained", best(), "pupil_shift") == (False, [])
     assert score_case("unexplained", best(("blank_bow",)), "pupil_shift") == (False, [])  # nothing attributed
     assert score_case("explained", best(("blank_bow",)), "ool_stray") == (False, ["blank_bow"])
+
+
+def test_a_pair_case_is_correct_only_when_both_effects_are_named():
+    """A case that injects two effects (the paper's J grating: amplitude and pupil shift)
+    is correct when the top finding is that pair, not either member alone, nor the pair
+    with a third effect; it is a library case, and its recovery is the pair's own fit."""
+    from pipeline.diagnosis.campaign import in_library, injected, recovery_errors, score_case
+    from pipeline.diagnosis.engine import Finding
+
+    def best(effects, companions=()):
+        return Finding("+".join(effects), effects, {}, {}, 0.0, -50.0, 1.0, 0.5, 0.5, 0.5, companions=companions)
+
+    pair = "amplitude_scale+pupil_shift"
+    assert injected(pair) == ("amplitude_scale", "pupil_shift") and in_library(pair)
+    assert not in_library("ool_stray") and in_library("slit_width")
+    assert score_case("explained", best(("amplitude_scale", "pupil_shift")), pair) == (True, [])
+    assert score_case("explained", best(("amplitude_scale",)), pair) == (False, [])
+    assert score_case("explained", best(("amplitude_scale", "pupil_shift"), ("quilt_shape",)), pair,
+                      ["quilt_shape"]) == (True, [])
+    assert score_case("explained", best(("amplitude_scale", "pupil_shift"), ("blank_bow",)), pair) \
+        == (False, ["blank_bow"])
+    truth = {"scale_J": 1.5, "pupil_x_mm": 4.0, "pupil_y_mm": -2.0}
+    fit = {"scale_J": 1.56, "pupil_x_mm": 4.4, "pupil_y_mm": -2.0}
+    d = FakeDiagnosis(pair, FakeFinding(fit, dict.fromkeys(fit, 0.1)))
+    rec = recovery_errors(d, pair, truth)
+    assert rec["per_parameter"] == pytest.approx(0.1) and rec["vector"] == rec["per_parameter"]
+
+
+def test_pair_case_types_are_opt_in_and_parse():
+    """The independent truth's pair cases are not among the default case types; they parse
+    and are accepted as ``only_types``; the model truth has none."""
+    from pipeline.diagnosis.campaign import CampaignConfig, parse_types
+    from pipeline.diagnosis.truth import CASE_TYPES, PAIR_CASE_TYPES
+
+    assert not set(PAIR_CASE_TYPES) & set(CASE_TYPES)
+    assert parse_types("line_profile:amplitude_scale+pupil_shift", "independent") == (
+        ("line_profile", "amplitude_scale+pupil_shift"),)
+    cfg = CampaignConfig(only_types=(("line_profile", "amplitude_scale+slit_width"),))
+    assert cfg.only_types == (("line_profile", "amplitude_scale+slit_width"),)
+    with pytest.raises(ValueError, match="not a case type of the model truth"):
+        parse_types("line_profile:amplitude_scale+pupil_shift", "model")
+
+
+def test_a_pair_case_applies_both_effects(tmp_path, monkeypatch):
+    """The optics of a pupil-shift + slit-width pair case receive both the drawn shift and
+    the drawn slit width (the Abbe sum is replaced by a recorder; the detector is real)."""
+    from pipeline.diagnosis.campaign import CampaignConfig
+    from pipeline.diagnosis.effect_draws import DRAWS
+    from pipeline.diagnosis.truth import generate
+
+    calls = []
+
+    def recorder(gr, wl, order, na, sag, **kw):
+        calls.append(kw)
+        u = np.linspace(-150.0, 150.0, 601)
+        return u, np.exp(-0.5 * (u / 20.0) ** 2)
+
+    monkeypatch.setattr(generate, "abbe_line_profile", recorder)
+    s, p = quilt_sag_map(0.6, "sum", spacing_mm=0.5), quilt_sag_map(0.6, "product", spacing_mm=0.5)
+    nom = s.with_sag(0.5 * s.sag_um + 0.5 * p.sag_um)
+    X, _ = nom.grid()
+    fea = nom.with_sag(nom.sag_um + 0.002 * np.cos(2 * np.pi * X / 7.0))
+    cfg = CampaignConfig(only_types=(("line_profile", "pupil_shift+slit_width"),))
+    _, truth = generate.make_case("line_profile", "pupil_shift+slit_width", np.random.default_rng(5), nom, fea,
+                                  tmp_path, cfg)
+    assert {"pupil_x_mm", "pupil_y_mm", "slit_image_width_um"} <= set(truth)
+    assert set(DRAWS["pupil_shift"](np.random.default_rng(0), "line_profile", "J")) <= set(truth)
+    assert calls and all(c["pupil_shift_mm"] == (truth["pupil_x_mm"], truth["pupil_y_mm"]) for c in calls)
+    assert all(c["slit_image_width_um"] is not None for c in calls)
 
 
 def test_a_rescaling_is_part_of_a_truth_whose_x_fundamental_differs():

@@ -184,7 +184,7 @@ class CampaignConfig:
                              "pixel_um) with pixel_um in [0, 100] (or None)")
         if self.discrepancy not in DISCREPANCIES:
             raise ValueError(f"CampaignConfig: discrepancy={self.discrepancy!r} is not one of {sorted(DISCREPANCIES)}")
-        extra = EXTRA_CASE_TYPES if self.truth == "model" else ()  # the model truth's opt-in quilt_shape cases
+        extra = EXTRA_CASE_TYPES if self.truth == "model" else _pair_types()  # opt-in cases
         unknown = set(self.only_types or ()) - set(self.case_types) - set(extra)
         if unknown:
             raise ValueError(f"CampaignConfig: only_types {sorted(unknown)} are not case types; valid: "
@@ -198,7 +198,7 @@ def parse_types(text: str | None, truth: str = "model") -> tuple | None:
         return None
     from .truth import CASE_TYPES as INDEPENDENT_TYPES
 
-    valid = INDEPENDENT_TYPES if truth == "independent" else CASE_TYPES + EXTRA_CASE_TYPES
+    valid = INDEPENDENT_TYPES + _pair_types() if truth == "independent" else CASE_TYPES + EXTRA_CASE_TYPES
     out = []
     for item in text.split(","):
         kind, sep, effect = item.strip().partition(":")
@@ -210,6 +210,24 @@ def parse_types(text: str | None, truth: str = "model") -> tuple | None:
 
 
 _COLD_K = NOMINAL_SIMULATION["cold_K"]
+
+
+def _pair_types() -> tuple:
+    """The independent truth's opt-in cases with two effects injected together."""
+    from .truth import PAIR_CASE_TYPES
+
+    return PAIR_CASE_TYPES
+
+
+def injected(effect: str) -> tuple[str, ...]:
+    """The effects a case type injects: ``"a+b"`` (a pair case) -> ``("a", "b")``."""
+    return tuple(effect.split("+"))
+
+
+def in_library(effect: str) -> bool:
+    """Whether every effect a case type injects is a library effect (the diagnosis should
+    name it) rather than out of the library (it should be left ``unexplained``)."""
+    return all(e in LIBRARY for e in injected(effect))
 
 
 def _ool_coma(rng):
@@ -356,9 +374,9 @@ def recovery_errors(d, effect: str, truth: dict) -> dict | None:
     parameter within twice its reported 1-sigma uncertainty of the truth (are the error
     bars honest?). None if the effect is out of the library or was not fitted."""
     f = d.finding(effect)
-    if f is None or effect not in LIBRARY:
+    if f is None or not in_library(effect):
         return None
-    floors = {q.name: q.floor for q in LIBRARY[effect].parameters}
+    floors = {q.name: q.floor for e in injected(effect) for q in LIBRARY[e].parameters}
     errs, dv, tv, sig_ok = [], [], [], True
     for k, v in truth.items():
         fit = f.parameters.get(k)
@@ -378,7 +396,7 @@ def recovery_errors(d, effect: str, truth: dict) -> dict | None:
         return None
     per = float(max(errs))
     vec = per
-    if LIBRARY[effect].vector and len(dv) == len(errs):
+    if len(injected(effect)) == 1 and LIBRARY[effect].vector and len(dv) == len(errs):
         vec = float(np.linalg.norm(dv) / max(np.linalg.norm(tv), max(floors.values())))
     return {"per_parameter": per, "vector": vec, "within_2sigma": bool(sig_ok)}
 
@@ -404,11 +422,11 @@ def score_case_fundamental(verdict: str, best, effect: str, present=(), fundamen
     if score_case(verdict, best, effect, present)[0]:
         return True
     rescaled = rescalings_present(fundamental_x_ratio)
-    allowed = {effect, *present, *rescaled}
-    if verdict != "explained" or best is None or effect not in LIBRARY or not rescaled:
+    allowed = {*injected(effect), *present, *rescaled}
+    if verdict != "explained" or best is None or not in_library(effect) or not rescaled:
         return False
     false = _false_companions(best, allowed)
-    names = effect in best.effects or effect in best.degenerate_with
+    names = set(injected(effect)) <= set(best.effects) or effect in best.degenerate_with
     return bool(names and set(best.effects) <= allowed and not false)
 
 
@@ -426,9 +444,9 @@ def score_case(verdict: str, best, effect: str, present=()) -> tuple[bool, list[
     truth does not carry. Such companions of an ``explained`` top finding are returned as
     false attributions, for any case (an ``unexplained`` verdict attributes nothing)."""
     explained = verdict == "explained" and best is not None
-    false = _false_companions(best, {effect, *present}) if explained else []
-    correct = bool(effect in LIBRARY and verdict == "explained" and best is not None
-                   and (best.effects == (effect,) or effect in best.degenerate_with) and not false)
+    false = _false_companions(best, {*injected(effect), *present}) if explained else []
+    correct = bool(in_library(effect) and verdict == "explained" and best is not None
+                   and (best.effects == injected(effect) or effect in best.degenerate_with) and not false)
     return correct, false
 
 
@@ -459,7 +477,7 @@ def run_case(args) -> dict:
                     "recovery_error_vector": None,
                     "within_2sigma": None, "seconds": time.perf_counter() - t0}
     best = d.best
-    own = d.finding(effect) if effect in LIBRARY else None  # the injected effect's own fit
+    own = d.finding(effect) if in_library(effect) else None  # the injected effect's own fit
     rec = recovery_errors(d, effect, truth)
     correct, false_companions = score_case(d.verdict, best, effect, present)
     fx = (truth_info or {}).get("fundamental_x_ratio")
@@ -499,8 +517,8 @@ def _measurement_kind(kind: str, cfg: CampaignConfig) -> str:
 
 def _scores(rows: list[dict]) -> dict:
     """The three headline scores of ``rows`` (correct top, within 20 %, out-of-library unexplained)."""
-    lib = [r for r in rows if r["effect"] in LIBRARY]
-    ool = [r for r in rows if r["effect"] not in LIBRARY]
+    lib = [r for r in rows if in_library(r["effect"])]
+    ool = [r for r in rows if not in_library(r["effect"])]
     return {"n_library": len(lib), "n_ool": len(ool),
             "correct_top": sum(r["correct"] for r in lib),
             "correct_top_fundamental": sum(bool(r.get("correct_fundamental")) for r in lib),
@@ -510,8 +528,8 @@ def _scores(rows: list[dict]) -> dict:
 
 
 def _summary(rows: list[dict], wall_s: float, cfg: CampaignConfig) -> dict:
-    lib = [r for r in rows if r["effect"] in LIBRARY]
-    ool = [r for r in rows if r["effect"] not in LIBRARY]
+    lib = [r for r in rows if in_library(r["effect"])]
+    ool = [r for r in rows if not in_library(r["effect"])]
     confusion = {}
     for r in rows:
         row = confusion.setdefault(f"{r['kind']}:{r['effect']}", {})

@@ -42,6 +42,6 @@ Shared (deliberately, as data or physics the diagnosis is meant to assume):
 """
 
 from .abbe import AbbeSettings, abbe_line_profile
-from .generate import CASE_TYPES, make_case
+from .generate import CASE_TYPES, PAIR_CASE_TYPES, make_case
 
-__all__ = ["AbbeSettings", "abbe_line_profile", "CASE_TYPES", "make_case"]
+__all__ = ["AbbeSettings", "abbe_line_profile", "CASE_TYPES", "PAIR_CASE_TYPES", "make_case"]
