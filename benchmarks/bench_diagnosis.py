@@ -6,7 +6,7 @@ injection-recovery campaign. Writes the per-case rows and the summary as JSON (`
         [--profiles extended|minimal] [--no-scenarios] [--out FILE] [--progress FILE.jsonl] [--profile-map-K K]
         [--psf-image] [--types KIND:EFFECT,...] [--discrepancy unmodelled|companions]
         [--n-eff-from nominal|best_fit] [--truth independent|model] [--truth-families FAM,...]
-        [--error-model by_kind|n_eff|two_part]
+        [--error-model by_kind|n_eff|two_part] [--pair-forward]
 
 ``--progress``: every finished case is appended there as a JSON line (partial results
 survive an interrupted run). ``--profiles``: the campaign's line-profile measurement set
@@ -58,8 +58,11 @@ def main(argv=None):
                     help="independent truth's grating families, comma-separated (benchmarks/truth_families.md)")
     ap.add_argument("--error-model", default=Criteria().error_model, choices=ERROR_MODELS,
                     help="the score's error model (Criteria.error_model)")
+    ap.add_argument("--pair-forward", action="store_true",
+                    help="also pair the best single with every other (Criteria.pair_forward)")
     a = ap.parse_args(argv)
-    criteria = dataclasses.replace(CampaignConfig.criteria, n_eff_from=a.n_eff_from, error_model=a.error_model)
+    criteria = dataclasses.replace(CampaignConfig.criteria, n_eff_from=a.n_eff_from, error_model=a.error_model,
+                                   pair_forward=a.pair_forward)
     out = {"scenarios": {}}
     for name in () if a.no_scenarios else ("cryo_astigmatism", "j_repolished", "hk_amplitude"):
         t = time.perf_counter()

@@ -106,6 +106,7 @@ def test_pairs_are_formed_among_the_best_and_from_the_best_with_every_other():
                           ("slit_width", "collimator_wfe")]
     assert pairs3[3:] == [("amplitude_scale", "pupil_shift")]
     assert pairs_to_fit(findings, 1) == [] and pairs_to_fit(findings[:1], 3) == []
+    assert [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 3, forward=False)] == pairs3[:3]
 
 
 def test_a_temperature_whose_mirror_has_no_physical_state_keeps_its_sign(tmp_path):

@@ -22,6 +22,11 @@ class Criteria:
     heldout_ratio: float = 0.5
     pair_extra_bic: float = 10.0
     pair_from: int = 3
+    #: Also pair the best single with every further significant one (one forward-selection
+    #: step, :func:`.ranking.pairs_to_fit`) and grid-search a pair's weaker member beside the
+    #: warm start. Off by default: measured on single-effect profile truths it puts a rescaling
+    #: beside the right effect (``benchmarks/results_pairs.md``).
+    pair_forward: bool = False
     degenerate_bic: float = 2.0
     degenerate_prediction: float = 0.2
     no_gap_ratio: float = 1.3
@@ -47,6 +52,8 @@ class Criteria:
                   "degenerate_bic": (0.0, math.inf), "degenerate_prediction": (0.0, 1.0),
                   "no_gap_ratio": (1.0, math.inf), "no_gap_z": (0.0, math.inf), "heldout_top": (0, 20),
                   "companion_top": (0, 20), "companion_bic": (0.0, math.inf), "absorb_test_bic": (0.0, math.inf)}
+        if not isinstance(self.pair_forward, bool):
+            raise ValueError(f"Criteria: pair_forward={self.pair_forward!r} must be True or False")
         for name, (lo, hi) in ranges.items():
             v = getattr(self, name)
             integer = isinstance(lo, int)

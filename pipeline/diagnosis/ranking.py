@@ -55,12 +55,14 @@ def rank(prob: Problem, nom: FitOutcome, cands, criteria: Criteria, memo: dict) 
         f, fo = fit_effects(prob, nom, (e.name,), criteria, memo=memo)
         findings.append(f)
         fits[f.effect] = fo
-    for a, b in pairs_to_fit(findings, criteria.pair_from):
+    for a, b in pairs_to_fit(findings, criteria.pair_from, criteria.pair_forward):
         names = tuple(sorted(a.effects + b.effects, key=list(LIBRARY).index))
-        # b, the weaker single, is also grid-searched beside a's fit: alone it may have
-        # taken up what a explains and sit in the wrong basin (:func:`.fitting.fit`).
+        # With the forward step, b, the weaker single, is also grid-searched beside a's fit:
+        # alone it may have taken up what a explains and sit in the wrong basin
+        # (:func:`.fitting.fit`). Both are off by default, as measured together.
+        regrid = tuple(b.parameters) if criteria.pair_forward else ()
         f, fo = fit_effects(prob, nom, names, criteria, start={**a.parameters, **b.parameters}, memo=memo,
-                            regrid=tuple(b.parameters))
+                            regrid=regrid)
         findings.append(f)
         fits[f.effect] = fo
     findings.sort(key=lambda f: _rank_key(f, criteria))
@@ -90,21 +92,24 @@ def pair_singles(findings, n: int) -> list:
     return out[:n]
 
 
-def pairs_to_fit(findings, n: int) -> list:
+def pairs_to_fit(findings, n: int, forward: bool = True) -> list:
     """The pairs of singles to fit, better single first: every pair among the ``n`` best
-    of :func:`pair_singles`, and the best one with each further one (none for ``n < 2``).
+    of :func:`pair_singles`, and with ``forward`` the best one with each further one (none
+    for ``n < 2``).
 
     Why the best with every other: a second effect whose signature is small beside the
     first's ranks low on its own (alone it can only take up part of what the first
     explains), and a pair formed only among the best singles never meets it (measured: the
     paper's J scenario, a 1.5x amplitude and a 4 mm pupil shift, under the two-part
     weights: pupil shift alone fifth of the singles, so the pair was never fitted). This
-    is one forward-selection step from the best single."""
+    is one forward-selection step from the best single. It is not the default
+    (``Criteria.pair_forward``): on single-effect profile truths it also puts a rescaling
+    beside the right effect (``benchmarks/results_pairs.md``)."""
     if n < 2:
         return []
     eligible = pair_singles(findings, len(findings))
     pairs = list(itertools.combinations(eligible[:n], 2))
-    return pairs + [(eligible[0], b) for b in eligible[n:]]
+    return pairs + [(eligible[0], b) for b in eligible[n:]] if forward else pairs
 
 
 def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict, cands, c: Criteria,
