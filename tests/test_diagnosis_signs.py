@@ -98,15 +98,15 @@ def test_pairs_are_formed_among_the_best_and_from_the_best_with_every_other():
     findings = [_single("temperature", -120.0), _single("amplitude_scale", -130.0), _single("pupil_shift", -40.0),
                 _single("collimator_wfe", -80.0), _single("slit_width", -90.0), _single("quilt_shape", -500.0),
                 _single("blank_bow", -10.0, significant=False)]
-    pairs = [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2)]
+    pairs = [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2, forward=True)]
     assert pairs == [("amplitude_scale", "slit_width"), ("amplitude_scale", "collimator_wfe"),
                      ("amplitude_scale", "pupil_shift")]
-    pairs3 = [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 3)]
+    pairs3 = [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 3, forward=True)]
     assert pairs3[:3] == [("amplitude_scale", "slit_width"), ("amplitude_scale", "collimator_wfe"),
                           ("slit_width", "collimator_wfe")]
     assert pairs3[3:] == [("amplitude_scale", "pupil_shift")]
-    assert pairs_to_fit(findings, 1) == [] and pairs_to_fit(findings[:1], 3) == []
-    assert [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 3, forward=False)] == pairs3[:3]
+    assert pairs_to_fit(findings, 1, forward=True) == [] and pairs_to_fit(findings[:1], 3, forward=True) == []
+    assert [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 3)] == pairs3[:3]  # default: no forward step
 
 
 def test_a_temperature_whose_mirror_has_no_physical_state_keeps_its_sign(tmp_path):

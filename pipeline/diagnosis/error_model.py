@@ -50,10 +50,10 @@ against 7 of 15 with a map beside the profiles (development seeds,
 against 10 of 12. ``"by_kind"`` (:func:`model_for_kinds`) therefore scores with
 ``two_part`` wherever a line profile is measured and with ``n_eff`` on maps and PSF images.
 The default stays ``n_eff``. With the wider pair search (``Criteria.pair_forward``: the best
-single also paired with every other, :func:`.ranking.pairs_to_fit`), ``two_part`` names both effects of the paper's J scenario
-(a larger quilt amplitude *and* a 4 mm pupil shift, its section 5.3) and of 5 in 9 independent
-truths with two effects, against 3 in 9 for ``n_eff`` (``benchmarks/results_pairs.md``). But the
-errors are measured on the best-ranked finding's residual, which is then more often a pair's:
+single also paired with every other, :func:`.ranking.pairs_to_fit`), ``two_part`` names both
+effects of the paper's J scenario (a larger quilt amplitude *and* a 4 mm pupil shift, its
+section 5.3) and of 5 in 9 independent truths with two effects, against 3 in 9 for ``n_eff``
+(``benchmarks/results_pairs.md``). But the errors are measured on the best-ranked finding's residual, which is then more often a pair's:
 the measured mismatch shrinks, the weights grow, pairs beat single truths (4 of 4 single-effect
 profile cases lost that were 3 of 4 right before), and the error estimate and the pair search
 feed each other.

@@ -92,7 +92,7 @@ def pair_singles(findings, n: int) -> list:
     return out[:n]
 
 
-def pairs_to_fit(findings, n: int, forward: bool = True) -> list:
+def pairs_to_fit(findings, n: int, forward: bool = False) -> list:
     """The pairs of singles to fit, better single first: every pair among the ``n`` best
     of :func:`pair_singles`, and with ``forward`` the best one with each further one (none
     for ``n < 2``).
