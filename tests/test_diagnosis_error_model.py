@@ -9,7 +9,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.engine import Criteria
-from pipeline.diagnosis.error_model import ERROR_MODELS, SIGN_Z, model_for_kinds, sign_is_claimed
+from pipeline.diagnosis.error_model import ERROR_MODELS, SIGN_Z, error_source, model_for_kinds, sign_is_claimed
 from pipeline.diagnosis.noise import two_part_errors
 from optics.zernike import zernike_xy
 
@@ -49,6 +49,19 @@ class _Fit:
 
 class _Prob:
     weights = {"a": 1.0}
+
+
+def test_errors_measured_on_the_best_single():
+    """A pair ranked first would take part of the mismatch into its second member and so
+    shrink the errors that rank it: the errors come from the best single, whatever pairs
+    were tried; a pair only where no single was ranked."""
+    from types import SimpleNamespace as F
+    pair, single, other = (F(effect="a+b", effects=("a", "b")), F(effect="b", effects=("b",)),
+                           F(effect="a", effects=("a",)))
+    assert error_source([pair, single, other]) is single
+    assert error_source([other, pair]) is other
+    assert error_source([pair]) is pair
+    assert error_source([]) is None
 
 
 def test_sign_claimed_only_beyond_what_the_errors_could_do():

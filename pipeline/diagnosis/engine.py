@@ -20,7 +20,7 @@ from .criteria import N_EFF_SOURCES, Criteria
 from .effects import (LIBRARY, SummaryContext, applicable_effects, library_rows, parameter_spec, parameter_units,
                       physical_summary)
 from .amplitude_or_shape import amplitude_degeneracies
-from .error_model import errors_summary, measure_errors, model_for_kinds, two_part_problem, weights_settled
+from .error_model import error_source, errors_summary, measure_errors, model_for_kinds, two_part_problem, weights_settled
 from .finding import Finding, all_effects
 from .fitting import FitOutcome, Problem, fit
 from .forward import ProfileForward, SurfaceForward
@@ -234,7 +234,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo)
     if model == "two_part":
         for _ in range(_N_EFF_PASSES):
-            errs = measure_errors(base_prob, fits[findings[0].effect])
+            errs = measure_errors(base_prob, fits[error_source(findings).effect])
             new = two_part_problem(base_prob, errs)
             if weights_settled(prob, new, _N_EFF_RTOL):
                 break

@@ -14,8 +14,12 @@ weights are ``1 / sqrt(V)`` (absolute: no common factor) and the score is
 ``sum_i RSS_i / V_i + k log N`` with ``N`` the residuals' independent samples.
 
 The errors are first measured on the nominal residual (the conservative start: the
-signal counts as mismatch), then on the residual of the best-ranked finding, and the
-candidates are refitted and re-ranked with them until the weights settle.
+signal counts as mismatch), then on the residual of the best-ranked *single* effect
+(:func:`error_source`), and the candidates are refitted and re-ranked with them until the
+weights settle. A single's residual, not the best finding's: a pair ranked first would
+take part of the mismatch into its second member, shrink the measured mismatch, raise the
+weights and so favour pairs in the next pass; measured on the best single, the errors do
+not depend on which pairs are tried, and a pair must beat what that single leaves.
 
 A sign is claimed only where flipping it costs more than the errors could: the fitted
 and the mirrored solutions differ by predictions ``d_i``; the errors change the cost
@@ -53,10 +57,11 @@ The default stays ``n_eff``. With the wider pair search (``Criteria.pair_forward
 single also paired with every other, :func:`.ranking.pairs_to_fit`), ``two_part`` names both
 effects of the paper's J scenario (a larger quilt amplitude *and* a 4 mm pupil shift, its
 section 5.3) and of 5 in 9 independent truths with two effects, against 3 in 9 for ``n_eff``
-(``benchmarks/results_pairs.md``). But the errors are measured on the best-ranked finding's residual, which is then more often a pair's:
-the measured mismatch shrinks, the weights grow, pairs beat single truths (4 of 4 single-effect
-profile cases lost that were 3 of 4 right before), and the error estimate and the pair search
-feed each other.
+(``benchmarks/results_pairs.md``). Measured on the best-ranked finding's residual, which is
+then more often a pair's, the mismatch shrank, the weights grew, pairs beat single truths (4
+of 4 single-effect profile cases lost that were 3 of 4 right before): the error estimate and
+the pair search fed each other, which is why the errors come from the best single
+(:func:`error_source`).
 """
 
 from __future__ import annotations
@@ -69,7 +74,7 @@ import numpy as np
 from .fitting import FitOutcome, Problem
 from .noise import two_part_errors
 
-__all__ = ["ERROR_MODELS", "SIGN_Z", "model_for_kinds", "measure_errors", "two_part_problem", "weights_settled", "sign_is_claimed",
+__all__ = ["ERROR_MODELS", "SIGN_Z", "model_for_kinds", "error_source", "measure_errors", "two_part_problem", "weights_settled", "sign_is_claimed",
            "errors_summary"]
 
 ERROR_MODELS = ("n_eff", "two_part", "by_kind")
@@ -96,6 +101,23 @@ def model_for_kinds(error_model: str, kinds) -> str:
 
 def _residual(f, fo: FitOutcome) -> np.ndarray:
     return f.residual(fo.parameters, fo.deltas_um.get(f.name, f.delta0_um))
+
+
+def error_source(findings):
+    """The finding whose residual the two-part errors are measured on: the best-ranked
+    one with a single library effect (companions allowed), else the best-ranked one.
+
+    Parameters
+    ----------
+    findings : sequence of Finding
+        Ranked best first.
+
+    Returns
+    -------
+    Finding or None
+        ``None`` for no findings.
+    """
+    return next((f for f in findings if len(f.effects) == 1), findings[0] if findings else None)
 
 
 def measure_errors(prob: Problem, fo: FitOutcome) -> dict:
