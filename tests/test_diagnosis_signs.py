@@ -119,3 +119,42 @@ def test_a_temperature_whose_mirror_has_no_physical_state_keeps_its_sign(tmp_pat
     f = d.finding("temperature")
     assert f.parameters["temperature_offset_K"] > 40.0
     assert "temperature_offset_K" not in f.sign_degenerate
+
+
+class _Bump:
+    """A map-kind forward: a line of amplitude ``a`` at position ``b_mm`` (width 0.5 mm)
+    on a 20 mm axis. Far from the data's bump the cost is flat in ``b_mm``: a warm start
+    there is a wrong basin a local fit cannot leave."""
+
+    kind, n_shift, nuisance_count, delta0_um = "surface", 0, 0, 0.0
+
+    def __init__(self, a, b_mm):
+        self.name = "m"
+        self.x = np.linspace(-10.0, 10.0, 401)
+        self.n = self.x.size
+        self.y = self._model(a, b_mm)
+
+    def _model(self, a, b_mm):
+        return a * np.exp(-0.5 * ((self.x - b_mm) / 0.5) ** 2)
+
+    def residual(self, p, delta_um=0.0, mask=None):
+        r = self.y - self._model(p["a"], p["b_mm"])
+        return r if mask is None else r[mask]
+
+
+def test_regrid_leaves_a_warm_starts_wrong_basin():
+    """``fit(start=..., regrid=...)``: a warm start in a flat wrong basin stays there; with the
+    parameter re-gridded beside it the grid point nearest the truth wins."""
+    from pipeline.diagnosis.effects.base import Parameter
+    from pipeline.diagnosis.fitting import Problem, fit
+
+    f = _Bump(1.5, 4.0)
+    prob = Problem([f], {"m": 1.0}, {"m": float(f.n)})
+    params = (Parameter("a", 1.0, 0.0, 3.0, starts=(1.0,)),
+              Parameter("b_mm", 0.0, -10.0, 10.0, starts=(-8.0, -4.0, 0.0, 4.2, 8.0)))
+    warm = {"a": 1.0, "b_mm": -9.0}
+    stuck = fit(prob, params, start=warm)
+    assert abs(stuck.parameters["b_mm"] + 9.0) < 1.0
+    freed = fit(prob, params, start=warm, regrid=("b_mm",))
+    assert freed.parameters["b_mm"] == pytest.approx(4.0, abs=1e-3)
+    assert freed.parameters["a"] == pytest.approx(1.5, abs=1e-3)
