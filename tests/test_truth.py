@@ -303,6 +303,33 @@ def test_a_pair_case_is_correct_only_when_both_effects_are_named():
     assert rec["per_parameter"] == pytest.approx(0.1) and rec["vector"] == rec["per_parameter"]
 
 
+def test_a_pair_with_the_other_rescaling_counts_where_the_rescalings_are_degenerate():
+    """On profiles of one blank a temperature offset and an amplitude scale are one change of
+    the quilt; the pair search forms only the better rescaling's pair. Where the singles were
+    found degenerate, the pair lists the other rescaling's pair as degenerate, and an
+    amplitude + collimator truth named temperature + collimator is correct; where they were
+    not (a map at another temperature tells them apart) it is not."""
+    from pipeline.diagnosis.campaign import score_case
+    from pipeline.diagnosis.engine import Finding
+    from pipeline.diagnosis.identifiability import swapped_rescalings
+
+    def f(effects, deg=()):
+        return Finding("+".join(effects), effects, {}, {}, 0.0, -50.0, 1.0, 0.5, 0.5, 0.5, degenerate_with=deg)
+
+    pair = ("temperature", "collimator_wfe")
+    told = swapped_rescalings([f(pair), f(("temperature",), ("amplitude_scale",)),
+                               f(("amplitude_scale",), ("temperature",)), f(("collimator_wfe",))])
+    assert told[0].degenerate_with == ("amplitude_scale+collimator_wfe",)
+    assert [g.degenerate_with for g in told[1:]] == [("amplitude_scale",), ("temperature",), ()]
+    truth = "amplitude_scale+collimator_wfe"
+    assert score_case("explained", told[0], truth) == (True, [])
+    apart = swapped_rescalings([f(pair), f(("temperature",)), f(("amplitude_scale",))])
+    assert apart[0].degenerate_with == () and score_case("explained", apart[0], truth) == (False, [])
+    # a non-rescaling degeneracy of a member is not carried over to the pair
+    other = swapped_rescalings([f(("pupil_shift", "slit_width")), f(("pupil_shift",), ("collimator_wfe",))])
+    assert other[0].degenerate_with == ()
+
+
 def test_pair_case_types_are_opt_in_and_parse():
     """The independent truth's pair cases are not among the default case types; they parse
     and are accepted as ``only_types``; the model truth has none."""

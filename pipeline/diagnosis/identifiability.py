@@ -19,7 +19,7 @@ from .finding import Finding, all_effects
 from .fitting import FitOutcome, Problem, fit
 from .ranking import parameters_of, predictions
 
-__all__ = ["degeneracies", "sign_degeneracies", "absorbed", "unconstrained"]
+__all__ = ["degeneracies", "swapped_rescalings", "sign_degeneracies", "absorbed", "unconstrained"]
 
 
 def unconstrained(f: Finding, half_widths: dict) -> tuple:
@@ -48,6 +48,34 @@ def degeneracies(findings, fits, prob, c: Criteria):
             if den > 0 and math.sqrt(num / den) < c.degenerate_prediction:
                 deg.append(b.effect)
         out.append(a if not deg else replace(a, degenerate_with=tuple(deg)))
+    return swapped_rescalings(out)
+
+
+def swapped_rescalings(findings) -> list:
+    """Pairs with a rescaling member also listed as degenerate with the pair that has the
+    other rescaling in its place, where the two rescalings' singles were found degenerate.
+
+    Why: the pair search forms only the better of two rescalings' pairs
+    (:func:`.ranking.pair_singles`: on one blank a temperature offset and an amplitude scale
+    are the same change of the quilt), so the other pair is never fitted and cannot be
+    compared; that the data cannot tell the rescalings apart was measured on the singles,
+    and a pair adds the same second member to either."""
+    singles = {f.effects[0]: f for f in findings if len(f.effects) == 1}
+    order = list(LIBRARY)
+    out = []
+    for f in findings:
+        extra = []
+        if len(f.effects) > 1:
+            for r in f.effects:
+                if not LIBRARY[r].rescales or r not in singles:
+                    continue
+                for o in singles[r].degenerate_with:
+                    if "+" in o or not LIBRARY[o].rescales or o in f.effects:
+                        continue
+                    swapped = "+".join(sorted((o if e == r else e for e in f.effects), key=order.index))
+                    if swapped not in f.degenerate_with:
+                        extra.append(swapped)
+        out.append(replace(f, degenerate_with=tuple(dict.fromkeys(f.degenerate_with + tuple(extra)))) if extra else f)
     return out
 
 
