@@ -57,11 +57,8 @@ The default stays ``n_eff``. With the wider pair search (``Criteria.pair_forward
 single also paired with every other, :func:`.ranking.pairs_to_fit`), ``two_part`` names both
 effects of the paper's J scenario (a larger quilt amplitude *and* a 4 mm pupil shift, its
 section 5.3) and of 5 in 9 independent truths with two effects, against 3 in 9 for ``n_eff``
-(``benchmarks/results_pairs.md``). Measured on the best-ranked finding's residual, which is
-then more often a pair's, the mismatch shrank, the weights grew, pairs beat single truths (4
-of 4 single-effect profile cases lost that were 3 of 4 right before): the error estimate and
-the pair search fed each other, which is why the errors come from the best single
-(:func:`error_source`).
+(``benchmarks/results_pairs.md``). But that wider search also names single-effect truths as
+pairs (a pupil shift as amplitude + pupil shift), so it is off by default too.
 """
 
 from __future__ import annotations
