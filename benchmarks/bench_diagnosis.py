@@ -6,14 +6,16 @@ injection-recovery campaign. Writes the per-case rows and the summary as JSON (`
         [--profiles extended|minimal] [--no-scenarios] [--out FILE] [--progress FILE.jsonl] [--profile-map-K K]
         [--psf-image] [--types KIND:EFFECT,...] [--discrepancy unmodelled|companions]
         [--n-eff-from nominal|best_fit] [--truth independent|model] [--truth-families FAM,...]
-        [--error-model by_kind|n_eff|two_part] [--pair-forward]
+        [--error-model by_kind|n_eff|two_part] [--pair-forward] [--pair-from N]
 
 ``--progress``: every finished case is appended there as a JSON line (partial results
 survive an interrupted run). ``--profiles``: the campaign's line-profile measurement set
 (:data:`pipeline.diagnosis.campaign.PROFILE_SETS`). ``--profile-map-K 128``: the line-profile
 cases also get a 128 K map of the same blank (``CampaignConfig.profile_map_K``).
 ``--truth-families pocket_jitter,sharp_ribs``: the independent truth's grating families
-(``CampaignConfig.truth_families``; default ``sum_mix,product_mix``).
+(``CampaignConfig.truth_families``; default ``sum_mix,product_mix``). ``--pair-from``: how
+many of the best singles are paired (``Criteria.pair_from``; the campaign's default is 2, the
+diagnosis's own 3).
 """
 
 from __future__ import annotations
@@ -60,9 +62,14 @@ def main(argv=None):
                     help="the score's error model (Criteria.error_model)")
     ap.add_argument("--pair-forward", action="store_true",
                     help="also pair the best single with every other (Criteria.pair_forward)")
+    ap.add_argument("--pair-from", type=int, default=CampaignConfig.criteria.pair_from,
+                    help="pairs among this many best singles (Criteria.pair_from; campaign default %(default)s)")
     a = ap.parse_args(argv)
-    criteria = dataclasses.replace(CampaignConfig.criteria, n_eff_from=a.n_eff_from, error_model=a.error_model,
-                                   pair_forward=a.pair_forward)
+    try:
+        criteria = dataclasses.replace(CampaignConfig.criteria, n_eff_from=a.n_eff_from, error_model=a.error_model,
+                                       pair_forward=a.pair_forward, pair_from=a.pair_from)
+    except ValueError as exc:
+        ap.error(str(exc))
     out = {"scenarios": {}}
     for name in () if a.no_scenarios else ("cryo_astigmatism", "j_repolished", "hk_amplitude"):
         t = time.perf_counter()
