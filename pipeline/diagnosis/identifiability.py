@@ -17,7 +17,7 @@ from .effects import LIBRARY
 from .error_model import sign_is_claimed
 from .finding import Finding, all_effects
 from .fitting import FitOutcome, Problem, fit
-from .ranking import parameters_of, predictions
+from .ranking import in_library_order, parameters_of, predictions
 
 __all__ = ["degeneracies", "swapped_rescalings", "sign_degeneracies", "absorbed", "unconstrained"]
 
@@ -61,7 +61,6 @@ def swapped_rescalings(findings) -> list:
     compared; that the data cannot tell the rescalings apart was measured on the singles,
     and a pair adds the same second member to either."""
     singles = {f.effects[0]: f for f in findings if len(f.effects) == 1}
-    order = list(LIBRARY)
     out = []
     for f in findings:
         extra = []
@@ -70,9 +69,9 @@ def swapped_rescalings(findings) -> list:
                 if not LIBRARY[r].rescales or r not in singles:
                     continue
                 for o in singles[r].degenerate_with:
-                    if "+" in o or not LIBRARY[o].rescales or o in f.effects:
+                    if o not in LIBRARY or not LIBRARY[o].rescales or o in f.effects:  # pairs, labels
                         continue
-                    swapped = "+".join(sorted((o if e == r else e for e in f.effects), key=order.index))
+                    swapped = "+".join(in_library_order(o if e == r else e for e in f.effects))
                     if swapped not in f.degenerate_with:
                         extra.append(swapped)
         out.append(replace(f, degenerate_with=tuple(dict.fromkeys(f.degenerate_with + tuple(extra)))) if extra else f)

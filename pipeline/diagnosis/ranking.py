@@ -14,7 +14,15 @@ from .finding import Finding
 from .fitting import FitOutcome, Problem, fit
 from .gap import excesses, recount
 
-__all__ = ["parameters_of", "fit_effects", "rank", "pair_singles", "pairs_to_fit", "predictions", "mismatch_errors"]
+__all__ = ["parameters_of", "in_library_order", "fit_effects", "rank", "pair_singles", "pairs_to_fit", "predictions",
+           "mismatch_errors"]
+
+
+def in_library_order(effects) -> tuple:
+    """Library effects ``effects`` in the library's order: a combination's members as the
+    diagnosis names it (``"+".join`` of them is the finding's ``effect``)."""
+    order = list(LIBRARY)
+    return tuple(sorted(effects, key=order.index))
 
 
 def parameters_of(names, forwards) -> tuple:
@@ -56,7 +64,7 @@ def rank(prob: Problem, nom: FitOutcome, cands, criteria: Criteria, memo: dict) 
         findings.append(f)
         fits[f.effect] = fo
     for a, b in pairs_to_fit(findings, criteria.pair_from, criteria.pair_forward):
-        names = tuple(sorted(a.effects + b.effects, key=list(LIBRARY).index))
+        names = in_library_order(a.effects + b.effects)
         # With the forward step, b, the weaker single, is also grid-searched beside a's fit:
         # alone it may have taken up what a explains and sit in the wrong basin
         # (:func:`.fitting.fit`). Both are off by default, as measured together.
