@@ -107,6 +107,14 @@ def test_pairs_are_formed_among_the_best_and_from_the_best_with_every_other():
     assert pairs3[3:] == [("amplitude_scale", "pupil_shift")]
     assert pairs_to_fit(findings, 1, forward=True) == [] and pairs_to_fit(findings[:1], 3, forward=True) == []
     assert [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 3)] == pairs3[:3]  # default: no forward step
+    # The forward step adds no rescaling: it pairs the best single with a rescaling only
+    # from among the n best.
+    findings[2] = _single("pupil_shift", -140.0)
+    assert [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2, forward=True)] == [
+        ("pupil_shift", "amplitude_scale"), ("pupil_shift", "slit_width"), ("pupil_shift", "collimator_wfe")]
+    findings[0], findings[1] = _single("temperature", -20.0), _single("amplitude_scale", -60.0)
+    assert [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2, forward=True)] == [
+        ("pupil_shift", "slit_width"), ("pupil_shift", "collimator_wfe")]
 
 
 def test_a_temperature_whose_mirror_has_no_physical_state_keeps_its_sign(tmp_path):
