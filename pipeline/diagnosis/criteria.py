@@ -22,10 +22,12 @@ class Criteria:
     heldout_ratio: float = 0.5
     pair_extra_bic: float = 10.0
     pair_from: int = 3
-    #: Also pair the best single with every further significant one (one forward-selection
-    #: step, :func:`.ranking.pairs_to_fit`) and grid-search a pair's weaker member beside the
-    #: warm start. Off by default: measured on single-effect profile truths it puts a rescaling
-    #: beside the right effect (``benchmarks/results_pairs.md``).
+    #: Also pair the best single with every further significant one that is not a rescaling
+    #: (one forward-selection step, :func:`.ranking.pairs_to_fit`) and grid-search a pair's
+    #: weaker member beside the warm start. Off by default: measured on single-effect profile
+    #: truths the weak second member it adds takes up what the library does not model (a
+    #: rescaling beside the right effect; without rescalings, a pupil shift beside the
+    #: amplitude on out-of-library profiles; ``benchmarks/results_pairs.md``).
     pair_forward: bool = False
     degenerate_bic: float = 2.0
     degenerate_prediction: float = 0.2

@@ -58,7 +58,8 @@ single also paired with every other, :func:`.ranking.pairs_to_fit`), ``two_part`
 effects of the paper's J scenario (a larger quilt amplitude *and* a 4 mm pupil shift, its
 section 5.3) and of 5 in 9 independent truths with two effects, against 3 in 9 for ``n_eff``
 (``benchmarks/results_pairs.md``). But that wider search also names single-effect truths as
-pairs (a pupil shift as amplitude + pupil shift), so it is off by default too.
+pairs (a pupil shift as amplitude + pupil shift; with no rescaling added, out-of-library
+profiles as amplitude + pupil shift), so it is off by default too.
 """
 
 from __future__ import annotations

@@ -92,7 +92,7 @@ def pair_singles(findings, n: int) -> list:
     out. The other one still competes as a single."""
     out, rescaling = [], False
     for f in sorted((f for f in findings if f.significant and not _background_only(f)), key=lambda f: f.score):
-        r = any(LIBRARY[e].rescales for e in f.effects)
+        r = _rescales(f)
         if r and rescaling:
             continue
         rescaling |= r
@@ -125,7 +125,12 @@ def pairs_to_fit(findings, n: int, forward: bool = False) -> list:
     pairs = list(itertools.combinations(eligible[:n], 2))
     if not forward:
         return pairs
-    return pairs + [(eligible[0], b) for b in eligible[n:] if not any(LIBRARY[e].rescales for e in b.effects)]
+    return pairs + [(eligible[0], b) for b in eligible[n:] if not _rescales(b)]
+
+
+def _rescales(f: Finding) -> bool:
+    """Whether one of ``f``'s effects rescales the deformation (``Effect.rescales``)."""
+    return any(LIBRARY[e].rescales for e in f.effects)
 
 
 def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict, cands, c: Criteria,
