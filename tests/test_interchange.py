@@ -21,7 +21,8 @@ from pipeline.io.zernike import read_zernike_list, write_zernike_list
 #   .dat  12 significant digits of the sag in mm  -> < 1e-11 um
 #   .csv  12 significant digits of the sag in um  -> < 1e-11 um
 #   .nc / .npz  float64, exact
-TOL_UM = {".int": 0.5 * 3.5 / 32766 * (1 + 1e-5), ".dat": 1e-11, ".csv": 1e-11, ".nc": 0.0, ".npz": 0.0}
+TOL_UM = {".int": 0.5 * 3.5 / 32766 * (1 + 1e-5), ".dat": 1e-11, ".csv": 1e-11, ".nc": 0.0, ".npz": 0.0,
+          ".fits": 0.0, ".fit": 0.0, ".fts": 0.0}
 
 
 @pytest.fixture
@@ -220,7 +221,7 @@ def test_malformed_file_names_file_and_line(tmp_path, name, make, pattern):
 
 # ------------------------------------------------------------------ bad input
 def test_unknown_suffix_lists_valid(tmp_path, quadrant_map):
-    with pytest.raises(ValueError, match=r"\.xyz.*\['\.csv', '\.dat', '\.int', '\.nc', '\.npz'\]"):
+    with pytest.raises(ValueError, match=r"\.xyz.*\['\.csv', '\.dat', '\.fit', '\.fits', '\.fts', '\.int', '\.nc', '\.npz'\]"):
         ic.write_sag_map(quadrant_map, tmp_path / "m.xyz")
     with pytest.raises(ValueError, match=r"unknown sag-map format '\.txt'"):
         ic.read_sag_map(tmp_path / "m.txt")

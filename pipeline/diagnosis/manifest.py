@@ -12,7 +12,7 @@ A manifest names the nominal simulation and the measurements it is compared with
     sag_file = "nominal.npz"  # optional: use this map (at cold_K) instead of solving the FEA
 
     [[measurement]]
-    kind = "surface"          # cold-minus-warm sag map (CODE V .int, Zemax .dat, CSV, .nc, .npz)
+    kind = "surface"          # cold-minus-warm sag map (CODE V .int, Zemax/Zygo .dat, CSV, .nc, .npz, .fits)
     file = "cryo_map.int"
     temperature_K = 128
     aperture_diameter_mm = 137
@@ -22,7 +22,8 @@ A manifest names the nominal simulation and the measurements it is compared with
 
     [[measurement]]
     kind = "line_profile"     # CSV offset_um,intensity (offset in nm/mm, offset_px in 18 µm pixels,
-                              # or wavelength_nm through the grating's dispersion at the line)
+                              # or wavelength_nm through the grating's dispersion at the line),
+                              # or FITS (1-D spectrum with a WCS axis, or a table)
     file = "J_1p25_250mas.csv"
     grating = "J"
     order = -2
@@ -32,7 +33,7 @@ A manifest names the nominal simulation and the measurements it is compared with
 
     [[measurement]]
     kind = "psf_image"        # image of a point source (pinhole at the slit centre)
-    file = "J_1p25_psf.csv"   # CSV x_um,y_um,intensity (x dispersion, y along the slit) or .npz
+    file = "J_1p25_psf.csv"   # CSV x_um,y_um,intensity (x dispersion, y along the slit), .npz or FITS
     grating = "J"
     order = -2
     wavelength_um = 1.25
@@ -431,7 +432,7 @@ def load_manifest(path_or_obj, allow_outside: bool = False) -> Manifest:
 
 def _read_surface(m: Measurement) -> SurfaceData:
     from pipeline.io.registry import read_sag_map
-    from pipeline.io.codev import GridUnknownError
+    from pipeline.io.gridding import GridUnknownError
 
     try:
         sm = read_sag_map(m.file, **m.read_options)
@@ -479,7 +480,7 @@ def recentre(coords: np.ndarray, unit_peak: np.ndarray, beyond_um: float) -> flo
 
 
 def _read_profile(m: Measurement) -> ProfileData:
-    from pipeline.io.measured import read_line_profile
+    from pipeline.io.registry import read_measured
 
     from optics.grating import GRATINGS, SPIFFI
 
@@ -488,7 +489,8 @@ def _read_profile(m: Measurement) -> ProfileData:
     g = GRATINGS[str(m.grating).upper().replace("+", "")]
     dispersion = float(g.angular_dispersion_rad_per_um(m.wavelength_um, m.order)) * SPIFFI.camera_focal_mm * 1e3
     try:
-        u, y = read_line_profile(m.file, normalise=False, pixel_um=SPIFFI.pixel_um, dispersion_um_per_um=dispersion)
+        u, y = read_measured("line profile", m.file, normalise=False, pixel_um=SPIFFI.pixel_um,
+                             dispersion_um_per_um=dispersion)
     except ValueError as exc:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
     if u.size < 10:
@@ -500,10 +502,12 @@ def _read_profile(m: Measurement) -> ProfileData:
 
 
 def _read_psf_image(m: Measurement) -> PsfImageData:
-    from pipeline.io.measured import read_psf_image
+    from pipeline.io.registry import read_measured
 
     try:
-        x, y, v = read_psf_image(m.file)
+        # a frame in detector pixels is sampled at its pixel's pitch; a focal-plane image
+        # (pixel_um = 0) has no such pitch and needs a WCS in µm
+        x, y, v = read_measured("psf image", m.file, pixel_um=m.pixel_um or None)
     except ValueError as exc:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
     if m.noise_rel is None:

@@ -67,6 +67,7 @@ from optics.sagmap import SagMap
 from pipeline.io.codev_header import DATA_TYPES, parse_keywords, split_int_file
 from pipeline.io.codev_quantity import check_request, grating_wfr_to_sag_factor, sag_factor
 from pipeline.io.common import atomic_write, parse_error
+from pipeline.io.gridding import GridUnknownError, grid_from_options
 
 __all__ = ["GridUnknownError", "write_codev_int", "read_codev_int", "grating_wfr_to_sag_factor", "choose_ssz",
            "MAX_COUNT", "CODEV_NDA"]
@@ -176,33 +177,10 @@ def write_codev_int(
     return path
 
 
-class GridUnknownError(ValueError):
-    """A CODE V INT file without a physical grid size (no EXTENT_MM title, no argument).
-
-    ``problem`` says so; the message adds the remedy of :func:`read_codev_int`'s caller
-    (its ``extent_mm`` / ``spacing_mm`` arguments). Front ends that spell these otherwise
-    (a manifest key, none on the command line) re-word it with :meth:`with_remedy`."""
-
-    def __init__(self, problem: str):
-        self.problem = problem
-        super().__init__(f"{problem}; pass extent_mm=(xmin, xmax, ymin, ymax) or spacing_mm (mm)")
-
-    def with_remedy(self, remedy: str) -> ValueError:
-        return ValueError(f"{self.problem}; {remedy}")
-
-
 def _grid_coordinates(path, nx, ny, title, extent_mm, spacing_mm):
-    if extent_mm is not None:
-        x0, x1, y0, y1 = (float(v) for v in extent_mm)
-        if not (x1 > x0 and y1 > y0):
-            raise ValueError(f"extent_mm={tuple(extent_mm)} must be (xmin, xmax, ymin, ymax) with max > min")
-        return np.linspace(x0, x1, nx), np.linspace(y0, y1, ny), "extent_mm argument"
-    if spacing_mm is not None:
-        dx, dy = (spacing_mm, spacing_mm) if np.isscalar(spacing_mm) else tuple(spacing_mm)
-        if not (dx > 0 and dy > 0):
-            raise ValueError(f"spacing_mm={spacing_mm!r} must be > 0 (one value or (dx, dy))")
-        hx, hy = 0.5 * (nx - 1) * dx, 0.5 * (ny - 1) * dy
-        return np.linspace(-hx, hx, nx), np.linspace(-hy, hy, ny), "spacing_mm argument, centred"
+    given = grid_from_options(nx, ny, extent_mm, spacing_mm)
+    if given is not None:
+        return given
     m = _EXTENT_RE.search(title)
     if m:
         try:

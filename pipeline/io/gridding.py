@@ -18,7 +18,7 @@ from scipy.spatial import QhullError, cKDTree
 from optics.triangulation import linear_on_grid
 
 __all__ = ["GRID_TOLERANCE", "MAX_GRID_NODES", "SAG_UNITS_TO_UM", "LENGTH_UNITS_TO_MM", "grid_points",
-           "detect_axis", "sag_unit_factor", "length_unit_factor"]
+           "detect_axis", "sag_unit_factor", "length_unit_factor", "GridUnknownError", "grid_from_options"]
 
 #: A coordinate is on the grid if it lies within this fraction of the step of a node:
 #: far above print noise (6 significant digits of a 100 mm coordinate: 5e-5 mm), far
@@ -208,3 +208,43 @@ def _scattered(x, y, s, spacing_mm, source):
             "spacing_mm": [spacing_mm, spacing_mm], "n_points": int(x.size)}
     return gx, gy, sag, meta
 
+
+
+class GridUnknownError(ValueError):
+    """A sag-map file without a physical grid size (a CODE V INT without an EXTENT_MM
+    title, a FITS image without a length WCS) and no reader option giving one.
+
+    ``problem`` says so; the message adds the remedy of :func:`read_codev_int`'s caller
+    (its ``extent_mm`` / ``spacing_mm`` options). Front ends that spell these otherwise
+    (a manifest key, none on the command line) re-word it with :meth:`with_remedy`."""
+
+    def __init__(self, problem: str):
+        self.problem = problem
+        super().__init__(f"{problem}; pass extent_mm=(xmin, xmax, ymin, ymax) or spacing_mm (mm)")
+
+    def with_remedy(self, remedy: str) -> ValueError:
+        return ValueError(f"{self.problem}; {remedy}")
+
+
+def grid_from_options(nx: int, ny: int, extent_mm=None, spacing_mm=None) -> tuple | None:
+    """Sample coordinates (mm) of an ``nx`` x ``ny`` grid whose file carries no lateral
+    scale, from a reader's options: ``extent_mm = (x0, x1, y0, y1)`` (first and last
+    sample centres) or ``spacing_mm`` (one value or ``(dx, dy)``, grid centred on 0).
+
+    Returns
+    -------
+    (x_mm, y_mm, source) or None
+        None when neither option is given (the caller then raises :class:`GridUnknownError`).
+    """
+    if extent_mm is not None:
+        x0, x1, y0, y1 = (float(v) for v in extent_mm)
+        if not (x1 > x0 and y1 > y0):
+            raise ValueError(f"extent_mm={tuple(extent_mm)} must be (xmin, xmax, ymin, ymax) with max > min")
+        return np.linspace(x0, x1, nx), np.linspace(y0, y1, ny), "extent_mm argument"
+    if spacing_mm is not None:
+        dx, dy = (spacing_mm, spacing_mm) if np.isscalar(spacing_mm) else tuple(spacing_mm)
+        if not (dx > 0 and dy > 0):
+            raise ValueError(f"spacing_mm={spacing_mm!r} must be > 0 (one value or (dx, dy))")
+        hx, hy = 0.5 * (nx - 1) * dx, 0.5 * (ny - 1) * dy
+        return np.linspace(-hx, hx, nx), np.linspace(-hy, hy, ny), "spacing_mm argument, centred"
+    return None

@@ -15,7 +15,8 @@ import numpy as np
 
 from pipeline.io.common import atomic_write, parse_error, read_csv_choices, read_csv_columns
 
-__all__ = ["PIXEL_OFFSET_COLUMNS", "WAVELENGTH_COLUMNS", "read_line_profile", "read_psf_image", "write_line_profile_csv", "write_psf_image_csv"]
+__all__ = ["PIXEL_OFFSET_COLUMNS", "WAVELENGTH_COLUMNS", "profile_offsets_um", "checked_profile",
+           "checked_psf_image", "read_line_profile", "read_psf_image", "write_line_profile_csv", "write_psf_image_csv"]
 
 
 #: Column names of offsets given in detector pixels (after ``[px]`` -> ``_px``).
@@ -24,6 +25,30 @@ PIXEL_OFFSET_COLUMNS = ("offset_px", "offset_pixel", "offset_pix", "pixel", "px"
 
 #: Column names of a profile's wavelength axis (any length unit: ``wavelength_nm``, ``lambda [nm]``).
 WAVELENGTH_COLUMNS = ("wavelength_um", "lambda_um", "wave_um")
+
+
+def profile_offsets_um(values: np.ndarray, axis: str, path: Path, pixel_um: float | None,
+                       dispersion_um_per_um: float | None, source: str = "") -> np.ndarray:
+    """Offsets (µm along the dispersion) of a profile's axis ``values``: ``axis`` is
+    ``"offset_um"`` (already a length in µm), ``"pixel"`` (detector pixels, times
+    ``pixel_um``) or ``"wavelength_um"`` (times ``dispersion_um_per_um``, about the
+    median wavelength). A missing conversion is refused naming it, the file and
+    ``source`` (where the axis came from, e.g. ``"column 'pixel'"``)."""
+    where = f" ({source})" if source else ""
+    v = np.asarray(values, float)
+    if axis == "pixel":
+        if pixel_um is None or not (np.isfinite(pixel_um) and pixel_um > 0):
+            raise parse_error(path, None, f"offsets in detector pixels{where} need pixel_um, the pixel pitch in µm (> 0); "
+                                          f"got pixel_um={pixel_um!r}")
+        return v * pixel_um
+    if axis == "wavelength_um":
+        if dispersion_um_per_um is None or not (np.isfinite(dispersion_um_per_um) and dispersion_um_per_um != 0):
+            raise parse_error(path, None, f"a wavelength axis{where} needs the linear dispersion (detector µm per µm of "
+                                          f"wavelength, signed); got {dispersion_um_per_um!r}")
+        return (v - np.median(v)) * dispersion_um_per_um
+    if axis != "offset_um":
+        raise ValueError(f"axis={axis!r} must be one of 'offset_um', 'pixel', 'wavelength_um'")
+    return v
 
 
 def _profile_columns(path: Path, pixel_um: float | None,
@@ -35,16 +60,8 @@ def _profile_columns(path: Path, pixel_um: float | None,
             f"axis {WAVELENGTH_COLUMNS[0]!r} (any length unit)")
     v, lines, (name, _) = read_csv_choices(
         path, "line profile", (("offset_um", *PIXEL_OFFSET_COLUMNS, *WAVELENGTH_COLUMNS), ("intensity",)), hint)
-    if name in PIXEL_OFFSET_COLUMNS:
-        if pixel_um is None or not (np.isfinite(pixel_um) and pixel_um > 0):
-            raise parse_error(path, None, f"offsets in detector pixels (column {name!r}) need pixel_um, the "
-                                          f"pixel pitch in µm (> 0); got pixel_um={pixel_um!r}")
-        v[:, 0] *= pixel_um
-    elif name in WAVELENGTH_COLUMNS:
-        if dispersion_um_per_um is None or not (np.isfinite(dispersion_um_per_um) and dispersion_um_per_um != 0):
-            raise parse_error(path, None, f"a wavelength axis (column {name!r}) needs the linear dispersion "
-                                          f"(detector µm per µm of wavelength, signed); got {dispersion_um_per_um!r}")
-        v[:, 0] = (v[:, 0] - np.median(v[:, 0])) * dispersion_um_per_um
+    axis = "pixel" if name in PIXEL_OFFSET_COLUMNS else "wavelength_um" if name in WAVELENGTH_COLUMNS else "offset_um"
+    v[:, 0] = profile_offsets_um(v[:, 0], axis, path, pixel_um, dispersion_um_per_um, f"column {name!r}")
     return v, lines
 
 
@@ -90,11 +107,22 @@ def read_line_profile(path: str | Path, normalise: bool = True, pixel_um: float 
     """
     path = Path(path)
     v, lines = _profile_columns(path, pixel_um, dispersion_um_per_um)
+    return checked_profile(path, v[:, 0], v[:, 1], normalise, lines)
+
+
+def checked_profile(path: Path, offset_um, intensity, normalise: bool = True,
+                    lines: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A profile's samples as every reader returns them: sorted by offset, samples at one
+    offset averaged, refused (naming ``path`` and, where given, the line) for fewer than 5
+    distinct offsets, a non-finite value or a total flux <= 0; divided by the flux when
+    ``normalise``."""
+    v = np.column_stack([np.asarray(offset_um, float).ravel(), np.asarray(intensity, float).ravel()])
     if v.shape[0] < 5:
         raise parse_error(path, None, f"needs >= 5 samples, found {v.shape[0]}")
     nonfinite = ~np.isfinite(v).all(axis=1)
     if nonfinite.any():
-        raise parse_error(path, int(lines[nonfinite][0]), "offset_um and intensity must be finite numbers")
+        where = int(lines[nonfinite][0]) if lines is not None else None
+        raise parse_error(path, where, "offset_um and intensity must be finite numbers")
     # samples at one offset (exposures merged into one table) are averaged
     x, inverse = np.unique(v[:, 0], return_inverse=True)
     y = np.bincount(inverse, weights=v[:, 1]) / np.bincount(inverse)
@@ -196,6 +224,16 @@ def read_psf_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray
         lines = np.zeros(v.shape[0], int)
     else:
         v, lines = read_csv_columns(path, "PSF image", ("x_um", "y_um", "intensity"))
+    return checked_psf_image(path, v, lines)
+
+
+def checked_psf_image(path: Path, v: np.ndarray, lines: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An image's points ``v[:, (x_um, y_um, intensity)]`` as every reader returns them:
+    sorted by (y, x), refused (naming ``path`` and, where given, the line) for fewer than
+    25 samples, a non-finite value, a duplicate point or a total flux <= 0."""
+    v = np.asarray(v, float)
+    lines = np.zeros(v.shape[0], int) if lines is None else np.asarray(lines)
     line = (lambda k: int(lines[k]) if lines[k] else None)
     if v.shape[0] < 25:
         raise parse_error(path, None, f"needs >= 25 samples, found {v.shape[0]}")

@@ -35,9 +35,12 @@ from pathlib import Path
 from typing import Callable
 
 from optics.sagmap import SagMap
-from pipeline.io.codev import GridUnknownError, read_codev_int, write_codev_int
+from pipeline.io.codev import read_codev_int, write_codev_int
 from pipeline.io.codev_zfr import read_codev_zernike, write_codev_zernike
 from pipeline.io.fe import read_fe_result
+from pipeline.io.fits import (FITS_SUFFIXES, read_line_profile_fits, read_psf_image_fits, read_sag_fits,
+                              write_sag_fits)
+from pipeline.io.gridding import GridUnknownError
 from pipeline.io.measured import read_line_profile, read_psf_image, write_line_profile_csv, write_psf_image_csv
 from pipeline.io.plain import (read_sag_csv, read_sag_netcdf, read_sag_npz, write_sag_csv, write_sag_netcdf,
                                write_sag_npz)
@@ -46,7 +49,7 @@ from pipeline.io.zernike import read_zernike_list, write_zernike_list
 from pipeline.io.zygo import is_zygo_dat, read_zygo_ascii, read_zygo_dat, read_zygo_datx
 
 __all__ = ["KINDS", "Format", "FORMATS", "SAG_FORMATS", "SAG_READERS", "formats", "format_table", "write_sag_map", "read_sag_map",
-           "load_sag_map"]
+           "load_sag_map", "read_measured"]
 
 #: What a file holds.
 KINDS = ("sag map", "zernike list", "line profile", "psf image", "fe result")
@@ -108,6 +111,8 @@ FORMATS: tuple[Format, ...] = (
     Format("sag map", (".nc",), "NetCDF4 sag_um[y_mm, x_mm]", read_sag_netcdf, write_sag_netcdf,
            "float64, exact; units attributes honoured"),
     Format("sag map", (".npz",), "NumPy arrays x_mm, y_mm, sag_um", read_sag_npz, write_sag_npz, "float64, exact"),
+    Format("sag map", FITS_SUFFIXES, "FITS image sag[y, x], BUNIT, linear WCS", read_sag_fits, write_sag_fits,
+           "float64, exact; BLANK/NaN no data; a map in pixels needs spacing_mm or extent_mm"),
     Format("zernike list", (".txt",), "project Zernike list (Fringe or Noll, header says which)", read_zernike_list,
            write_zernike_list, "self-describing: convention, normalisation, radius"),
     Format("zernike list", (".int",), "CODE V Zernike deck (ZFR), Fringe order", read_codev_zernike,
@@ -116,8 +121,12 @@ FORMATS: tuple[Format, ...] = (
            write_zemax_zernike, "Extra Data Editor order, mm"),
     Format("line profile", (".csv",), "measured line profile offset_um,intensity", read_line_profile,
            write_line_profile_csv, "counts, pedestal, negative noise, any grid accepted; written exact"),
+    Format("line profile", FITS_SUFFIXES, "FITS 1-D spectrum (WCS axis) or profile table", read_line_profile_fits,
+           None, "wavelength, length or pixel axis; NaN samples masked"),
     Format("psf image", (".csv", ".npz"), "measured point-source image x_um,y_um,intensity", read_psf_image,
            write_psf_image_csv, "counts, pedestal, negative noise, any grid accepted"),
+    Format("psf image", FITS_SUFFIXES, "FITS 2-D image (NAXIS1 dispersion, NAXIS2 slit)", read_psf_image_fits,
+           None, "length or pixel axes; NaN/BLANK pixels masked"),
     Format("fe result", (".vtu", ".vtk", ".xdmf", ".exo", ".e", ".msh", ".inp", ".bdf", ".nas"),
            "another FE solver's mesh with nodal displacements (meshio)", read_fe_result, None,
            ".inp/.bdf/.nas with a node_id,ux,uy,uz CSV; cryograting import-fe"),
@@ -224,6 +233,29 @@ def read_sag_map(path: str | Path, **options) -> SagMap:
     if not path.exists():
         raise ValueError(f"{path}: file does not exist")
     return reader(path, **options)
+
+
+def read_measured(kind: str, path: str | Path, **instrument):
+    """Read a measured ``"line profile"`` or ``"psf image"`` file with the reader of its
+    suffix; a file under a suffix no format claims (``.txt``, ``.dat``, ``.tsv``) is read
+    as a delimited table, the CSV reader taking any delimiter.
+
+    ``**instrument`` are facts about the instrument, not about the file (``pixel_um``,
+    the detector's pixel pitch; ``dispersion_um_per_um``, the linear dispersion at the
+    line): a manifest gives them for every file, and each reader takes the ones its
+    format can need (a CSV image in µm needs neither), so those a reader does not use
+    are left out rather than refused.
+    """
+    if kind not in ("line profile", "psf image"):
+        raise ValueError(f"kind={kind!r} must be 'line profile' or 'psf image'")
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"{path}: file does not exist")
+    rows = formats(kind)
+    suffix = path.suffix.lower()
+    chosen = next((f for f in rows if suffix in f.suffixes), None) or next(f for f in rows if ".csv" in f.suffixes)
+    takes = inspect.signature(chosen.reader).parameters
+    return chosen.reader(path, **{k: v for k, v in instrument.items() if k in takes})
 
 
 def load_sag_map(path: str | Path) -> SagMap:

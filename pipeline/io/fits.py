@@ -1,0 +1,377 @@
+"""FITS files (``astropy.io.fits``): line profiles, point-source images and sag maps as
+astronomical detectors, their pipelines and many laboratory tools write them.
+
+What is read
+------------
+* **Line profile**: the first HDU holding a 1-D image (a degenerate axis of length 1 is
+  dropped, so a ``1 x n`` extraction is 1-D too), or the first binary table with an
+  intensity column (``intensity``, ``flux``, ``counts``, ``data``, ``signal``) and an
+  axis column (``offset``, ``wave``/``wavelength``/``lambda``, ``pixel``); a table of one
+  row whose cells are arrays (the ESO spectroscopic data-product layout) is read as those
+  arrays. The axis comes from the WCS (``CRVAL1``, ``CRPIX1``, ``CDELT1`` or ``CD1_1``,
+  ``PC1_1``, ``CUNIT1``, ``CTYPE1``, via ``astropy.wcs``) or the column's ``TUNIT``.
+* **Point-source image**: the first 2-D image HDU; ``NAXIS1`` is x (dispersion), ``NAXIS2``
+  y (along the slit). NaN pixels (or ``BLANK`` in integer data) are masked points and are
+  left out.
+* **Sag map**: the first 2-D image HDU; ``NAXIS1`` is x, ``NAXIS2`` y, NaN or ``BLANK`` no
+  data; the sag unit is ``BUNIT`` (nm, µm, mm, m, Angstrom, or waves with the reader's
+  ``wavelength_um``).
+
+Axes and units
+--------------
+An axis is a **wavelength** if its ``CTYPE`` is a wavelength type (``WAVE``, ``AWAV``,
+``LAMBDA``…) or its unit is Angstrom or nm (no detector offset is given in those), a
+**length** (µm, mm, m; detector offset or map coordinate) if it has such a unit, and in
+**pixels** if it has no WCS on that axis or its unit is ``pixel``: a profile's pixels
+are the detector's (``pixel_um``), an image's too; a map in pixels needs ``spacing_mm`` or
+``extent_mm`` as a CODE V INT file does. ``BSCALE``/``BZERO`` are applied by astropy;
+counts in any normalisation, negative background-subtracted samples and pedestals are
+data (the diagnosis fits flux and background). Rotated or skewed WCS (off-diagonal
+``CD``/``PC`` terms) and non-length, non-wavelength axes are refused by name: resample to
+an axis-aligned grid first.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from optics.sagmap import SagMap
+from pipeline.io.common import atomic_path, parse_error
+from pipeline.io.gridding import SAG_UNITS_TO_UM, GridUnknownError, grid_from_options, sag_unit_factor
+from pipeline.io.measured import checked_profile, checked_psf_image, profile_offsets_um
+
+__all__ = ["FITS_SUFFIXES", "is_fits", "read_line_profile_fits", "read_psf_image_fits", "read_sag_fits", "write_sag_fits"]
+
+#: Suffixes of FITS files.
+FITS_SUFFIXES = (".fits", ".fit", ".fts")
+#: CTYPE prefixes of wavelength axes (FITS WCS paper III: vacuum, air, velocity-wavelength).
+_WAVELENGTH_CTYPES = ("WAVE", "AWAV", "VWAV", "LAMBDA", "WAVELEN")
+#: Units that are a wavelength on a profile's axis, not a detector offset.
+_WAVELENGTH_UNITS = {"angstrom": 1e-4, "a": 1e-4, "aa": 1e-4, "nm": 1e-3, "nanometer": 1e-3, "nanometre": 1e-3}
+#: Length units (to µm): the project's spellings, Angstrom, and the FITS ``um``.
+_LENGTH_TO_UM = {**SAG_UNITS_TO_UM, "angstrom": 1e-4, "aa": 1e-4}
+#: Table column names: intensity, and the axis by kind (first match wins, case-insensitive).
+_INTENSITY_COLUMNS = ("intensity", "flux", "counts", "data", "signal", "value")
+_AXIS_COLUMNS = (("offset", "offset_um"), ("wave", "wavelength_um"), ("wavelength", "wavelength_um"),
+                 ("lambda", "wavelength_um"), ("wavelen", "wavelength_um"), ("pixel", "pixel"), ("px", "pixel"),
+                 ("x", "offset_um"))
+#: Header keywords that put an axis ``i`` under a WCS (without any of them it is in pixels).
+_WCS_KEYS = ("CTYPE{i}", "CUNIT{i}", "CRVAL{i}", "CDELT{i}", "CD{i}_{i}")
+
+
+def is_fits(path: str | Path) -> bool:
+    """Whether ``path`` starts with a FITS primary header (``SIMPLE  =``)."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(9) == b"SIMPLE  ="
+    except OSError:
+        return False
+
+
+def _open(path: Path):
+    from astropy.io import fits
+
+    if not path.exists():
+        raise ValueError(f"{path}: file does not exist")
+    try:
+        hdul = fits.open(path, memmap=False)
+        hdul.verify("silentfix")
+        return hdul
+    except (OSError, ValueError, TypeError) as exc:
+        raise ValueError(f"{path}: not a readable FITS file ({type(exc).__name__}: {exc})") from None
+
+
+def _images(hdul) -> list:
+    """(index, data as float with masked values NaN, header) of every image HDU with data."""
+    from astropy.io import fits
+
+    out = []
+    for i, h in enumerate(hdul):
+        if isinstance(h, (fits.PrimaryHDU, fits.ImageHDU, fits.CompImageHDU)) and h.data is not None:
+            data = np.asarray(h.data)
+            if np.iscomplexobj(data) or not np.issubdtype(data.dtype, np.number):
+                continue
+            out.append((i, data.astype(float), h.header))
+    return out
+
+
+def _image(path: Path, hdul, ndim: int, what: str) -> tuple[np.ndarray, object, list[int]]:
+    """The first image HDU with ``ndim`` non-degenerate axes: (data squeezed, header, the
+    FITS axis numbers (1-based) kept, in FITS order)."""
+    shapes = []
+    for i, data, header in _images(hdul):
+        axes = [k for k in range(1, data.ndim + 1) if data.shape[data.ndim - k] > 1]
+        shapes.append(f"HDU {i}: {data.shape}")
+        if len(axes) == ndim:
+            return data.squeeze(), header, axes
+    found = "; ".join(shapes) if shapes else "no image data"
+    raise parse_error(path, None, f"no {ndim}-D image for a {what} (found {found})")
+
+
+def _unit_to_um(unit: str) -> float | None:
+    """µm per unit of a length ``unit`` string, None for pixels / no unit; an unknown
+    unit is a ValueError naming it."""
+    u = str(unit).strip()
+    if u.lower() in ("", "pixel", "pixels", "pix", "px"):
+        return None
+    if u.lower() in _LENGTH_TO_UM:
+        return _LENGTH_TO_UM[u.lower()]
+    import astropy.units as au
+
+    try:
+        q = au.Unit(u, parse_strict="raise")
+    except ValueError:
+        q = None
+    if q is None or q.physical_type != "length":
+        raise ValueError(f"unit {u!r} is not a length (valid: Angstrom, nm, um, mm, m, or pixel)")
+    return float(q.to(au.um))
+
+
+def _axis(path: Path, header, axis: int, n: int, naxis: int) -> tuple[np.ndarray, str, str]:
+    """Values of FITS axis ``axis`` (1-based) of ``n`` samples: (values, unit, ctype). The
+    unit is "" for an axis without a WCS (pixel numbers 1..n)."""
+    from astropy.wcs import WCS
+
+    if not any(k.format(i=axis) in header for k in _WCS_KEYS):
+        return np.arange(1.0, n + 1.0), "", ""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            w = WCS(header, naxis=naxis, relax=True, fix=True)
+            scale = np.asarray(w.pixel_scale_matrix)
+            if naxis > 1 and np.any(scale[~np.eye(scale.shape[0], dtype=bool)] != 0):
+                raise parse_error(path, None, "rotated or skewed WCS (off-diagonal CD/PC terms) is not supported; "
+                                              "resample the image to axis-aligned rows and columns")
+            sub = w.sub([axis])
+            values = np.asarray(sub.pixel_to_world_values(np.arange(n, dtype=float)), float).ravel()
+            unit = str(sub.wcs.cunit[0])
+            ctype = str(sub.wcs.ctype[0]).upper()
+    except ValueError as exc:
+        if str(path) in str(exc):
+            raise
+        raise parse_error(path, None, f"axis {axis}: WCS not readable ({exc})") from None
+    if not np.isfinite(values).all():
+        raise parse_error(path, None, f"axis {axis}: the WCS gives non-finite coordinates")
+    return values, unit, ctype
+
+
+def _profile_axis(path: Path, values: np.ndarray, unit: str, ctype: str) -> tuple[np.ndarray, str]:
+    """(values in µm or pixels, axis kind for :func:`profile_offsets_um`)."""
+    is_wave = ctype.split("-")[0] in _WAVELENGTH_CTYPES or unit.strip().lower() in _WAVELENGTH_UNITS
+    try:
+        f = _unit_to_um(unit)
+    except ValueError as exc:
+        raise parse_error(path, None, f"axis ({ctype or 'no CTYPE'}): {exc}") from None
+    if ctype and ctype.split("-")[0] in ("FREQ", "ENER", "WAVN", "VRAD", "VOPT", "ZOPT", "VELO", "BETA"):
+        raise parse_error(path, None, f"axis CTYPE {ctype!r} is not a wavelength or a length; give the profile on "
+                                      "a wavelength (WAVE), detector-offset (µm) or pixel axis")
+    if f is None:
+        if is_wave:
+            raise parse_error(path, None, f"wavelength axis CTYPE {ctype!r} has no unit (CUNIT)")
+        return values, "pixel"
+    return values * f, ("wavelength_um" if is_wave else "offset_um")
+
+
+def _table_profile(path: Path, hdul) -> tuple[np.ndarray, np.ndarray, str, str] | None:
+    """(axis values, intensity, unit, axis kind name) of the first binary table with an
+    intensity and an axis column, else None."""
+    from astropy.io import fits
+
+    for h in hdul:
+        if not isinstance(h, fits.BinTableHDU) or h.data is None or len(h.data) == 0:
+            continue
+        names = {n.lower(): n for n in h.columns.names}
+        iname = next((names[k] for k in names if k.split("_")[0] in _INTENSITY_COLUMNS), None)
+        axis = next(((names[k], kind) for stem, kind in _AXIS_COLUMNS for k in names
+                     if k == stem or k.startswith(stem + "_")), None)
+        if iname is None or axis is None:
+            continue
+        aname, kind = axis
+        col = h.columns[aname]
+        a = np.asarray(h.data[aname], float)
+        y = np.asarray(h.data[iname], float)
+        if a.ndim == 2 and a.shape[0] == 1:  # one row of arrays (ESO data products)
+            a, y = a[0], y[0]
+        unit = col.unit or ""
+        suffix = aname.lower().rpartition("_")[2]
+        if not unit and aname.lower() != kind and suffix in _LENGTH_TO_UM:  # wave_nm, offset_mm
+            unit = suffix
+        ctype = "WAVE" if kind == "wavelength_um" else ("PIXEL" if kind == "pixel" else "")
+        return a.ravel(), y.ravel(), unit, ctype
+    return None
+
+
+def read_line_profile_fits(path: str | Path, normalise: bool = True, pixel_um: float | None = None,
+                           dispersion_um_per_um: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Read a line profile from a FITS file (a 1-D image with a WCS, or a binary table).
+
+    Parameters
+    ----------
+    path : str or Path
+        The FITS file.
+    normalise : bool
+        Divide by the total flux (unit area over ``offset_um``).
+    pixel_um : float, optional
+        Detector pixel pitch (µm) for an axis in pixels (no WCS, ``CUNIT1 = 'pixel'``).
+    dispersion_um_per_um : float, optional
+        Signed linear dispersion (detector µm per µm of wavelength) for a wavelength
+        axis; offsets are taken about the median wavelength.
+
+    Returns
+    -------
+    offset_um, intensity : ndarray, shape (n,)
+        Sorted by offset; as :func:`pipeline.io.measured.read_line_profile`.
+
+    Raises
+    ------
+    ValueError
+        Naming the file: no 1-D image or profile table, an axis that is neither a
+        wavelength, a length nor pixels, a missing ``pixel_um``/dispersion, non-finite
+        values, fewer than 5 offsets, total flux <= 0.
+    """
+    path = Path(path)
+    with _open(path) as hdul:
+        try:
+            data, header, axes = _image(path, hdul, 1, "line profile")
+        except ValueError:
+            table = _table_profile(path, hdul)
+            if table is None:
+                raise parse_error(path, None, "no 1-D image and no binary table with an intensity column "
+                                              f"{list(_INTENSITY_COLUMNS)} and an axis column (offset, wavelength, "
+                                              "pixel)") from None
+            a, y, unit, ctype = table
+        else:
+            a, unit, ctype = _axis(path, header, axes[0], data.size, header.get("NAXIS", 1))
+            y = data.ravel()
+    keep = np.isfinite(y)  # NaN samples are masked (bad pixels), not errors
+    values, kind = _profile_axis(path, a[keep], unit, ctype)
+    x = profile_offsets_um(values, kind, path, pixel_um, dispersion_um_per_um, "FITS axis")
+    return checked_profile(path, x, y[keep], normalise)
+
+
+def read_psf_image_fits(path: str | Path, pixel_um: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Read a point-source image from the first 2-D image HDU of a FITS file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The FITS file; ``NAXIS1`` along the dispersion, ``NAXIS2`` along the slit.
+    pixel_um : float, optional
+        Sample pitch (µm) of axes in pixels (no WCS or ``CUNIT = 'pixel'``): the
+        detector's pixel for a detector frame.
+
+    Returns
+    -------
+    x_um, y_um, intensity : ndarray, shape (n,)
+        The valid pixels (NaN / ``BLANK`` left out), sorted by (y, x).
+    """
+    path = Path(path)
+    with _open(path) as hdul:
+        data, header, axes = _image(path, hdul, 2, "point-source image")
+        naxis = header.get("NAXIS", 2)
+        coords = []
+        for k, n in zip(axes, (data.shape[1], data.shape[0])):
+            v, unit, ctype = _axis(path, header, k, n, naxis)
+            try:
+                f = _unit_to_um(unit)
+            except ValueError as exc:
+                raise parse_error(path, None, f"axis {k}: {exc}") from None
+            if f is None:
+                if pixel_um is None or not (np.isfinite(pixel_um) and pixel_um > 0):
+                    raise parse_error(path, None, f"axis {k} is in pixels: give pixel_um, the sample pitch in µm "
+                                                  f"(> 0), or a WCS in µm (CUNIT{k}, CDELT{k}); got "
+                                                  f"pixel_um={pixel_um!r}")
+                f = pixel_um
+            coords.append(v * f)
+    X, Y = np.meshgrid(coords[0], coords[1])
+    ok = np.isfinite(data)
+    return checked_psf_image(path, np.column_stack([X[ok], Y[ok], data[ok]]))
+
+
+def read_sag_fits(path: str | Path, spacing_mm=None, extent_mm=None, wavelength_um: float | None = None) -> SagMap:
+    """Read a sag map from the first 2-D image HDU of a FITS file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The FITS file: ``sag[y, x]`` with ``NAXIS1`` along x (dispersion), NaN or
+        ``BLANK`` = no data, the sag unit in ``BUNIT``.
+    spacing_mm, extent_mm : optional
+        Grid of an image without a length WCS (as for CODE V INT files); refused
+        when the WCS gives one.
+    wavelength_um : float, optional
+        Wavelength (µm) of one wave, for ``BUNIT = 'waves'``.
+
+    Raises
+    ------
+    GridUnknownError
+        The image has no length WCS and neither grid option is given.
+    ValueError
+        Naming the file: no 2-D image, no or unknown ``BUNIT``, a rotated WCS.
+    """
+    path = Path(path)
+    with _open(path) as hdul:
+        data, header, axes = _image(path, hdul, 2, "sag map")
+        naxis = header.get("NAXIS", 2)
+        bunit = str(header.get("BUNIT", "")).strip()
+        axes_mm, units = [], []
+        for k, n in zip(axes, (data.shape[1], data.shape[0])):
+            v, unit, _ = _axis(path, header, k, n, naxis)
+            try:
+                f = _unit_to_um(unit)
+            except ValueError as exc:
+                raise parse_error(path, None, f"axis {k}: {exc}") from None
+            axes_mm.append(None if f is None else v * f * 1e-3)
+            units.append(unit)
+    if not bunit:
+        raise parse_error(path, None, "BUNIT (the sag unit: nm, um, mm, m, Angstrom or waves) is missing")
+    try:
+        factor = _LENGTH_TO_UM[bunit.lower()] if bunit.lower() in _LENGTH_TO_UM else sag_unit_factor(bunit, wavelength_um)
+    except ValueError as exc:
+        raise parse_error(path, None, f"BUNIT: {exc}") from None
+    grid = "header WCS"
+    if any(a is None for a in axes_mm):
+        given = grid_from_options(data.shape[1], data.shape[0], extent_mm, spacing_mm)
+        if given is None:
+            raise GridUnknownError(f"{path}: the image's axes are in pixels (no length CUNIT/CDELT)")
+        axes_mm[0], axes_mm[1], grid = given
+    elif spacing_mm is not None or extent_mm is not None:
+        raise parse_error(path, None, f"spacing_mm/extent_mm given, but the header's WCS already gives the grid "
+                                      f"(CUNIT {units}); leave them out")
+    if np.isinf(data).any():
+        raise parse_error(path, None, f"{int(np.isinf(data).sum())} infinite sag values; use NaN for no data")
+    x, y, sag = axes_mm[0], axes_mm[1], data * factor
+    if x.size > 1 and x[0] > x[-1]:
+        x, sag = x[::-1], sag[:, ::-1]
+    if y.size > 1 and y[0] > y[-1]:
+        y, sag = y[::-1], sag[::-1]
+    try:
+        return SagMap(x, y, sag, path.stem, {"format": "fits", "source_units": bunit, "grid_source": grid})
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+
+
+def write_sag_fits(sagmap: SagMap, path: str | Path) -> Path:
+    """Write ``sagmap`` as a FITS primary image ``sag[y, x]`` in µm (``BUNIT = 'um'``), NaN
+    no data, with a linear WCS in mm (``CRPIX = 1`` at the first sample, ``CDELT`` the
+    grid steps), atomically."""
+    from astropy.io import fits
+
+    hdu = fits.PrimaryHDU(np.asarray(sagmap.sag_um, dtype=np.float64))
+    h = hdu.header
+    h["BUNIT"] = ("um", "surface sag along +z, NaN = no data")
+    for i, (name, a) in enumerate((("x, dispersion", sagmap.x_mm), ("y, ruling direction", sagmap.y_mm)), start=1):
+        step = float(a[1] - a[0]) if a.size > 1 else 1.0
+        h[f"CTYPE{i}"] = ("LINEAR", name)
+        h[f"CUNIT{i}"] = "mm"
+        h[f"CRPIX{i}"] = 1.0
+        h[f"CRVAL{i}"] = float(a[0])
+        h[f"CDELT{i}"] = step
+    h["OBJECT"] = str(sagmap.label)[:68]
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        hdu.writeto(tmp, overwrite=True)
+    return path

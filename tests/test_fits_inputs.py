@@ -1,0 +1,257 @@
+"""FITS inputs as other software writes them: files built here with astropy alone and
+headers the way detector pipelines, IRAF-style tools and ESO data products spell them;
+expected values come from the FITS WCS definitions (world = CRVAL + (p - CRPIX) CDELT,
+1-based p), not from the project's writer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+fits = pytest.importorskip("astropy.io.fits")
+
+from pipeline.io.fits import read_line_profile_fits, read_psf_image_fits, read_sag_fits, write_sag_fits  # noqa: E402
+from pipeline.io.gridding import GridUnknownError  # noqa: E402
+from pipeline.io.registry import read_measured, read_sag_map, write_sag_map  # noqa: E402
+
+DISPERSION = -2.0e3  # detector µm per µm of wavelength (signed, as the SPIFFI orders)
+
+
+def _line(n=81, rng=None):
+    rng = rng or np.random.default_rng(3)
+    i = np.arange(n)
+    return 500.0 + 4000.0 * np.exp(-0.5 * ((i - 43.3) / 3.0) ** 2) + rng.normal(0, 5.0, n)
+
+
+def _write(path, *hdus):
+    fits.HDUList(list(hdus)).writeto(path)
+    return path
+
+
+def test_wavelength_spectrum_in_counts_with_bscale(tmp_path):
+    counts = _line()
+    h = fits.Header()
+    h["CTYPE1"], h["CUNIT1"], h["CRVAL1"], h["CRPIX1"], h["CDELT1"] = "WAVE", "Angstrom", 12500.0, 40.5, 0.25
+    hdu = fits.PrimaryHDU(np.round(counts).astype(np.int16), header=h)
+    hdu.scale("int16", bscale=1.0, bzero=1000.0)  # stored as int16 - 1000, read back by astropy
+    p = _write(tmp_path / "arc.fits", hdu)
+    x, y = read_line_profile_fits(p, normalise=False, dispersion_um_per_um=DISPERSION)
+    wl_um = (12500.0 + (np.arange(1, 82) - 40.5) * 0.25) * 1e-4
+    expect = np.sort((wl_um - np.median(wl_um)) * DISPERSION)
+    np.testing.assert_allclose(x, expect, atol=1e-9)
+    # negative dispersion reverses the order of the samples on the detector
+    np.testing.assert_allclose(y, np.round(counts)[::-1])
+
+
+def test_linear_ctype_in_nm_is_a_wavelength_and_cd_matrix_is_read(tmp_path):
+    h = fits.Header()
+    h["CTYPE1"], h["CUNIT1"], h["CRVAL1"], h["CRPIX1"], h["CD1_1"] = "LINEAR", "nm", 1250.0, 1.0, 0.02
+    p = _write(tmp_path / "s.fits", fits.PrimaryHDU(_line(), header=h))
+    x, _ = read_line_profile_fits(p, normalise=False, dispersion_um_per_um=DISPERSION)
+    assert np.ptp(x) == pytest.approx(80 * 0.02e-3 * abs(DISPERSION))
+
+
+def test_wave_axis_without_cunit_is_in_metres(tmp_path):
+    """FITS WCS paper III: the default unit of a WAVE axis is the metre."""
+    h = fits.Header([("CTYPE1", "WAVE"), ("CRVAL1", 1.25e-6), ("CRPIX1", 41.0), ("CDELT1", 2e-11)])
+    p = _write(tmp_path / "w.fits", fits.PrimaryHDU(_line(), header=h))
+    x, _ = read_line_profile_fits(p, normalise=False, dispersion_um_per_um=DISPERSION)
+    assert np.ptp(x) == pytest.approx(80 * 2e-5 * abs(DISPERSION))
+
+
+def test_pixel_axis_without_wcs_needs_the_pixel_pitch(tmp_path):
+    p = _write(tmp_path / "px.fits", fits.PrimaryHDU(_line()))
+    with pytest.raises(ValueError, match="pixel_um"):
+        read_line_profile_fits(p)
+    x, _ = read_line_profile_fits(p, pixel_um=18.0)
+    np.testing.assert_allclose(x, 18.0 * np.arange(1, 82))
+
+
+def test_one_row_extraction_with_an_offset_axis_in_um_and_masked_samples(tmp_path):
+    y = _line()
+    y[10] = np.nan  # a bad pixel: masked, not an error
+    h = fits.Header()
+    h["CTYPE1"], h["CUNIT1"], h["CRVAL1"], h["CRPIX1"], h["CDELT1"] = "OFFSET", "um", -360.0, 1.0, 9.0
+    p = _write(tmp_path / "row.fits", fits.PrimaryHDU(y[None, :], header=h))
+    x, v = read_line_profile_fits(p, normalise=False)
+    assert x.size == 80 and -360.0 + 9.0 * 10 not in x
+    np.testing.assert_allclose(x[:10], -360.0 + 9.0 * np.arange(10))
+
+
+def test_eso_style_table_of_one_row_of_arrays(tmp_path):
+    wl_nm = 1245.0 + 0.1 * np.arange(81)
+    col_w = fits.Column(name="WAVE", format="81D", unit="nm", array=wl_nm[None, :])
+    col_f = fits.Column(name="FLUX", format="81D", unit="adu", array=_line()[None, :])
+    table = fits.BinTableHDU.from_columns([col_w, col_f])
+    p = _write(tmp_path / "sdp.fits", fits.PrimaryHDU(), table)
+    x, y = read_line_profile_fits(p, normalise=False, dispersion_um_per_um=DISPERSION)
+    np.testing.assert_allclose(np.sort(x), np.sort((wl_nm - np.median(wl_nm)) * 1e-3 * DISPERSION), atol=1e-9)
+    assert y.sum() == pytest.approx(_line().sum())
+
+
+def test_table_of_rows_with_unit_in_the_column_name(tmp_path):
+    off_mm = np.linspace(-0.4, 0.4, 81)
+    table = fits.BinTableHDU.from_columns([fits.Column(name="offset_mm", format="D", array=off_mm),
+                                           fits.Column(name="counts", format="D", array=_line())])
+    p = _write(tmp_path / "t.fits", fits.PrimaryHDU(), table)
+    x, _ = read_line_profile_fits(p, normalise=False)
+    np.testing.assert_allclose(x, off_mm * 1e3)
+
+
+def test_background_subtracted_profile_is_data(tmp_path):
+    y = _line() - 560.0  # negative noise on both sides of the line
+    assert (y < 0).sum() > 20
+    p = _write(tmp_path / "bs.fits", fits.PrimaryHDU(y))
+    x, v = read_line_profile_fits(p, pixel_um=18.0)
+    assert np.trapezoid(v, x) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("make,match", [
+    (lambda: fits.PrimaryHDU(_line(), header=fits.Header([("CTYPE1", "FREQ"), ("CUNIT1", "Hz"),
+                                                          ("CRVAL1", 2.4e14), ("CDELT1", 1e9)])), "FREQ"),
+    (lambda: fits.PrimaryHDU(np.ones((5, 6, 7))), "no 1-D image"),
+])
+def test_profiles_refused_by_name(tmp_path, make, match):
+    p = _write(tmp_path / "bad.fits", make())
+    with pytest.raises(ValueError, match=match):
+        read_line_profile_fits(p, pixel_um=18.0, dispersion_um_per_um=DISPERSION)
+
+
+def test_table_wavelength_without_unit_is_refused(tmp_path):
+    table = fits.BinTableHDU.from_columns([fits.Column(name="WAVE", format="D", array=np.linspace(1.2, 1.3, 81)),
+                                           fits.Column(name="FLUX", format="D", array=_line())])
+    p = _write(tmp_path / "t.fits", fits.PrimaryHDU(), table)
+    with pytest.raises(ValueError, match="no unit"):
+        read_line_profile_fits(p, dispersion_um_per_um=DISPERSION)
+
+
+def test_not_a_fits_file_is_named(tmp_path):
+    p = tmp_path / "x.fits"
+    p.write_text("offset_um,intensity\n")
+    with pytest.raises(ValueError, match="not a readable FITS file"):
+        read_line_profile_fits(p)
+
+
+def _map_header(cdelt1_m=5e-4, cdelt2_m=-5e-4, crpix=(1.0, 1.0), crval_m=(-0.01, 0.0075)):
+    h = fits.Header()
+    h["BUNIT"] = "nm"
+    for i, (d, p, v) in enumerate(zip((cdelt1_m, cdelt2_m), crpix, crval_m), start=1):
+        h[f"CTYPE{i}"], h[f"CUNIT{i}"], h[f"CDELT{i}"], h[f"CRPIX{i}"], h[f"CRVAL{i}"] = "LINEAR", "m", d, p, v
+    return h
+
+
+def test_interferometer_map_in_nm_with_blank_and_descending_y(tmp_path):
+    ny, nx = 31, 41
+    yy, xx = np.mgrid[0:ny, 0:nx]
+    sag_nm = 100.0 * np.sin(xx / 5.0) + 3.0 * yy
+    raw = np.round(sag_nm / 0.5).astype(np.int32)  # stored in half-nm counts
+    raw[0, 0] = -999999
+    hdu = fits.PrimaryHDU(raw, header=_map_header())
+    hdu.header["BSCALE"], hdu.header["BLANK"] = 0.5, -999999
+    p = _write(tmp_path / "cold.fits", hdu)
+    m = read_sag_map(p)
+    # x: -10 mm + 0.5 mm steps; y given descending from +7.5 mm, flipped to ascending
+    np.testing.assert_allclose(m.x_mm, -10.0 + 0.5 * np.arange(nx))
+    np.testing.assert_allclose(m.y_mm, 7.5 - 0.5 * np.arange(ny)[::-1])
+    expect_um = (raw * 0.5 * 1e-3)[::-1].astype(float)
+    expect_um[-1, 0] = np.nan
+    np.testing.assert_allclose(m.sag_um, expect_um, atol=1e-12)
+    assert m.meta["source_units"] == "nm"
+
+
+def test_map_in_pixels_needs_a_grid_option(tmp_path):
+    h = fits.Header([("BUNIT", "um")])
+    p = _write(tmp_path / "px.fits", fits.PrimaryHDU(np.zeros((11, 21)), header=h))
+    with pytest.raises(GridUnknownError, match="pixels"):
+        read_sag_fits(p)
+    m = read_sag_map(p, spacing_mm=0.5)
+    np.testing.assert_allclose(m.x_mm, 0.5 * np.arange(21) - 5.0)
+
+
+@pytest.mark.parametrize("edit,match", [
+    (lambda h: h.remove("BUNIT"), "BUNIT"),
+    (lambda h: h.update(BUNIT="kelvin"), "BUNIT"),
+    (lambda h: h.update(PC1_2=0.1, PC2_1=-0.1), "rotated"),
+    (lambda h: h.update(CUNIT1="deg"), "not a length"),
+])
+def test_maps_refused_by_name(tmp_path, edit, match):
+    h = _map_header()
+    edit(h)
+    p = _write(tmp_path / "bad.fits", fits.PrimaryHDU(np.zeros((11, 21)), header=h))
+    with pytest.raises(ValueError, match=match):
+        read_sag_fits(p)
+
+
+def test_grid_options_beside_a_wcs_are_refused(tmp_path):
+    p = _write(tmp_path / "m.fits", fits.PrimaryHDU(np.zeros((11, 21)), header=_map_header()))
+    with pytest.raises(ValueError, match="already gives the grid"):
+        read_sag_fits(p, spacing_mm=0.5)
+
+
+def test_written_map_reads_back_exactly(tmp_path):
+    from optics.sagmap import SagMap
+
+    x, y = np.linspace(-20, 20, 41), np.linspace(-15, 15, 31)
+    z = np.cos(x[None, :] / 3.0) * np.sin(y[:, None] / 4.0)
+    z[3, 4] = np.nan
+    sm = SagMap(x, y, z, "t", {})
+    p = write_sag_map(sm, tmp_path / "m.fits")
+    back = read_sag_map(p)
+    np.testing.assert_allclose(back.x_mm, x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(back.y_mm, y, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(np.isnan(back.sag_um), np.isnan(z))
+    np.testing.assert_array_equal(back.sag_um[~np.isnan(z)], z[~np.isnan(z)])
+    assert fits.getheader(p)["BUNIT"] == "um"  # readable by other FITS software as a labelled image
+    assert write_sag_fits  # the registry's writer for .fits
+
+
+def test_psf_image_frame_in_pixels_and_in_um(tmp_path):
+    yy, xx = np.mgrid[0:15, 0:17]
+    img = 100.0 + 1e4 * np.exp(-((xx - 8.2) ** 2 + (yy - 7.1) ** 2) / 4.0)
+    img[2, 3] = np.nan
+    p = _write(tmp_path / "psf.fits", fits.PrimaryHDU(img))
+    with pytest.raises(ValueError, match="pixel_um"):
+        read_psf_image_fits(p)
+    x, y, v = read_psf_image_fits(p, pixel_um=18.0)
+    assert x.size == img.size - 1
+    assert set(np.unique(x)) == set(18.0 * np.arange(1, 18))
+    h = fits.Header()
+    for i in (1, 2):
+        h[f"CUNIT{i}"], h[f"CDELT{i}"], h[f"CRPIX{i}"], h[f"CRVAL{i}"] = "um", 2.0, 1.0, -16.0
+    p2 = _write(tmp_path / "psf_um.fits", fits.PrimaryHDU(img, header=h))
+    x2, y2, v2 = read_psf_image_fits(p2)
+    np.testing.assert_allclose(np.unique(y2), -16.0 + 2.0 * np.arange(15))
+    assert v2.sum() == pytest.approx(np.nansum(img))
+
+
+def test_registry_reads_measured_files_by_suffix(tmp_path):
+    p = tmp_path / "prof.txt"  # whitespace table under a suffix no format claims
+    u = np.linspace(-100, 100, 41)
+    p.write_text("offset_um intensity\n" + "\n".join(f"{a} {np.exp(-a * a / 800):.6f}" for a in u) + "\n")
+    x, _ = read_measured("line profile", p, normalise=False, pixel_um=18.0, dispersion_um_per_um=DISPERSION)
+    np.testing.assert_allclose(x, u)
+    f = _write(tmp_path / "prof.fits", fits.PrimaryHDU(_line()))
+    x, _ = read_measured("line profile", f, pixel_um=18.0, dispersion_um_per_um=DISPERSION)
+    assert x.size == 81
+    with pytest.raises(ValueError, match="kind"):
+        read_measured("sag map", f)
+
+
+def test_manifest_reads_fits_profile_like_its_csv(tmp_path):
+    """A FITS spectrum and the CSV of the same samples give the diagnosis the same data."""
+    from pipeline.diagnosis.manifest import load_data, load_manifest
+    from pipeline.io.measured import write_line_profile_csv
+
+    y = _line()
+    h = fits.Header()
+    h["CTYPE1"], h["CUNIT1"], h["CRVAL1"], h["CRPIX1"], h["CDELT1"] = "OFFSET", "um", -360.0, 1.0, 9.0
+    _write(tmp_path / "p.fits", fits.PrimaryHDU(y, header=h))
+    write_line_profile_csv(tmp_path / "p.csv", -360.0 + 9.0 * np.arange(81), y)
+    text = ('[simulation]\nt0_um = 200\npolish = 0.75\n'
+            + "".join(f'[[measurement]]\nkind = "line_profile"\nfile = "p.{s}"\nname = "{s}"\ngrating = "J"\n'
+                      'order = -2\nwavelength_um = 1.25\npixel_scale_mas = 250\n' for s in ("fits", "csv")))
+    (tmp_path / "m.toml").write_text(text)
+    a, b = load_data(load_manifest(tmp_path / "m.toml"))
+    np.testing.assert_allclose(a.offset_um, b.offset_um)
+    np.testing.assert_allclose(a.intensity, b.intensity)
+    assert a.origin_um == b.origin_um != 0.0
