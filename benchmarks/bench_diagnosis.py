@@ -6,7 +6,7 @@ injection-recovery campaign. Writes the per-case rows and the summary as JSON (`
         [--profiles extended|minimal] [--no-scenarios] [--out FILE] [--progress FILE.jsonl] [--profile-map-K K]
         [--psf-image] [--types KIND:EFFECT,...] [--discrepancy unmodelled|companions]
         [--n-eff-from nominal|best_fit] [--truth independent|model] [--truth-families FAM,...]
-        [--error-model by_kind|n_eff|two_part] [--pair-forward] [--pair-from N]
+        [--error-model by_kind|n_eff|two_part] [--pair-forward] [--pair-from N] [--diagnosis-criteria]
 
 ``--progress``: every finished case is appended there as a JSON line (partial results
 survive an interrupted run). ``--profiles``: the campaign's line-profile measurement set
@@ -15,7 +15,10 @@ cases also get a 128 K map of the same blank (``CampaignConfig.profile_map_K``).
 ``--truth-families pocket_jitter,sharp_ribs``: the independent truth's grating families
 (``CampaignConfig.truth_families``; default ``sum_mix,product_mix``). ``--pair-from``: how
 many of the best singles are paired (``Criteria.pair_from``; the campaign's default is 2, the
-diagnosis's own 3).
+diagnosis's own 3). ``--diagnosis-criteria``: the campaign diagnoses with the diagnosis's own
+``Criteria()`` (pairs among 3 singles, held-out checks of the 3 best findings) instead of the
+campaign's narrower, faster ``CampaignConfig.criteria`` (2 and 1): the score of the product
+as a user runs it.
 """
 
 from __future__ import annotations
@@ -62,12 +65,17 @@ def main(argv=None):
                     help="the score's error model (Criteria.error_model)")
     ap.add_argument("--pair-forward", action="store_true",
                     help="also pair the best single with every other (Criteria.pair_forward)")
-    ap.add_argument("--pair-from", type=int, default=CampaignConfig.criteria.pair_from,
-                    help="pairs among this many best singles (Criteria.pair_from; campaign default %(default)s)")
+    ap.add_argument("--pair-from", type=int, default=None,
+                    help=f"pairs among this many best singles (Criteria.pair_from; campaign default "
+                         f"{CampaignConfig.criteria.pair_from}, the diagnosis's own {Criteria().pair_from})")
+    ap.add_argument("--diagnosis-criteria", action="store_true",
+                    help="diagnose with the diagnosis's own Criteria() (as a user runs it), not the campaign's")
     a = ap.parse_args(argv)
+    base = Criteria() if a.diagnosis_criteria else CampaignConfig.criteria
     try:
-        criteria = dataclasses.replace(CampaignConfig.criteria, n_eff_from=a.n_eff_from, error_model=a.error_model,
-                                       pair_forward=a.pair_forward, pair_from=a.pair_from)
+        criteria = dataclasses.replace(base, n_eff_from=a.n_eff_from, error_model=a.error_model,
+                                       pair_forward=a.pair_forward,
+                                       pair_from=base.pair_from if a.pair_from is None else a.pair_from)
     except ValueError as exc:
         ap.error(str(exc))
     out = {"scenarios": {}}
