@@ -409,3 +409,22 @@ def test_a_profile_on_a_wavelength_axis_lands_on_the_models_detector_axis(tmp_pa
     k = int(np.argmax(p.intensity))
     shoulder = p.intensity[k + 10] - p.intensity[k - 10]  # +15 µm against -15 µm
     assert shoulder > 0.2
+
+
+def test_a_profile_export_with_a_preamble_is_read(tmp_path):
+    """Lab and program exports put title, date and exposure lines before the table."""
+    u = np.linspace(-120.0, 120.0, 61)
+    body = "\n".join(f"{a:.1f}\t{1000 * np.exp(-a * a / 900) + 40:.3f}" for a in u)
+    p = tmp_path / "arc_1250nm.txt"
+    p.write_text("Line profile export\nDate: 2026-11-20 14:02\nExposure, 10 s\n\n"
+                 "Offset [um]\tIntensity\n" + body + "\n")
+    x, y = read_line_profile(p, normalise=False)
+    np.testing.assert_allclose(x, u)
+    assert y.max() == pytest.approx(1040.0, abs=1e-3)
+
+
+def test_a_table_without_a_header_names_the_header_to_add(tmp_path):
+    p = tmp_path / "bare.txt"
+    p.write_text("\n".join(f"{a} {np.exp(-a * a / 900):.4f}" for a in range(-60, 61, 5)) + "\n")
+    with pytest.raises(ValueError, match=r"line 1: the table has no header line.*offset_um,intensity"):
+        read_line_profile(p)

@@ -9,7 +9,7 @@
 * :func:`numbered_lines` — text lines with 1-based line numbers for those messages.
 * :func:`read_text` / :func:`read_csv_columns` — a file's text (UTF-8, or UTF-16/32 with
   a byte-order mark) and the numeric columns of a delimited table with a header, errors by
-  line. Tables other code writes are taken as they come: comma, semicolon, tab or
+  line; lines before the header (an export's title, date, exposure) are skipped. Tables other code writes are taken as they come: comma, semicolon, tab or
   whitespace delimited (told from the header line), and a column in another length unit
   than the one asked for (``x [m]``, ``sag_nm``, ``Offset (mm)``) converted to it.
 """
@@ -31,7 +31,7 @@ from fea.atomic import atomic_path, atomic_write
 from pipeline.io.gridding import SAG_UNITS_TO_UM
 
 __all__ = ["atomic_write", "atomic_path", "parse_error", "numbered_lines", "read_text",
-           "decode_text", "read_csv_columns", "read_csv_choices"]
+           "decode_text", "read_csv_columns", "read_csv_choices", "PREAMBLE_LINES"]
 
 
 def parse_error(path: str | Path, line: int | None, message: str) -> ValueError:
@@ -110,6 +110,31 @@ def _column(header: list[str], name: str) -> tuple[int, float] | None:
     return None
 
 
+#: Lines of preamble (before the header line) a table may have.
+PREAMBLE_LINES = 50
+
+
+def _header(line: str) -> list[str]:
+    """A header line's column names, canonical (:func:`_canonical_header`)."""
+    return [_canonical_header(h) for h in _split(line, _delimiter(line))]
+
+
+def _found(header: list[str], alts: tuple[str, ...]):
+    """``(name, (index, factor))`` of the first of ``alts`` that ``header`` has, else None."""
+    return next(((a, f) for a in alts if (f := _column(header, a)) is not None), None)
+
+
+def _numeric(line: str, delimiter: str | None) -> bool:
+    """Whether every field of ``line`` is a number (a data row, not a header)."""
+    fields = [f for f in _split(line, delimiter) if f.strip()]
+    try:
+        for f in fields:
+            float(f)
+    except ValueError:
+        return False
+    return bool(fields)
+
+
 def _fast_csv_columns(text: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray] | None:
     """NumPy parse of a clean comma-separated file with the very column names (header on
     line 1, no blank or ragged lines); None means "use the line-by-line parser", which is
@@ -137,7 +162,10 @@ def read_csv_columns(path: Path, what: str, names: tuple[str, ...]) -> tuple[np.
     Names match case-insensitively, with ``[unit]``/``(unit)`` read as ``_unit``; a name
     ``<base>_<unit>`` with a length unit (nm, um, mm, m) also matches ``<base>`` in another
     length unit, converted. Other columns are ignored, ``#`` comment lines and blank lines
-    skipped; the delimiter (comma, semicolon, tab or whitespace) is the header's."""
+    skipped; the delimiter (comma, semicolon, tab or whitespace) is the header's. The header
+    is the first line naming every column (within :data:`PREAMBLE_LINES` lines): a preamble
+    before it (an export's title, date, exposure lines) is skipped. A table without a
+    header is refused, naming the header line to add."""
     v, lines, _ = read_csv_choices(path, what, tuple((n,) for n in names))
     return v, lines
 
@@ -153,18 +181,30 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
     names = [alts[0] for alts in choices]
     if not lines_:
         raise parse_error(path, None, f"file is empty; expected a header with columns {names}")
-    hline, htext = lines_[0]
+    # The header is the first line naming every column: lines before it are a preamble
+    # (an instrument's or a program's export: date, exposure, title lines), skipped.
+    start = 0
+    for k, (_, t) in enumerate(lines_[:PREAMBLE_LINES + 1]):
+        if all(_found(_header(t), alts) is not None for alts in choices):
+            start = k
+            break
+    hline, htext = lines_[start]
     delim = _delimiter(htext)
-    header = [_canonical_header(h) for h in _split(htext, delim)]
-    found = [next(((a, f) for a in alts if (f := _column(header, a)) is not None), None) for alts in choices]
+    header = _header(htext)
+    found = [_found(header, alts) for alts in choices]
     missing = [n for n, f in zip(names, found) if f is None]
     if missing:
+        if _numeric(htext, delim):
+            raise parse_error(path, hline, f"the table has no header line naming its columns; add a first line "
+                                           f"{','.join(names)} (with the units in the names)"
+                              + (f"; {hint}" if hint else ""))
         units = "; a length column may carry any of nm, um, mm, m (e.g. x [m], sag_nm)"
         raise parse_error(path, hline, f"missing column(s) {missing}; found header {header}, need {names}"
                           + (units if any(c.rpartition("_")[2] in SAG_UNITS_TO_UM for c in missing) else "")
                           + (f"; {hint}" if hint else ""))
+    lines_ = lines_[start:]
     chosen = tuple(a for a, _ in found)
-    fast = _fast_csv_columns(text, chosen) if all(f == 1.0 for _, (_, f) in found) else None
+    fast = _fast_csv_columns(text, chosen) if start == 0 and all(f == 1.0 for _, (_, f) in found) else None
     if fast is not None:
         return (*fast, chosen)
     idx = [i for _, (i, _) in found]
