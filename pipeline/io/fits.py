@@ -111,6 +111,24 @@ def _image(path: Path, hdul, ndim: int, what: str) -> tuple[np.ndarray, object, 
     raise parse_error(path, None, f"no {ndim}-D image for a {what} (found {found})")
 
 
+def _image_2d(path: Path, what: str) -> tuple[np.ndarray, list, object]:
+    """The first 2-D image of a FITS file: (data[y, x] as float, masked values NaN;
+    [(pixel-or-WCS values, the same in µm or None where the axis is in pixels)] for x and
+    y; its header)."""
+    with _open(path) as hdul:
+        data, header, axes = _image(path, hdul, 2, what)
+        naxis = header.get("NAXIS", 2)
+        out = []
+        for k, n in zip(axes, (data.shape[1], data.shape[0])):
+            v, unit, _ = _axis(path, header, k, n, naxis)
+            try:
+                f = _unit_to_um(unit)
+            except ValueError as exc:
+                raise parse_error(path, None, f"axis {k}: {exc}") from None
+            out.append((v, None if f is None else v * f))
+        return data, out, header.copy()
+
+
 def _unit_to_um(unit: str) -> float | None:
     """µm per unit of a length ``unit`` string, None for pixels / no unit; an unknown
     unit is a ValueError naming it."""
@@ -269,23 +287,16 @@ def read_psf_image_fits(path: str | Path, pixel_um: float | None = None) -> tupl
         The valid pixels (NaN / ``BLANK`` left out), sorted by (y, x).
     """
     path = Path(path)
-    with _open(path) as hdul:
-        data, header, axes = _image(path, hdul, 2, "point-source image")
-        naxis = header.get("NAXIS", 2)
-        coords = []
-        for k, n in zip(axes, (data.shape[1], data.shape[0])):
-            v, unit, ctype = _axis(path, header, k, n, naxis)
-            try:
-                f = _unit_to_um(unit)
-            except ValueError as exc:
-                raise parse_error(path, None, f"axis {k}: {exc}") from None
-            if f is None:
-                if pixel_um is None or not (np.isfinite(pixel_um) and pixel_um > 0):
-                    raise parse_error(path, None, f"axis {k} is in pixels: give pixel_um, the sample pitch in µm "
-                                                  f"(> 0), or a WCS in µm (CUNIT{k}, CDELT{k}); got "
-                                                  f"pixel_um={pixel_um!r}")
-                f = pixel_um
-            coords.append(v * f)
+    data, axes, _ = _image_2d(path, "point-source image")
+    coords = []
+    for k, (v, um) in enumerate(axes, start=1):
+        if um is None:
+            if pixel_um is None or not (np.isfinite(pixel_um) and pixel_um > 0):
+                raise parse_error(path, None, f"axis {k} is in pixels: give pixel_um, the sample pitch in µm "
+                                              f"(> 0), or a WCS in µm (CUNIT{k}, CDELT{k}); got "
+                                              f"pixel_um={pixel_um!r}")
+            um = v * pixel_um
+        coords.append(um)
     X, Y = np.meshgrid(coords[0], coords[1])
     ok = np.isfinite(data)
     return checked_psf_image(path, np.column_stack([X[ok], Y[ok], data[ok]]))
@@ -313,19 +324,10 @@ def read_sag_fits(path: str | Path, spacing_mm=None, extent_mm=None, wavelength_
         Naming the file: no 2-D image, no or unknown ``BUNIT``, a rotated WCS.
     """
     path = Path(path)
-    with _open(path) as hdul:
-        data, header, axes = _image(path, hdul, 2, "sag map")
-        naxis = header.get("NAXIS", 2)
-        bunit = str(header.get("BUNIT", "")).strip()
-        axes_mm, units = [], []
-        for k, n in zip(axes, (data.shape[1], data.shape[0])):
-            v, unit, _ = _axis(path, header, k, n, naxis)
-            try:
-                f = _unit_to_um(unit)
-            except ValueError as exc:
-                raise parse_error(path, None, f"axis {k}: {exc}") from None
-            axes_mm.append(None if f is None else v * f * 1e-3)
-            units.append(unit)
+    data, axes, header = _image_2d(path, "sag map")
+    bunit = str(header.get("BUNIT", "")).strip()
+    axes_mm = [None if um is None else um * 1e-3 for _, um in axes]
+    units = [str(header.get(f"CUNIT{k}", "")) for k in (1, 2)]
     if not bunit:
         raise parse_error(path, None, "BUNIT (the sag unit: nm, um, mm, m, Angstrom or waves) is missing")
     try:
