@@ -98,6 +98,20 @@ def test_table_of_rows_with_unit_in_the_column_name(tmp_path):
     np.testing.assert_allclose(x, off_mm * 1e3)
 
 
+def test_detector_cut_out_is_summed_along_the_slit(tmp_path):
+    rng = np.random.default_rng(5)
+    rows = np.exp(-0.5 * ((np.arange(20) - 9.5) / 4.0) ** 2)  # the slit's illumination
+    frame = rows[:, None] * _line()[None, :] + rng.normal(0, 2.0, (20, 81))
+    frame[4, 30] = np.nan  # a bad pixel: its column is scaled up from the 19 valid ones
+    h = fits.Header([("CTYPE1", "WAVE"), ("CUNIT1", "nm"), ("CRVAL1", 1250.0), ("CRPIX1", 41.0), ("CDELT1", 0.02)])
+    p = _write(tmp_path / "frame.fits", fits.PrimaryHDU(frame, header=h))
+    x, y = read_line_profile_fits(p, normalise=False, dispersion_um_per_um=DISPERSION)
+    expect = np.nansum(frame, axis=0)
+    expect[30] *= 20 / 19
+    np.testing.assert_allclose(y, expect[::-1])  # negative dispersion: reversed on the detector
+    assert x.size == 81
+
+
 def test_background_subtracted_profile_is_data(tmp_path):
     y = _line() - 560.0  # negative noise on both sides of the line
     assert (y < 0).sum() > 20
@@ -109,7 +123,7 @@ def test_background_subtracted_profile_is_data(tmp_path):
 @pytest.mark.parametrize("make,match", [
     (lambda: fits.PrimaryHDU(_line(), header=fits.Header([("CTYPE1", "FREQ"), ("CUNIT1", "Hz"),
                                                           ("CRVAL1", 2.4e14), ("CDELT1", 1e9)])), "FREQ"),
-    (lambda: fits.PrimaryHDU(np.ones((5, 6, 7))), "no 1-D image"),
+    (lambda: fits.PrimaryHDU(np.ones((5, 6, 7))), "no 1-D or 2-D image"),
 ])
 def test_profiles_refused_by_name(tmp_path, make, match):
     p = _write(tmp_path / "bad.fits", make())

@@ -4,11 +4,12 @@ astronomical detectors, their pipelines and many laboratory tools write them.
 What is read
 ------------
 * **Line profile**: the first HDU holding a 1-D image (a degenerate axis of length 1 is
-  dropped, so a ``1 x n`` extraction is 1-D too), or the first binary table with an
+  dropped, so a ``1 x n`` extraction is 1-D too), else the first binary table with an
   intensity column (``intensity``, ``flux``, ``counts``, ``data``, ``signal``) and an
-  axis column (``offset``, ``wave``/``wavelength``/``lambda``, ``pixel``); a table of one
+  axis column (``offset``, ``wave``/``wavelength``/``lambda``, ``pixel``) — a table of one
   row whose cells are arrays (the ESO spectroscopic data-product layout) is read as those
-  arrays. The axis comes from the WCS (``CRVAL1``, ``CRPIX1``, ``CDELT1`` or ``CD1_1``,
+  arrays —, else a 2-D detector cut-out around the line (``NAXIS1`` along the dispersion,
+  ``NAXIS2`` along the slit), summed along the slit as the line profiles are. The axis comes from the WCS (``CRVAL1``, ``CRPIX1``, ``CDELT1`` or ``CD1_1``,
   ``PC1_1``, ``CUNIT1``, ``CTYPE1``, via ``astropy.wcs``) or the column's ``TUNIT``.
 * **Point-source image**: the first 2-D image HDU; ``NAXIS1`` is x (dispersion), ``NAXIS2``
   y (along the slit). NaN pixels (or ``BLANK`` in integer data) are masked points and are
@@ -193,6 +194,25 @@ def _profile_axis(path: Path, values: np.ndarray, unit: str, ctype: str) -> tupl
     return values * f, ("wavelength_um" if is_wave else "offset_um")
 
 
+def _profile_image(path: Path, hdul, ndim: int) -> tuple | None:
+    """(axis values, intensity, unit, ctype) of the first ``ndim``-D image, else None. A
+    2-D frame (``NAXIS1`` along the dispersion, ``NAXIS2`` along the slit) is summed along
+    the slit, as the line profiles are: each column's valid pixels, scaled to the full
+    column where some are masked (a column with none is left out)."""
+    try:
+        data, header, axes = _image(path, hdul, ndim, "line profile")
+    except ValueError:
+        return None
+    if ndim == 2:
+        valid = np.isfinite(data).sum(axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            y = np.where(valid > 0, np.nansum(data, axis=0) * data.shape[0] / valid, np.nan)
+    else:
+        y = data.ravel()
+    a, unit, ctype = _axis(path, header, axes[0], y.size, header.get("NAXIS", ndim))
+    return a, y, unit, ctype
+
+
 def _table_profile(path: Path, hdul) -> tuple[np.ndarray, np.ndarray, str, str] | None:
     """(axis values, intensity, unit, axis kind name) of the first binary table with an
     intensity and an axis column, else None."""
@@ -224,7 +244,8 @@ def _table_profile(path: Path, hdul) -> tuple[np.ndarray, np.ndarray, str, str] 
 
 def read_line_profile_fits(path: str | Path, normalise: bool = True, pixel_um: float | None = None,
                            dispersion_um_per_um: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Read a line profile from a FITS file (a 1-D image with a WCS, or a binary table).
+    """Read a line profile from a FITS file (a 1-D image with a WCS, a binary table, or a
+    2-D cut-out summed along the slit).
 
     Parameters
     ----------
@@ -252,18 +273,11 @@ def read_line_profile_fits(path: str | Path, normalise: bool = True, pixel_um: f
     """
     path = Path(path)
     with _open(path) as hdul:
-        try:
-            data, header, axes = _image(path, hdul, 1, "line profile")
-        except ValueError:
-            table = _table_profile(path, hdul)
-            if table is None:
-                raise parse_error(path, None, "no 1-D image and no binary table with an intensity column "
-                                              f"{list(_INTENSITY_COLUMNS)} and an axis column (offset, wavelength, "
-                                              "pixel)") from None
-            a, y, unit, ctype = table
-        else:
-            a, unit, ctype = _axis(path, header, axes[0], data.size, header.get("NAXIS", 1))
-            y = data.ravel()
+        found = _profile_image(path, hdul, 1) or _table_profile(path, hdul) or _profile_image(path, hdul, 2)
+    if found is None:
+        raise parse_error(path, None, "no 1-D or 2-D image and no binary table with an intensity column "
+                                      f"{list(_INTENSITY_COLUMNS)} and an axis column (offset, wavelength, pixel)")
+    a, y, unit, ctype = found
     keep = np.isfinite(y)  # NaN samples are masked (bad pixels), not errors
     values, kind = _profile_axis(path, a[keep], unit, ctype)
     x = profile_offsets_um(values, kind, path, pixel_um, dispersion_um_per_um, "FITS axis")
