@@ -100,12 +100,19 @@ def _cmd_fit(a) -> int:
     return 0
 
 
+def _suffixes(written: bool) -> str:
+    """The sag-map suffixes read (or written), from the format registry."""
+    from pipeline.io.registry import formats
+
+    return " ".join(sorted({s for f in formats("sag map") if f.writer or not written for s in f.suffixes}))
+
+
 def register(sub) -> None:
     """Add the ``convert`` and ``fit`` subcommands to the ``cryograting`` sub-parsers."""
     q = sub.add_parser("convert", help="a sag map from one format into another (formats by suffix: "
                        "python -m pipeline.io.registry lists them)")
-    q.add_argument("input", metavar="IN", help="sag map: .int .dat .csv .nc .npz, or a Zygo .asc/.dat/.datx")
-    q.add_argument("output", metavar="OUT", help="sag map written: .int (CODE V) .dat (Zemax) .csv .nc .npz")
+    q.add_argument("input", metavar="IN", help=f"sag map read: {_suffixes(False)}")
+    q.add_argument("output", metavar="OUT", help=f"sag map written: {_suffixes(True)}")
     q.add_argument("--spacing-mm", type=float, default=None,
                    help="sample pitch (mm) of an input without one (a foreign CODE V grid, a Zygo file "
                    "without lateral calibration, scattered CSV points)")
@@ -113,7 +120,7 @@ def register(sub) -> None:
     q.set_defaults(func=_cmd_convert)
 
     q = sub.add_parser("fit", help="Zernike or quilt-Fourier coefficients of a sag map (any readable format)")
-    q.add_argument("map", metavar="MAP", help="sag map: .int .dat .csv .nc .npz, or a Zygo .asc/.dat/.datx")
+    q.add_argument("map", metavar="MAP", help=f"sag map read: {_suffixes(False)}")
     q.add_argument("--basis", default="zernike-fringe:37",
                    help="zernike-noll:N (RMS-normalised), zernike-fringe:N (unnormalised, as CODE V ZFR) or "
                    "fourier:H (the quilt's harmonics up to H at 21 x 18 mm); default zernike-fringe:37")
