@@ -124,6 +124,8 @@ def test_background_subtracted_profile_is_data(tmp_path):
     (lambda: fits.PrimaryHDU(_line(), header=fits.Header([("CTYPE1", "FREQ"), ("CUNIT1", "Hz"),
                                                           ("CRVAL1", 2.4e14), ("CDELT1", 1e9)])), "FREQ"),
     (lambda: fits.PrimaryHDU(np.ones((5, 6, 7))), "no 1-D or 2-D image"),
+    (lambda: fits.PrimaryHDU(_line(), header=fits.Header([("CTYPE1", "LINEAR"), ("CRVAL1", 4.097),
+                                                          ("CDELT1", 1e-5), ("DC-FLAG", 1)])), "log-linear"),
 ])
 def test_profiles_refused_by_name(tmp_path, make, match):
     p = _write(tmp_path / "bad.fits", make())

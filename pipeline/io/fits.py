@@ -28,8 +28,9 @@ are the detector's (``pixel_um``), an image's too; a map in pixels needs ``spaci
 ``extent_mm`` as a CODE V INT file does. ``BSCALE``/``BZERO`` are applied by astropy;
 counts in any normalisation, negative background-subtracted samples and pedestals are
 data (the diagnosis fits flux and background). Rotated or skewed WCS (off-diagonal
-``CD``/``PC`` terms) and non-length, non-wavelength axes are refused by name: resample to
-an axis-aligned grid first.
+``CD``/``PC`` terms), IRAF's log-linear (``DC-FLAG = 1``) and multispec dispersions, and
+non-length, non-wavelength axes are refused by name: resample to a linear, axis-aligned
+grid first.
 """
 
 from __future__ import annotations
@@ -209,6 +210,10 @@ def _profile_image(path: Path, hdul, ndim: int) -> tuple | None:
             y = np.where(valid > 0, np.nansum(data, axis=0) * data.shape[0] / valid, np.nan)
     else:
         y = data.ravel()
+    if header.get("DC-FLAG", 0) == 1 or str(header.get("CTYPE1", "")).upper().startswith("MULTISPE"):
+        # IRAF's log-linear and multispec dispersions look linear to a WCS reader
+        raise parse_error(path, None, "IRAF log-linear (DC-FLAG = 1) or multispec wavelength axis; resample the "
+                                      "spectrum onto a linear axis (CRVAL1/CDELT1) or write it as a table")
     a, unit, ctype = _axis(path, header, axes[0], y.size, header.get("NAXIS", ndim))
     return a, y, unit, ctype
 
