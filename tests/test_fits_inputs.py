@@ -271,3 +271,23 @@ def test_manifest_reads_fits_profile_like_its_csv(tmp_path):
     np.testing.assert_allclose(a.offset_um, b.offset_um)
     np.testing.assert_allclose(a.intensity, b.intensity)
     assert a.origin_um == b.origin_um != 0.0
+
+
+def test_manifest_reads_a_fits_psf_frame_at_its_pixel_pitch(tmp_path):
+    """A detector frame in pixels is sampled at the manifest's ``pixel_um``; a focal-plane
+    image (``pixel_um = 0``) has no pitch and must carry a WCS in µm."""
+    from pipeline.diagnosis.manifest import load_data, load_manifest
+
+    yy, xx = np.mgrid[0:21, 0:21]
+    img = 10.0 + 1e4 * np.exp(-((xx - 10.0) ** 2 + (yy - 10.0) ** 2) / 3.0)
+    _write(tmp_path / "psf.fits", fits.PrimaryHDU(img))
+    for pix in (18, 0):
+        (tmp_path / "m.toml").write_text(
+            '[simulation]\nt0_um = 200\n[[measurement]]\nkind = "psf_image"\nfile = "psf.fits"\ngrating = "J"\n'
+            f'order = -2\nwavelength_um = 1.25\npixel_um = {pix}\nnoise_rel = 0.01\n')
+        if pix:
+            (d,) = load_data(load_manifest(tmp_path / "m.toml"))
+            assert np.ptp(d.x_um) == pytest.approx(20 * 18.0) and d.origin_um != (0.0, 0.0)
+        else:
+            with pytest.raises(ValueError, match=r"psf.fits.*in pixels.*WCS in µm"):
+                load_data(load_manifest(tmp_path / "m.toml"))
