@@ -428,3 +428,21 @@ def test_a_table_without_a_header_names_the_header_to_add(tmp_path):
     p.write_text("\n".join(f"{a} {np.exp(-a * a / 900):.4f}" for a in range(-60, 61, 5)) + "\n")
     with pytest.raises(ValueError, match=r"line 1: the table has no header line.*offset_um,intensity"):
         read_line_profile(p)
+
+
+def test_a_psf_image_with_masked_pixels_is_read(tmp_path):
+    """A bad pixel exported as nan is a masked point, not an error; an infinite one is."""
+    from pipeline.io.measured import read_psf_image
+
+    yy, xx = np.mgrid[-5:6, -5:6] * 2.0
+    v = 1e3 * np.exp(-(xx**2 + yy**2) / 20.0)
+    rows = [f"{a},{b},{c}" for a, b, c in zip(xx.ravel(), yy.ravel(), v.ravel())]
+    rows[7] = rows[7].rsplit(",", 1)[0] + ",nan"
+    p = tmp_path / "img.csv"
+    p.write_text("x_um,y_um,intensity\n" + "\n".join(rows) + "\n")
+    x, y, i = read_psf_image(p)
+    assert x.size == 120 and np.isfinite(i).all()
+    rows[7] = rows[7].rsplit(",", 1)[0] + ",inf"
+    p.write_text("x_um,y_um,intensity\n" + "\n".join(rows) + "\n")
+    with pytest.raises(ValueError, match="line 9: .*intensity finite or nan"):
+        read_psf_image(p)

@@ -2,8 +2,9 @@
 images (``x_um,y_um,intensity``), read the way laboratories deliver them — counts in any
 normalisation, a pedestal or background-subtracted negative samples, any grid, any row
 order, any length unit and delimiter (:func:`pipeline.io.common.read_csv_columns`); a
-profile's samples at one offset are averaged. Only non-finite values, duplicate image
-points and a total flux <= 0 are refused.
+profile's samples at one offset are averaged, an image's ``nan`` intensities are masked
+pixels (left out). Only other non-finite values, duplicate image points and a total flux
+<= 0 are refused.
 """
 
 from __future__ import annotations
@@ -205,7 +206,7 @@ def read_psf_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray
     column order, other columns ignored) or ``.npz`` with arrays ``x_um``, ``y_um``,
     ``intensity``. ``x`` is along the dispersion, ``y`` along the slit (detector µm).
     Like line profiles: counts, negative (background-subtracted) samples, a pedestal and
-    any grid are accepted.
+    any grid are accepted; a point whose intensity is ``nan`` is a masked pixel, left out.
 
     Returns
     -------
@@ -216,7 +217,8 @@ def read_psf_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray
     ------
     ValueError
         Naming file and (where it applies) line: missing columns or arrays, non-finite
-        values, fewer than 25 samples, duplicate points, total flux (sum) <= 0.
+        coordinates, infinite intensities, fewer than 25 valid samples, duplicate points,
+        total flux (sum) <= 0.
     """
     path = Path(path)
     if path.suffix.lower() == ".npz":
@@ -230,16 +232,21 @@ def read_psf_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray
 def checked_psf_image(path: Path, v: np.ndarray, lines: np.ndarray | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """An image's points ``v[:, (x_um, y_um, intensity)]`` as every reader returns them:
-    sorted by (y, x), refused (naming ``path`` and, where given, the line) for fewer than
-    25 samples, a non-finite value, a duplicate point or a total flux <= 0."""
+    sorted by (y, x), points whose intensity is NaN left out (masked pixels: bad pixels,
+    cosmic rays), refused (naming ``path`` and, where given, the line) for a non-finite
+    coordinate, an infinite intensity, fewer than 25 valid samples, a duplicate point or a
+    total flux <= 0."""
     v = np.asarray(v, float)
     lines = np.zeros(v.shape[0], int) if lines is None else np.asarray(lines)
     line = (lambda k: int(lines[k]) if lines[k] else None)
-    if v.shape[0] < 25:
-        raise parse_error(path, None, f"needs >= 25 samples, found {v.shape[0]}")
-    bad = ~np.isfinite(v).all(axis=1)
+    bad = ~np.isfinite(v[:, :2]).all(axis=1) | np.isinf(v[:, 2])
     if bad.any():
-        raise parse_error(path, line(int(np.flatnonzero(bad)[0])), "x_um, y_um and intensity must be finite numbers")
+        raise parse_error(path, line(int(np.flatnonzero(bad)[0])), "x_um and y_um must be finite numbers and "
+                                                                  "intensity finite or nan (masked)")
+    keep = ~np.isnan(v[:, 2])
+    v, lines = v[keep], lines[keep]
+    if v.shape[0] < 25:
+        raise parse_error(path, None, f"needs >= 25 valid samples, found {v.shape[0]}")
     order = np.lexsort((v[:, 0], v[:, 1]))
     v, lines = v[order], lines[order]
     dup = np.flatnonzero((np.diff(v[:, 0]) == 0) & (np.diff(v[:, 1]) == 0))
