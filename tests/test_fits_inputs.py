@@ -291,3 +291,18 @@ def test_manifest_reads_a_fits_psf_frame_at_its_pixel_pitch(tmp_path):
         else:
             with pytest.raises(ValueError, match=r"psf.fits.*in pixels.*WCS in µm"):
                 load_data(load_manifest(tmp_path / "m.toml"))
+
+
+def test_infinite_samples_are_refused_while_nan_ones_are_masked(tmp_path):
+    """NaN is a masked pixel; an infinite one is a broken file, refused as in CSV tables."""
+    y = _line()
+    y[5] = np.inf
+    p = _write(tmp_path / "inf.fits", fits.PrimaryHDU(y))
+    with pytest.raises(ValueError, match="must be finite"):
+        read_line_profile_fits(p, pixel_um=18.0)
+    img = np.ones((11, 11))
+    img[5, 5] = 100.0
+    img[2, 2] = np.inf
+    p = _write(tmp_path / "inf_img.fits", fits.PrimaryHDU(img))
+    with pytest.raises(ValueError, match="intensity finite or nan"):
+        read_psf_image_fits(p, pixel_um=18.0)

@@ -45,14 +45,14 @@ from pipeline.io.common import atomic_path, parse_error
 from pipeline.io.gridding import SAG_UNITS_TO_UM, GridUnknownError, grid_from_options, sag_unit_factor
 from pipeline.io.measured import checked_profile, checked_psf_image, profile_offsets_um
 
-__all__ = ["FITS_SUFFIXES", "is_fits", "read_line_profile_fits", "read_psf_image_fits", "read_sag_fits", "write_sag_fits"]
+__all__ = ["FITS_SUFFIXES", "read_line_profile_fits", "read_psf_image_fits", "read_sag_fits", "write_sag_fits"]
 
 #: Suffixes of FITS files.
 FITS_SUFFIXES = (".fits", ".fit", ".fts")
 #: CTYPE prefixes of wavelength axes (FITS WCS paper III: vacuum, air, velocity-wavelength).
 _WAVELENGTH_CTYPES = ("WAVE", "AWAV", "VWAV", "LAMBDA", "WAVELEN")
 #: Units that are a wavelength on a profile's axis, not a detector offset.
-_WAVELENGTH_UNITS = {"angstrom": 1e-4, "a": 1e-4, "aa": 1e-4, "nm": 1e-3, "nanometer": 1e-3, "nanometre": 1e-3}
+_WAVELENGTH_UNITS = frozenset({"angstrom", "a", "aa", "nm", "nanometer", "nanometre"})
 #: Length units (to µm): the project's spellings, Angstrom, and the FITS ``um``.
 _LENGTH_TO_UM = {**SAG_UNITS_TO_UM, "angstrom": 1e-4, "aa": 1e-4}
 #: Table column names: intensity, and the axis by kind (first match wins, case-insensitive).
@@ -62,15 +62,6 @@ _AXIS_COLUMNS = (("offset", "offset_um"), ("wave", "wavelength_um"), ("wavelengt
                  ("x", "offset_um"))
 #: Header keywords that put an axis ``i`` under a WCS (without any of them it is in pixels).
 _WCS_KEYS = ("CTYPE{i}", "CUNIT{i}", "CRVAL{i}", "CDELT{i}", "CD{i}_{i}")
-
-
-def is_fits(path: str | Path) -> bool:
-    """Whether ``path`` starts with a FITS primary header (``SIMPLE  =``)."""
-    try:
-        with open(path, "rb") as fh:
-            return fh.read(9) == b"SIMPLE  ="
-    except OSError:
-        return False
 
 
 def _open(path: Path):
@@ -283,7 +274,7 @@ def read_line_profile_fits(path: str | Path, normalise: bool = True, pixel_um: f
         raise parse_error(path, None, "no 1-D or 2-D image and no binary table with an intensity column "
                                       f"{list(_INTENSITY_COLUMNS)} and an axis column (offset, wavelength, pixel)")
     a, y, unit, ctype = found
-    keep = np.isfinite(y)  # NaN samples are masked (bad pixels), not errors
+    keep = ~np.isnan(y)  # NaN samples are masked (bad pixels), not errors; checked_profile refuses inf
     values, kind = _profile_axis(path, a[keep], unit, ctype)
     x = profile_offsets_um(values, kind, path, pixel_um, dispersion_um_per_um, "FITS axis")
     return checked_profile(path, x, y[keep], normalise)
@@ -317,8 +308,7 @@ def read_psf_image_fits(path: str | Path, pixel_um: float | None = None) -> tupl
             um = v * pixel_um
         coords.append(um)
     X, Y = np.meshgrid(coords[0], coords[1])
-    ok = np.isfinite(data)
-    return checked_psf_image(path, np.column_stack([X[ok], Y[ok], data[ok]]))
+    return checked_psf_image(path, np.column_stack([X.ravel(), Y.ravel(), data.ravel()]))  # masks NaN pixels
 
 
 def read_sag_fits(path: str | Path, spacing_mm=None, extent_mm=None, wavelength_um: float | None = None) -> SagMap:
