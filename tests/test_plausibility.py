@@ -223,3 +223,24 @@ def test_campaign_size_at_least_one(n, tmp_path, capsys):
     assert main(["diagnose", "--validate", f"--cases={n}", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"--cases {n}" in err
+
+
+@pytest.mark.parametrize("offset_um, height", [(54.0, 1.2), (-36.0, 1.5)])
+def test_a_hot_pixel_taller_than_the_line_is_data_not_a_refusal(offset_um, height):
+    """A profile sampled every 3 µm with one hot sample (1.2-1.5x the line's peak, in the
+    wing): the raw FWHM is one sample (implausible), the 3-sample running median
+    holds the 40 µm line; the spike is named, non-fatal. Without the line the same spike
+    on noise is still refused (no line in the running median)."""
+    x = np.arange(-180.0, 180.01, 3.0)
+    rng = np.random.default_rng(21)
+    y = _gauss(x, 40.0, rng)
+    i = int(np.argmin(np.abs(x - offset_um)))
+    y[i] += height
+    assert line_fwhm(x, y) < 6.0
+    (p,) = profile_problems("p", x, y, nominal_fwhm_um=40.0)
+    assert p.code == "spike" and not p.fatal
+    assert f"at offsets {x[i]:.1f} µm" in p.message and "hot pixel" in p.message
+    flat = 0.02 + rng.normal(0, 0.01, x.size)
+    flat[i] += height
+    (q,) = profile_problems("p", x, flat, nominal_fwhm_um=40.0)
+    assert q.fatal and q.code in ("no_line", "width")

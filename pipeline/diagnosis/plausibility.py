@@ -9,7 +9,10 @@ the nominal model predicts for it:
 * line profile: the offsets must span a plausible range for the nominal line (else the
   unit is named, e.g. mm instead of µm); there must be a line, a peak at least
   ``min_peak_sigma`` noise sigmas above the profile's median; its FWHM must lie within
-  ``width_range`` times the nominal line's FWHM;
+  ``width_range`` times the nominal line's FWHM. A hot pixel or cosmic-ray hit taller than
+  the line is one sample, not a line: where the raw FWHM is implausible but the profile's
+  3-sample running median holds a line of plausible width, the profile is data with a
+  spike (a non-fatal "spike" problem naming the samples), not a refusal;
 * surface map: its RMS about piston and tilt must exceed ``min_signal_ratio`` times its
   white noise ("no signal" otherwise), and lie within ``max_orders`` decades of the
   nominal's RMS at the measurement temperature (else "wrong unit (nm)?" / "(mm)?");
@@ -37,7 +40,7 @@ import numpy as np
 
 from .noise import estimate_noise
 
-__all__ = ["Plausibility", "Problem", "line_fwhm", "peak_sigma", "profile_problems", "map_problems",
+__all__ = ["Plausibility", "Problem", "line_fwhm", "peak_sigma", "running_median3", "profile_problems", "map_problems",
            "image_problems", "measurement_problems", "check_measurements", "at_prior_bound", "unit_hint"]
 
 
@@ -78,7 +81,7 @@ class Plausibility:
 @dataclass(frozen=True)
 class Problem:
     """One implausibility of a measurement: ``code`` ("no_line", "width", "unit",
-    "no_signal"), a one-line ``message``, and whether it makes the data undiagnosable."""
+    "no_signal", "spike"), a one-line ``message``, and whether it makes the data undiagnosable."""
 
     measurement: str
     code: str
@@ -152,16 +155,49 @@ def profile_problems(name: str, offset_um: np.ndarray, intensity: np.ndarray, no
         return [Problem(name, "unit", f"offsets span {span:.3g} µm; expected {lo:.0f}..{hi:.0f} µm "
                         f"({rules.span_range[0]:g}-{rules.span_range[1]:g}x the nominal line's FWHM "
                         f"{nominal_fwhm_um:.1f} µm): {hint}")]
-    missing = _no_peak(name, y, noise_rel if noise_rel is not None else estimate_noise(x, y), rules, "line")
+    sigma = noise_rel if noise_rel is not None else estimate_noise(x, y)
+    missing = _no_peak(name, y, sigma, rules, "line")
     if missing:
         return missing
     w = line_fwhm(x, y)
     ratio = w / nominal_fwhm_um
-    if not rules.width_range[0] <= ratio <= rules.width_range[1]:
-        return [Problem(name, "width", f"line FWHM {w:.3g} µm is {ratio:.2g}x the nominal's "
-                        f"{nominal_fwhm_um:.1f} µm; "
-                        f"a line the model can produce has {rules.width_range[0]:g}-{rules.width_range[1]:g}x")]
-    return []
+    if rules.width_range[0] <= ratio <= rules.width_range[1]:
+        return []
+    spike = _spike_problem(name, x, y, nominal_fwhm_um, sigma, rules)
+    if spike:
+        return spike
+    return [Problem(name, "width", f"line FWHM {w:.3g} µm is {ratio:.2g}x the nominal's "
+                    f"{nominal_fwhm_um:.1f} µm; "
+                    f"a line the model can produce has {rules.width_range[0]:g}-{rules.width_range[1]:g}x")]
+
+
+def running_median3(offset_um: np.ndarray, intensity: np.ndarray) -> tuple:
+    """``(offsets sorted, 3-sample running median of the intensity)``; the end samples keep
+    their value. A single-sample spike (hot pixel, cosmic ray) disappears from it while a
+    line sampled by two or more samples per FWHM keeps its width to within a sample."""
+    o = np.argsort(offset_um)
+    x, y = np.asarray(offset_um, float)[o], np.asarray(intensity, float)[o]
+    m = y.copy()
+    if y.size >= 3:
+        m[1:-1] = np.median(np.stack([y[:-2], y[1:-1], y[2:]]), axis=0)
+    return x, m
+
+
+def _spike_problem(name, x, y, nominal_fwhm_um, sigma, rules) -> list:
+    """``[non-fatal Problem "spike"]`` when the running median of the profile holds a line
+    of plausible width ``min_peak_sigma`` noise sigmas (the raw profile's ``sigma``) above
+    its median (the raw width was set by single samples), else ``[]``."""
+    xs, med = running_median3(x, y)
+    if _no_peak(name, med, sigma, rules, "line"):
+        return []
+    w = line_fwhm(xs, med)
+    if not rules.width_range[0] <= w / nominal_fwhm_um <= rules.width_range[1]:
+        return []
+    dev = np.abs(np.asarray(y, float)[np.argsort(x)] - med)
+    where = ", ".join(f"{v:.1f}" for v in xs[dev >= 0.5 * dev.max()])
+    return [Problem(name, "spike", f"single samples stand out of the line (at offsets {where} µm): a hot pixel or "
+                    f"cosmic-ray hit? The line's FWHM without them is {w:.3g} µm; the samples are kept as data "
+                    f"(no library effect makes a one-sample feature)", fatal=False)]
 
 
 def _piston_tilt_residual(x: np.ndarray, y: np.ndarray, v: np.ndarray) -> np.ndarray:
