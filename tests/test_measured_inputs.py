@@ -446,3 +446,26 @@ def test_a_psf_image_with_masked_pixels_is_read(tmp_path):
     p.write_text("x_um,y_um,intensity\n" + "\n".join(rows) + "\n")
     with pytest.raises(ValueError, match="line 9: .*intensity finite or nan"):
         read_psf_image(p)
+
+
+def test_a_line_profile_with_masked_samples_is_read(tmp_path):
+    """A background-subtracted profile whose pipeline masked two bad pixels as nan: the
+    other samples are read, unit area over them (the trapezoid flux of the kept samples);
+    an infinite intensity or a nan offset is still refused, naming the line."""
+    x = np.arange(-60.0, 60.01, 3.0)
+    y = 800.0 * np.exp(-x * x / 600.0) - 4.0
+    rows = [f"{a},{float(b)!r}" for a, b in zip(x, y)]
+    rows[5], rows[30] = f"{x[5]},nan", f"{x[30]},NaN"
+    p = tmp_path / "p.csv"
+    p.write_text("offset_um,intensity\n" + "\n".join(rows) + "\n")
+    xs, ys = read_line_profile(p)
+    keep = np.ones(x.size, bool)
+    keep[[5, 30]] = False
+    assert np.array_equal(xs, x[keep])
+    assert np.allclose(ys, y[keep] / np.trapezoid(y[keep], x[keep]), rtol=1e-12)
+    for bad, line in ((f"{x[9]},inf", 11), (f"nan,{float(y[9])!r}", 11)):
+        rows2 = list(rows)
+        rows2[9] = bad
+        p.write_text("offset_um,intensity\n" + "\n".join(rows2) + "\n")
+        with pytest.raises(ValueError, match=rf"line {line}: .*intensity finite or nan"):
+            read_line_profile(p)

@@ -274,10 +274,9 @@ def read_line_profile_fits(path: str | Path, normalise: bool = True, pixel_um: f
         raise parse_error(path, None, "no 1-D or 2-D image and no binary table with an intensity column "
                                       f"{list(_INTENSITY_COLUMNS)} and an axis column (offset, wavelength, pixel)")
     a, y, unit, ctype = found
-    keep = ~np.isnan(y)  # NaN samples are masked (bad pixels), not errors; checked_profile refuses inf
-    values, kind = _profile_axis(path, a[keep], unit, ctype)
+    values, kind = _profile_axis(path, a, unit, ctype)
     x = profile_offsets_um(values, kind, path, pixel_um, dispersion_um_per_um, "FITS axis")
-    return checked_profile(path, x, y[keep], normalise)
+    return checked_profile(path, x, y, normalise)  # masks NaN samples, refuses inf
 
 
 def read_psf_image_fits(path: str | Path, pixel_um: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -103,8 +103,9 @@ def read_line_profile(path: str | Path, normalise: bool = True, pixel_um: float 
     Raises
     ------
     ValueError
-        Naming file and (where it applies) line: missing columns, non-numeric or
-        non-finite values, fewer than 5 distinct offsets, total flux <= 0.
+        Naming file and (where it applies) line: missing columns, non-numeric values, an
+        infinite intensity or a non-finite offset, fewer than 5 distinct offsets, total
+        flux <= 0. A ``nan`` intensity is a masked sample and is left out.
     """
     path = Path(path)
     v, lines = _profile_columns(path, pixel_um, dispersion_um_per_um)
@@ -114,16 +115,20 @@ def read_line_profile(path: str | Path, normalise: bool = True, pixel_um: float 
 def checked_profile(path: Path, offset_um, intensity, normalise: bool = True,
                     lines: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """A profile's samples as every reader returns them: sorted by offset, samples at one
-    offset averaged, refused (naming ``path`` and, where given, the line) for fewer than 5
-    distinct offsets, a non-finite value or a total flux <= 0; divided by the flux when
-    ``normalise``."""
+    offset averaged, samples whose intensity is NaN left out (a bad pixel a pipeline masked
+    is a missing sample, not an error), refused (naming ``path`` and, where given, the line)
+    for fewer than 5 distinct offsets, an infinite intensity, a non-finite offset or a total
+    flux <= 0; divided by the flux when ``normalise``."""
     v = np.column_stack([np.asarray(offset_um, float).ravel(), np.asarray(intensity, float).ravel()])
-    if v.shape[0] < 5:
-        raise parse_error(path, None, f"needs >= 5 samples, found {v.shape[0]}")
-    nonfinite = ~np.isfinite(v).all(axis=1)
+    masked = np.isnan(v[:, 1]) & np.isfinite(v[:, 0])
+    nonfinite = ~np.isfinite(v).all(axis=1) & ~masked
     if nonfinite.any():
         where = int(lines[nonfinite][0]) if lines is not None else None
-        raise parse_error(path, where, "offset_um and intensity must be finite numbers")
+        raise parse_error(path, where, "offset_um must be a finite number and intensity finite or nan (masked)")
+    v = v[~masked]
+    if v.shape[0] < 5:
+        raise parse_error(path, None, f"needs >= 5 samples, found {v.shape[0]}"
+                          + (f" ({int(masked.sum())} more masked as nan)" if masked.any() else ""))
     # samples at one offset (exposures merged into one table) are averaged
     x, inverse = np.unique(v[:, 0], return_inverse=True)
     y = np.bincount(inverse, weights=v[:, 1]) / np.bincount(inverse)
