@@ -13,7 +13,7 @@ from pipeline.diagnosis.synth import synthetic_profile, synthetic_psf_image, syn
 from pipeline.io.measured import write_line_profile_csv, write_psf_image_csv
 from pipeline.io.registry import write_sag_map
 
-__all__ = ["nominal_map", "other_quilt_truth", "surface_manifest", "surface_case", "profile_image_case",
+__all__ = ["nominal_map", "sag_function_of", "other_quilt_truth", "surface_manifest", "surface_case", "profile_image_case",
            "FakeFinding", "FakeDiagnosis"]
 
 
@@ -21,6 +21,20 @@ def nominal_map(tmp_path):
     m = quilt_sag_map(0.6, "sum", spacing_mm=0.5)
     write_sag_map(m, tmp_path / "nominal.npz")
     return m
+
+
+def sag_function_of(nominal):
+    """``sag(x_mm, y_mm) -> µm`` of a map for the independent truth's Abbe sum: bilinear,
+    holes at 0, NaN off the map."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    s = np.where(np.isfinite(nominal.sag_um), nominal.sag_um, 0.0)
+    itp = RegularGridInterpolator((nominal.y_mm, nominal.x_mm), s, bounds_error=False, fill_value=np.nan)
+
+    def sag(x, y):
+        x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
+        return itp(np.column_stack([y.ravel(), x.ravel()])).reshape(x.shape)
+    return sag
 
 
 def other_quilt_truth(nominal):

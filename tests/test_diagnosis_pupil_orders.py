@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.interpolate import RegularGridInterpolator
 
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.criteria import Criteria
@@ -21,7 +20,7 @@ from pipeline.diagnosis.truth.detector import measure_profile
 from pipeline.diagnosis.truth.generate import COLLIMATOR_UM
 from pipeline.io.measured import write_line_profile_csv
 
-from diagnosis_cases import nominal_map
+from diagnosis_cases import nominal_map, sag_function_of
 
 
 def _profiles(tmp_path, camera_um=None, collimator_extra_um=None, seed=3):
@@ -29,13 +28,7 @@ def _profiles(tmp_path, camera_um=None, collimator_extra_um=None, seed=3):
     independent truth with the instrument's collimator plus ``collimator_extra_um`` and a
     camera wavefront ``camera_um`` ({(n, m): µm RMS}); measured with photon and read
     noise, background, sub-pixel phases (:func:`.truth.detector.measure_profile`)."""
-    nom = nominal_map(tmp_path)
-    s = np.where(np.isfinite(nom.sag_um), nom.sag_um, 0.0)
-    itp = RegularGridInterpolator((nom.y_mm, nom.x_mm), s, bounds_error=False, fill_value=np.nan)
-
-    def sag(x, y):
-        x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
-        return itp(np.column_stack([y.ravel(), x.ravel()])).reshape(x.shape)
+    sag = sag_function_of(nominal_map(tmp_path))
 
     coll = dict(COLLIMATOR_UM)
     for nm, v in (collimator_extra_um or {}).items():

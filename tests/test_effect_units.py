@@ -363,8 +363,37 @@ def test_the_image_models_memo_key_holds_every_spectrograph_parameter():
 
     want = {q.name for e in LIBRARY.values() if set(e.kinds) & {"line_profile", "psf_image"} and not e.rescales
             for q in e.parameters} | {q.name for e in ALTERNATIVES.values() for q in e.parameters}
-    assert set(SpectrographImageModel._KEYS) == want
-    assert {"pupil_x_mm", "coll_astig45_um", "slit_image_width_um", "pupil_coma2_um"} <= want
+    optics, detected = set(SpectrographImageModel._KEYS), set(SpectrographImageModel._DETECTED_NULLS)
+    # the detector side's parameters are keyed apart: they act on the memoised optics' profile
+    assert optics | detected == want and not optics & detected
+    assert {"pupil_x_mm", "coll_astig45_um", "slit_image_width_um", "pupil_coma2_um"} <= optics
+    assert {"halo_fraction", "tail_decay_um"} <= detected
+
+
+def test_a_wing_parameter_changes_the_profile_and_its_null_gives_the_memoised_nominal(tmp_path):
+    """A halo changes the line-profile model's prediction; back at zero fraction the
+    prediction is the nominal's bit for bit (no stale curve either way)."""
+    from optics.sagmap import quilt_sag_map
+    from pipeline.diagnosis.forward import ProfileForward
+    from pipeline.diagnosis.manifest import load_data, load_manifest
+    from pipeline.io.measured import write_line_profile_csv
+    from pipeline.io.registry import write_sag_map
+
+    nominal = quilt_sag_map(0.6, "sum", spacing_mm=0.5)
+    write_sag_map(nominal, tmp_path / "nominal.npz")
+    u = np.arange(-100.0, 100.1, 2.0)
+    write_line_profile_csv(tmp_path / "p.csv", u, np.exp(-0.5 * (u / 20.0) ** 2))
+    (tmp_path / "m.toml").write_text('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\n'
+                                     'kind = "line_profile"\nfile = "p.csv"\ngrating = "J"\norder = -2\n'
+                                     'wavelength_um = 1.25\npixel_scale_mas = 250\n')
+    (data,) = load_data(load_manifest(tmp_path / "m.toml"))
+    fw = ProfileForward(data, nominal, 80.0)
+    nom = fw.predict({})
+    halo = fw.predict({"halo_fraction": 0.1, "halo_hwhm_um": 30.0})
+    wider = fw.predict({"halo_fraction": 0.1, "halo_hwhm_um": 60.0})
+    assert not np.allclose(halo, nom) and not np.allclose(wider, halo)
+    assert np.array_equal(fw.predict({"halo_fraction": 0.0, "halo_hwhm_um": 30.0}), nom)
+    assert np.array_equal(fw.predict({"halo_fraction": 0.1, "halo_hwhm_um": 30.0}), halo)
 
 
 def test_a_rescaling_effect_refuses_a_hook_that_does_more_than_rescale():

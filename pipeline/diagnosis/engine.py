@@ -33,6 +33,7 @@ from .plausibility import at_prior_bound, check_measurements
 from .psf_image import PsfImageForward
 from .pupil_orders import checks, other_orders_check, with_check
 from .ranking import fit_effects, parameters_of, predictions, rank
+from . import wings as wings_alternative
 from .where import measurement_parts, profile_parts, psf_image_parts, satellite_spacing_um, surface_parts
 
 # Public names of the diagnosis, re-exported here from the modules that define them.
@@ -59,8 +60,9 @@ class Diagnosis:
     #: nominal when there is none): the part of the gap nothing in the library explains.
     unexplained_in: tuple = ()
     #: Why the top finding is not the best by BIC (a pair's member explains; see
-    #: :func:`member_explains`), and why a collimator finding does not explain
-    #: (:mod:`.pupil_orders`), else "".
+    #: :func:`member_explains`), why a collimator finding does not explain
+    #: (:mod:`.pupil_orders`), and the check of a line-profile finding against light the
+    #: detector side adds (:mod:`.wings`), else "".
     ranking_note: str = ""
 
     @property
@@ -290,9 +292,14 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
         pupil = other_orders_check(prob, best, fits[best.effect], criteria)
         best = findings[0] = with_check(best, pupil)
         note = "; ".join(n for n in (note, pupil.note if pupil.ambiguous else "") if n)
+    side = None
+    if gap and wings_alternative.checks(prob, best) and explains(best, criteria) and not (pupil and pupil.ambiguous):
+        side = wings_alternative.wings_check(prob, best, fits[best.effect], criteria)  # detector side's light?
+        best = findings[0] = wings_alternative.with_check(best, side)
+        note = "; ".join(n for n in (note, side.note) if n)
     if not gap:
         verdict = "no_gap"
-    elif best and explains(best, criteria) and not (pupil and pupil.ambiguous):
+    elif best and explains(best, criteria) and not (pupil and pupil.ambiguous) and not (side and side.ambiguous):
         verdict = "explained"
     else:
         verdict = "unexplained"

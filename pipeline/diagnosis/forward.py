@@ -237,14 +237,25 @@ def spectrograph_optics(grating, p: dict) -> SpectrographOptics:
 
 
 def profile_curve(grating: str, wavelength_um: float, order: int, pixel_scale_mas: int, sag: SagMap | None,
-                  p: dict, slit_position: float = 0.0, settings: LsfSettings = FIT_LSF_SETTINGS):
+                  p: dict, slit_position: float = 0.0, settings: LsfSettings = FIT_LSF_SETTINGS,
+                  detected: bool = True):
     """Detected line profile (offset_um, unit-area intensity) for effect parameters ``p``
-    (those of the spectrograph: :func:`spectrograph_optics`); the sag is passed already
-    scaled and shaped."""
+    (those of the spectrograph: :func:`spectrograph_optics`, then, with ``detected``, every
+    ``Effect.detected``: :func:`detected_profile`); the sag is passed already scaled and shaped."""
     o = spectrograph_optics(grating, p)
     r = line_profile(o.grating, wavelength_um, pixel_scale_mas, sag, order=order, pupil_shift_mm=o.pupil_shift_mm,
                      slit_position=slit_position, collimator_zernike_um=o.collimator_zernike_um, settings=settings)
-    return r.detected.offset_um, r.detected.intensity
+    u, y = r.detected.offset_um, r.detected.intensity
+    return u, (detected_profile(u, y, p) if detected else y)
+
+
+def detected_profile(offset_um: np.ndarray, intensity: np.ndarray, p: dict) -> np.ndarray:
+    """The profile the optics form (on its uniform ``offset_um`` grid) changed by every
+    ``Effect.detected`` of the parameters ``p`` (light the detector side adds)."""
+    for e in forward_effects():
+        if e.detected is not None:
+            intensity = e.detected(offset_um, intensity, p)
+    return intensity
 
 
 class SpectrographImageModel:
@@ -252,10 +263,13 @@ class SpectrographImageModel:
     deformation's overall factor and a memo of the model per physical parameter set
     (varying only the nuisances then costs an interpolation)."""
 
-    #: the memo key's parameters and their nulls: :data:`PROFILE_KEYS` and the alternatives' likewise
+    #: the memo key's parameters and their nulls: :data:`PROFILE_KEYS` and the alternatives' likewise,
+    #: except those acting after the optics (``Effect.detected``), which the line-profile model
+    #: applies to the memoised optics (a change of them then costs a convolution, not an image)
     _NULLS = {q.name: q.null for e in forward_effects() if set(e.kinds) & {"line_profile", "psf_image"}
-              and not e.rescales for q in e.parameters}
+              and not e.rescales and e.detected is None for q in e.parameters}
     _KEYS = tuple(_NULLS)
+    _DETECTED_NULLS = {q.name: q.null for e in forward_effects() if e.detected is not None for q in e.parameters}
 
     def _setup(self, m, nominal: SagMap, cold_K: float, warm_K: float, settings, cache_size: int,
                materials: tuple[str, str] = DEFAULT_MATERIALS) -> None:
@@ -273,10 +287,14 @@ class SpectrographImageModel:
         # taken at the simulation's cold_K: spectrograph data are stated at it
         return deformation_factor(p, self.blank, self.cold_K, self.cold_K, self.warm_K, self.materials)
 
+    def _key(self, p: dict) -> tuple:
+        """``(memo key, deformation factor)`` of the parameters ``p``."""
+        k = self.factor(p)
+        return (round(k, 12),) + tuple(round(float(p.get(q, self._NULLS[q])), 12) for q in self._KEYS), k
+
     def _memo(self, p: dict, build):
         """``build(sag, p)`` for the grating's deformed sag, memoised on the physical parameters."""
-        k = self.factor(p)
-        key = (round(k, 12),) + tuple(round(float(p.get(q, self._NULLS[q])), 12) for q in self._KEYS)
+        key, k = self._key(p)
         hit = self._cache.get(key)
         if hit is not None:
             self._cache.move_to_end(key)
@@ -300,19 +318,35 @@ class ProfileForward(SpectrographImageModel):
                  settings: LsfSettings = FIT_LSF_SETTINGS, cache_size: int = 512,
                  materials: tuple[str, str] = DEFAULT_MATERIALS):
         self._setup(data.measurement, nominal, cold_K, warm_K, settings, cache_size, materials)
+        self._splines: OrderedDict = OrderedDict()
         self.x = np.asarray(data.offset_um, float)
         self.data = np.asarray(data.intensity, float)
         self.n = self.data.size
         self.delta0_um = self._initial_shift()
 
     def curve(self, p: dict) -> CubicSpline:
-        """Memoised spline of the model profile (unit area) for the physical parameters."""
-        def build(sag, p):
-            u, y = profile_curve(self.m.grating, self.m.wavelength_um, self.m.order, self.m.pixel_scale_mas, sag, p,
-                                 self.m.slit_position, self.settings)
-            return CubicSpline(u, y, extrapolate=False)
+        """Memoised spline of the model profile (unit area) for the physical parameters: the
+        optics' profile memoised on the parameters that change it, then the detector side's
+        (:func:`detected_profile`)."""
+        wings = tuple(round(float(p.get(q, n)), 12) for q, n in self._DETECTED_NULLS.items())
+        if not any(w != self._DETECTED_NULLS[q] for q, w in zip(self._DETECTED_NULLS, wings)):
+            return self._memo(p, self._build)[1]
+        key = self._key(p)[0] + wings
+        hit = self._splines.get(key)
+        if hit is None:
+            u, y = self._memo(p, self._build)[0]
+            hit = self._splines[key] = CubicSpline(u, detected_profile(u, y, p), extrapolate=False)
+            if len(self._splines) > self._cache_size:
+                self._splines.popitem(last=False)
+        else:
+            self._splines.move_to_end(key)
+        return hit
 
-        return self._memo(p, build)
+    def _build(self, sag, p):
+        """((offset_um, intensity) the optics form, its spline) for the deformed ``sag``."""
+        u, y = profile_curve(self.m.grating, self.m.wavelength_um, self.m.order, self.m.pixel_scale_mas, sag, p,
+                             self.m.slit_position, self.settings, detected=False)
+        return (u, y), CubicSpline(u, y, extrapolate=False)
 
     def predict(self, p: dict, delta_um: float = 0.0) -> np.ndarray:
         """Model profile at the measured offsets shifted by ``delta_um`` (before flux/background)."""

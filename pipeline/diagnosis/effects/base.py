@@ -14,7 +14,8 @@ parameters, a missing one at its null, and leaves the input unchanged there):
    (:data:`SHAPE_STAGES`);
 4. a map after ``k``: ``map_zernike`` terms over the map's aperture disc;
 5. the spectrograph (line profiles, PSF images): ``pupil_zernike`` terms added to the
-   collimator's wavefront, then ``optics``.
+   collimator's wavefront, then ``optics``;
+6. a detected line profile: ``detected`` (light the detector side adds).
 """
 
 from __future__ import annotations
@@ -148,6 +149,9 @@ class Effect:
     optics : callable or None
         The spectrograph's changed optics, ``optics(SpectrographOptics, parameters) ->
         SpectrographOptics``.
+    detected : callable or None
+        The detected line profile changed after the optics, ``detected(offset_um,
+        intensity, parameters) -> intensity`` on the model's uniform offset grid (µm).
     """
 
     name: str
@@ -172,6 +176,7 @@ class Effect:
     map_zernike: tuple = ()
     pupil_zernike: tuple = ()
     optics: Callable | None = None
+    detected: Callable | None = None
 
     def __post_init__(self) -> None:
         if self.shape_stage not in SHAPE_STAGES:
@@ -185,7 +190,8 @@ class Effect:
                                      f"parameters {sorted(own)}, (n, m))")
         if self.truth_stage not in ("blank", "map"):
             raise ValueError(f"Effect {self.name!r}: truth_stage={self.truth_stage!r} must be 'blank' or 'map'")
-        if self.rescales and (self.coordinates or self.shape or self.map_zernike or self.pupil_zernike or self.optics):
+        if self.rescales and (self.coordinates or self.shape or self.map_zernike or self.pupil_zernike or self.optics
+                              or self.detected):
             # a rescaling acts only through the overall factor (never paired, not in the image memo key)
             raise ValueError(f"Effect {self.name!r}: rescales=True allows only the scale= and temperature= hooks")
         if self.projection is not None and not self.rescales:

@@ -8,6 +8,7 @@ from .astigmatism import ASTIGMATISM
 from .base import Effect, Parameter, SummaryContext
 from .blank_bow import BLANK_BOW
 from .collimator_wfe import COLLIMATOR_WFE
+from .instrument_wings import INSTRUMENT_WINGS
 from .plating_gradient import PLATING_GRADIENT
 from .pupil_other_orders import PUPIL_OTHER_ORDERS
 from .pupil_shift import PUPIL_SHIFT
@@ -27,8 +28,8 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
 
 #: Effects that are not candidates (never ranked or reported as an explanation) but whose
 #: parameters the forward models take: the diagnostic alternatives a check fits instead
-#: of a library effect (:mod:`pipeline.diagnosis.pupil_orders`).
-ALTERNATIVES: dict[str, Effect] = {e.name: e for e in (PUPIL_OTHER_ORDERS,)}
+#: of a library effect (:mod:`pipeline.diagnosis.pupil_orders`, :mod:`pipeline.diagnosis.wings`).
+ALTERNATIVES: dict[str, Effect] = {e.name: e for e in (PUPIL_OTHER_ORDERS, INSTRUMENT_WINGS)}
 
 
 def forward_effects() -> tuple[Effect, ...]:
