@@ -13,7 +13,7 @@ from pipeline.diagnosis.synth import synthetic_profile, synthetic_psf_image, syn
 from pipeline.io.measured import write_line_profile_csv, write_psf_image_csv
 from pipeline.io.registry import write_sag_map
 
-__all__ = ["nominal_map", "sag_function_of", "other_quilt_truth", "surface_manifest", "surface_case", "profile_image_case",
+__all__ = ["nominal_map", "sag_function_of", "abbe_profiles_manifest", "other_quilt_truth", "surface_manifest", "surface_case", "profile_image_case",
            "FakeFinding", "FakeDiagnosis"]
 
 
@@ -35,6 +35,29 @@ def sag_function_of(nominal):
         x, y = np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float))
         return itp(np.column_stack([y.ravel(), x.ravel()])).reshape(x.shape)
     return sag
+
+
+def abbe_profiles_manifest(tmp_path, pixel_scales, seed, distortion=None, **abbe_kwargs):
+    """Manifest of J 1.25 µm order -2 profiles of the nominal blank (:func:`nominal_map`) at
+    ``pixel_scales`` (mas), made by the independent truth's 2-D Abbe sum with
+    ``abbe_kwargs`` (collimator, camera, pupil shift) and measured with photon and read
+    noise, background, coupling and sub-pixel phases, ``distortion`` on the detector
+    (:func:`pipeline.diagnosis.truth.detector.measure_profile`)."""
+    from pipeline.diagnosis.truth.abbe import RELATIVE_NA, abbe_line_profile
+    from pipeline.diagnosis.truth.detector import measure_profile
+
+    sag = sag_function_of(nominal_map(tmp_path))
+    rng = np.random.default_rng(seed)
+    lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
+    for ps in pixel_scales:
+        u, det = abbe_line_profile("J", 1.25, -2, RELATIVE_NA[ps], sag, **abbe_kwargs)
+        x, counts, _ = measure_profile(u, det, rng, distortion=distortion)
+        write_line_profile_csv(tmp_path / f"p{ps}.csv", x, counts)
+        lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{ps}.csv"\ngrating = "J"\norder = -2\n'
+                     f'wavelength_um = 1.25\npixel_scale_mas = {ps}\n')
+    p = tmp_path / "m.toml"
+    p.write_text("\n".join(lines))
+    return p
 
 
 def other_quilt_truth(nominal):

@@ -5,7 +5,6 @@ no code with the engine's forward model. Nominal: the analytic sum quilt (no FEA
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from pipeline.diagnosis import diagnose
@@ -15,12 +14,9 @@ from pipeline.diagnosis.fitting import FitOutcome
 from pipeline.diagnosis.effects.pupil_other_orders import PUPIL_OTHER_ORDERS
 from pipeline.diagnosis.forward import collimator_terms
 from pipeline.diagnosis.pupil_orders import OTHER_ORDERS_LABEL, PupilOrdersCheck, checks, other_orders_check, with_check
-from pipeline.diagnosis.truth.abbe import RELATIVE_NA, abbe_line_profile
-from pipeline.diagnosis.truth.detector import measure_profile
 from pipeline.diagnosis.truth.generate import COLLIMATOR_UM
-from pipeline.io.measured import write_line_profile_csv
 
-from diagnosis_cases import nominal_map, sag_function_of
+from diagnosis_cases import abbe_profiles_manifest
 
 
 def _profiles(tmp_path, camera_um=None, collimator_extra_um=None, seed=3):
@@ -28,22 +24,10 @@ def _profiles(tmp_path, camera_um=None, collimator_extra_um=None, seed=3):
     independent truth with the instrument's collimator plus ``collimator_extra_um`` and a
     camera wavefront ``camera_um`` ({(n, m): µm RMS}); measured with photon and read
     noise, background, sub-pixel phases (:func:`.truth.detector.measure_profile`)."""
-    sag = sag_function_of(nominal_map(tmp_path))
-
     coll = dict(COLLIMATOR_UM)
     for nm, v in (collimator_extra_um or {}).items():
         coll[nm] = coll.get(nm, 0.0) + v
-    rng = np.random.default_rng(seed)
-    lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
-    for ps in (250, 25):
-        u, det = abbe_line_profile("J", 1.25, -2, RELATIVE_NA[ps], sag, collimator_um=coll, camera_um=camera_um)
-        x, counts, _ = measure_profile(u, det, rng)
-        write_line_profile_csv(tmp_path / f"p{ps}.csv", x, counts)
-        lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{ps}.csv"\ngrating = "J"\norder = -2\n'
-                     f'wavelength_um = 1.25\npixel_scale_mas = {ps}\n')
-    p = tmp_path / "m.toml"
-    p.write_text("\n".join(lines))
-    return p
+    return abbe_profiles_manifest(tmp_path, (250, 25), seed, collimator_um=coll, camera_um=camera_um)
 
 
 def test_other_order_terms_reach_the_pupil_and_are_not_the_collimators():

@@ -17,13 +17,10 @@ from pipeline.diagnosis.ranking import fit_effects
 from pipeline.diagnosis.finding import Finding
 from pipeline.diagnosis.fitting import FitOutcome
 from pipeline.diagnosis.wings import WINGS_LABEL, WingsCheck, checks, wings_check, with_check
-from pipeline.diagnosis.truth.abbe import RELATIVE_NA, abbe_line_profile
-from pipeline.diagnosis.truth.detector import measure_profile
 from pipeline.diagnosis.truth.generate import COLLIMATOR_UM
-from pipeline.io.measured import write_line_profile_csv
 from pipeline.io.registry import read_sag_map
 
-from diagnosis_cases import nominal_map, sag_function_of
+from diagnosis_cases import abbe_profiles_manifest
 
 
 class _Fw:
@@ -60,20 +57,8 @@ def _profiles(tmp_path, distortion=None, pupil_shift_mm=(0.0, 0.0), seed=5):
     """J 1.25 µm order -2 profiles at 250, 100 and 25 mas of the nominal blank by the Abbe
     sum with the instrument's collimator, measured with noise, coupling and sub-pixel
     phases, ``distortion`` on the detector."""
-    sag = sag_function_of(nominal_map(tmp_path))
-
-    rng = np.random.default_rng(seed)
-    lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
-    for ps in (250, 100, 25):
-        u, det = abbe_line_profile("J", 1.25, -2, RELATIVE_NA[ps], sag, pupil_shift_mm=pupil_shift_mm,
-                                   collimator_um=dict(COLLIMATOR_UM))
-        x, counts, _ = measure_profile(u, det, rng, distortion=distortion)
-        write_line_profile_csv(tmp_path / f"p{ps}.csv", x, counts)
-        lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{ps}.csv"\ngrating = "J"\norder = -2\n'
-                     f'wavelength_um = 1.25\npixel_scale_mas = {ps}\n')
-    p = tmp_path / "m.toml"
-    p.write_text("\n".join(lines))
-    return p
+    return abbe_profiles_manifest(tmp_path, (250, 100, 25), seed, distortion=distortion,
+                                  pupil_shift_mm=pupil_shift_mm, collimator_um=dict(COLLIMATOR_UM))
 
 
 @pytest.mark.slow

@@ -329,7 +329,7 @@ class ProfileForward(SpectrographImageModel):
         optics' profile memoised on the parameters that change it, then the detector side's
         (:func:`detected_profile`)."""
         wings = tuple(round(float(p.get(q, n)), 12) for q, n in self._DETECTED_NULLS.items())
-        if not any(w != self._DETECTED_NULLS[q] for q, w in zip(self._DETECTED_NULLS, wings)):
+        if wings == tuple(self._DETECTED_NULLS.values()):
             return self._memo(p, self._build)[1]
         key = self._key(p)[0] + wings
         hit = self._splines.get(key)

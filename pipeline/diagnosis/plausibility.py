@@ -172,28 +172,29 @@ def profile_problems(name: str, offset_um: np.ndarray, intensity: np.ndarray, no
 
 
 def running_median3(offset_um: np.ndarray, intensity: np.ndarray) -> tuple:
-    """``(offsets sorted, 3-sample running median of the intensity)``; the end samples keep
-    their value. A single-sample spike (hot pixel, cosmic ray) disappears from it while a
-    line sampled by two or more samples per FWHM keeps its width to within a sample."""
+    """``(offsets, intensity, its 3-sample running median)``, all sorted by offset; the end
+    samples keep their value. A single-sample spike (hot pixel, cosmic ray) disappears from
+    the median while a line sampled by two or more samples per FWHM keeps its width to
+    within a sample."""
     o = np.argsort(offset_um)
     x, y = np.asarray(offset_um, float)[o], np.asarray(intensity, float)[o]
     m = y.copy()
     if y.size >= 3:
         m[1:-1] = np.median(np.stack([y[:-2], y[1:-1], y[2:]]), axis=0)
-    return x, m
+    return x, y, m
 
 
 def _spike_problem(name, x, y, nominal_fwhm_um, sigma, rules) -> list:
     """``[non-fatal Problem "spike"]`` when the running median of the profile holds a line
     of plausible width ``min_peak_sigma`` noise sigmas (the raw profile's ``sigma``) above
     its median (the raw width was set by single samples), else ``[]``."""
-    xs, med = running_median3(x, y)
+    xs, ys, med = running_median3(x, y)
     if _no_peak(name, med, sigma, rules, "line"):
         return []
     w = line_fwhm(xs, med)
     if not rules.width_range[0] <= w / nominal_fwhm_um <= rules.width_range[1]:
         return []
-    dev = np.abs(np.asarray(y, float)[np.argsort(x)] - med)
+    dev = np.abs(ys - med)
     where = ", ".join(f"{v:.1f}" for v in xs[dev >= 0.5 * dev.max()])
     return [Problem(name, "spike", f"single samples stand out of the line (at offsets {where} µm): a hot pixel or "
                     f"cosmic-ray hit? The line's FWHM without them is {w:.3g} µm; the samples are kept as data "

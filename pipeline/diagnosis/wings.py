@@ -46,7 +46,7 @@ import math
 from dataclasses import dataclass, replace
 
 from .criteria import Criteria
-from .effects import LIBRARY
+from .effects import applicable_effects
 from .effects.instrument_wings import INSTRUMENT_WINGS
 from .finding import Finding, all_effects
 from .fitting import FitOutcome, Problem, fit
@@ -99,8 +99,7 @@ def wings_check(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria) ->
     and compare the BICs (module docstring's decision rule)."""
     if not checks(prob, finding):
         raise ValueError(f"wings_check: finding {finding.effect!r} is not on data holding a line profile")
-    kinds = {f.kind for f in prob.forwards}
-    background = tuple(n for n, e in LIBRARY.items() if e.background and set(e.kinds) & kinds)
+    background = tuple(e.name for e in applicable_effects({f.kind for f in prob.forwards}) if e.background)
     wings = tuple(replace(q, starts=_STARTS[q.name]) for q in WINGS_PARAMETERS)
     base = parameters_of(tuple(n for n in background if n not in finding.effects), prob.forwards)
     alt = fit(prob, base + wings, start={q.name: q.null for q in base} | {q.name: q.null for q in wings},

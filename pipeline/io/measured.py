@@ -112,6 +112,14 @@ def read_line_profile(path: str | Path, normalise: bool = True, pixel_um: float 
     return checked_profile(path, v[:, 0], v[:, 1], normalise, lines)
 
 
+def _unreadable_and_masked(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of ``v`` (coordinates, then the intensity last) that are refused (a non-finite
+    coordinate or an infinite intensity) and that are masked samples (a NaN intensity at
+    finite coordinates: a bad pixel a pipeline flagged), as two boolean arrays."""
+    coords_ok = np.isfinite(v[:, :-1]).all(axis=1)
+    return ~coords_ok | np.isinf(v[:, -1]), coords_ok & np.isnan(v[:, -1])
+
+
 def checked_profile(path: Path, offset_um, intensity, normalise: bool = True,
                     lines: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """A profile's samples as every reader returns them: sorted by offset, samples at one
@@ -120,8 +128,7 @@ def checked_profile(path: Path, offset_um, intensity, normalise: bool = True,
     for fewer than 5 distinct offsets, an infinite intensity, a non-finite offset or a total
     flux <= 0; divided by the flux when ``normalise``."""
     v = np.column_stack([np.asarray(offset_um, float).ravel(), np.asarray(intensity, float).ravel()])
-    masked = np.isnan(v[:, 1]) & np.isfinite(v[:, 0])
-    nonfinite = ~np.isfinite(v).all(axis=1) & ~masked
+    nonfinite, masked = _unreadable_and_masked(v)
     if nonfinite.any():
         where = int(lines[nonfinite][0]) if lines is not None else None
         raise parse_error(path, where, "offset_um must be a finite number and intensity finite or nan (masked)")
@@ -244,12 +251,11 @@ def checked_psf_image(path: Path, v: np.ndarray, lines: np.ndarray | None = None
     v = np.asarray(v, float)
     lines = np.zeros(v.shape[0], int) if lines is None else np.asarray(lines)
     line = (lambda k: int(lines[k]) if lines[k] else None)
-    bad = ~np.isfinite(v[:, :2]).all(axis=1) | np.isinf(v[:, 2])
+    bad, masked = _unreadable_and_masked(v)
     if bad.any():
         raise parse_error(path, line(int(np.flatnonzero(bad)[0])), "x_um and y_um must be finite numbers and "
                                                                   "intensity finite or nan (masked)")
-    keep = ~np.isnan(v[:, 2])
-    v, lines = v[keep], lines[keep]
+    v, lines = v[~masked], lines[~masked]
     if v.shape[0] < 25:
         raise parse_error(path, None, f"needs >= 25 valid samples, found {v.shape[0]}")
     order = np.lexsort((v[:, 0], v[:, 1]))
