@@ -129,3 +129,15 @@ def test_by_kind_diagnosis_of_a_map_is_the_n_eff_one(tmp_path):
     assert a.baseline["error_model"] == "by_kind" and a.baseline["error_model_used"] == "n_eff"
     assert [(f.effect, f.delta_bic) for f in a.findings] == [(f.effect, f.delta_bic) for f in b.findings]
     assert a.baseline["errors"] == {}
+
+
+def test_other_basin_moves_span_minima_inside_one_s2():
+    """A second minimum within s^2 of the best widens the uncertainty by its distance; one
+    beyond it, or the best itself, adds nothing (Wilks: delta chi^2 = 1 bounds the 68 %
+    region of one parameter)."""
+    from pipeline.diagnosis.fitting import other_basin_moves
+
+    minima = [(30.62, np.array([0.40, 0.0])), (30.619, np.array([0.66, 0.1])), (31.5, np.array([-0.7, 3.0]))]
+    np.testing.assert_allclose(other_basin_moves(minima, s2=0.44), [0.26, 0.1])
+    np.testing.assert_allclose(other_basin_moves(minima, s2=2.0), [1.36, 2.9])
+    np.testing.assert_allclose(other_basin_moves(minima[:1], s2=0.44), [0.0, 0.0])
