@@ -54,7 +54,7 @@ def _run(args) -> int:
         return 2
     from .engine import diagnose
     from .manifest import load_manifest
-    from .report import write_report
+    from .report import read_text, write_report
 
     effects = tuple(args.effects.split(",")) if args.effects else None
     manifest = load_manifest(args.manifest, allow_outside=args.allow_outside_paths)
@@ -62,6 +62,8 @@ def _run(args) -> int:
     d = diagnose(manifest, effects=effects, cache_dir=args.cache_dir, heldout=not args.no_heldout,
                  criteria=_criteria(args))
     j, h = write_report(d, args.out)
+    for m in d.measurements:
+        print(f"read {m['name']} ({m['kind']}): {read_text(m['read'])}")
     best = d.best
     print(f"verdict: {d.verdict}" + (f"; best: {best.effect} {best.parameters} shrink {best.shrink_fraction:.2f}" if best else ""))
     print(f"wrote {j} and {h}")

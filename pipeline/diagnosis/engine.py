@@ -27,7 +27,7 @@ from .forward import ProfileForward, SurfaceForward
 from .gap import acting_on, gap_statistics, gaps, has_gap, post_fit_n_eff, recount, recounted, residual_n_eff
 from .heldout import heldout_check
 from .identifiability import absorbed, degeneracies, sign_degeneracies, unconstrained
-from .manifest import Manifest, load_data, load_manifest
+from .manifest import Manifest, load_data, load_manifest, read_summary
 from .nominal import nominal_sag_map
 from .plausibility import at_prior_bound, check_measurements
 from .psf_image import PsfImageForward
@@ -314,7 +314,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
                 "weights": dict(prob.weights), "nominal_map": nominal.label}
     ms = tuple({"name": m.name, "kind": m.kind, "file": str(m.file), "blank": m.blank, "grating": m.grating,
                 "wavelength_um": m.wavelength_um, "pixel_scale_mas": m.pixel_scale_mas,
-                "temperature_K": m.temperature_K} for m in manifest.measurements)
+                "temperature_K": m.temperature_K, "read": read_summary(x)} for m, x in zip(manifest.measurements, data))
     curves = {}
     if keep_curves:
         curves = {"nominal": predictions(prob, nom), "data": {f.name: (f.x, getattr(f, "y", None), f.data) for f in prob.forwards},

@@ -19,6 +19,8 @@ A manifest names the nominal simulation and the measurements it is compared with
     # optional, for a file that does not carry its grid (a CODE V INT without the
     # EXTENT_MM title): spacing_mm = 0.5 (or [dx, dy]), or instead
     # extent_mm = [-68.5, 68.5, -60, 60]  (first/last sample centres x0, x1, y0, y1, mm)
+    # optional: centre_mm = [68.5, 60]  (map coordinates of the blank's centre; needed
+    # when the map counts from a corner: a map centred > 20 mm off (0, 0) is refused)
 
     [[measurement]]
     kind = "line_profile"     # CSV offset_um,intensity (offset in nm/mm, offset_px in 18 µm pixels,
@@ -63,6 +65,7 @@ unknown fields are refused with the valid ones.
 from __future__ import annotations
 
 import difflib
+import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -70,10 +73,11 @@ from pathlib import Path
 import numpy as np
 
 from fea.case import PARAMETERS, FEACase
+from optics.sagmap import SagMap
 
 __all__ = ["Simulation", "MESH_SPECS", "NOMINAL_SIMULATION", "Measurement", "Manifest", "SurfaceData", "ProfileData",
            "PsfImageData", "MEASUREMENT_KEYS", "SIMULATION_KEYS", "NOISE_RANGES", "ALLOW_OUTSIDE_FLAG", "recentre",
-           "resolve_data_path", "unit_line_peak", "unknown_keys_error", "load_manifest", "parse_manifest",
+           "read_summary", "resolve_data_path", "unit_line_peak", "unknown_keys_error", "load_manifest", "parse_manifest",
            "load_data"]
 
 #: Named FEA meshes of the nominal model (element size near surfaces / in the bulk, mm); see
@@ -92,7 +96,7 @@ _COMMON_KEYS = ("name", "kind", "file", "blank")
 #: Valid fields of a [[measurement]] table, per kind.
 MEASUREMENT_KEYS = {
     "surface": _COMMON_KEYS + ("grating", "temperature_K", "aperture_diameter_mm", "noise_um", "spacing_mm",
-                               "extent_mm", "wavelength_um"),
+                               "extent_mm", "wavelength_um", "centre_mm"),
     "line_profile": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_scale_mas", "slit_position",
                                     "noise_rel"),
     "psf_image": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_um", "noise_rel"),
@@ -175,6 +179,9 @@ class Measurement:
     pixel_um: float | None = None
     spacing_mm: float | tuple[float, float] | None = None
     extent_mm: tuple[float, float, float, float] | None = None
+    #: Map coordinates (mm) of the blank's centre; None: the map is taken as centred on
+    #: the blank and checked (:data:`OFF_CENTRE_LIMIT_MM`).
+    centre_mm: tuple[float, float] | None = None
 
     @property
     def read_options(self) -> dict:
@@ -331,9 +338,13 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
         wl = _number(entry, "wavelength_um", name)
         if wl is not None and not wl > 0:
             raise _err(name, "wavelength_um", wl, "must be > 0 µm")
+        centre = _numbers(entry, "centre_mm", name, (2,))
+        if centre is not None and not all(abs(v) <= 300.0 for v in centre):
+            raise _err(name, "centre_mm", list(centre), "must be [x0, y0] with |x0|, |y0| <= 300 mm")
         return Measurement(name, kind, path, blank, temperature_K=float(t), aperture_diameter_mm=float(ap),
                            grating=grating, noise_um=noise_um, spacing_mm=spacing, extent_mm=extent,
-                           wavelength_um=None if wl is None else float(wl))
+                           wavelength_um=None if wl is None else float(wl),
+                           centre_mm=None if centre is None else (float(centre[0]), float(centre[1])))
     from optics.grating import GRATINGS
 
     g = entry.get("grating")
@@ -372,6 +383,9 @@ def parse_manifest(data: dict, base_dir: str | Path | None = None, source: str =
     With a ``base_dir`` (the manifest's directory), file paths must stay inside it unless
     ``allow_outside``; without one, paths are taken as given (relative to the working
     directory), as a Python caller wrote them."""
+    if not isinstance(data, dict):
+        raise TypeError(f"parse_manifest: data={data!r:.80} must be a dict (the parsed TOML); read a manifest file "
+                        "with load_manifest(path)")
     contained = base_dir is not None and not allow_outside
     base = Path("." if base_dir is None else base_dir)
     top = set(data) - {"simulation", "measurement"}
@@ -441,13 +455,38 @@ def _read_surface(m: Measurement) -> SurfaceData:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc.with_remedy(remedy)}") from None
     except ValueError as exc:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
+    if m.centre_mm is not None:
+        sm = SagMap(sm.x_mm - m.centre_mm[0], sm.y_mm - m.centre_mm[1], sm.sag_um, sm.label, dict(sm.meta))
     X, Y = sm.grid()
+    if m.centre_mm is None:
+        _check_centred(m, sm, X, Y)
     inside = (X**2 + Y**2 <= (0.5 * m.aperture_diameter_mm) ** 2) & sm.mask
     if inside.sum() < 50:
         raise _err(m.name, "aperture_diameter_mm", m.aperture_diameter_mm,
                    f"leaves {int(inside.sum())} valid pixels of {m.file.name} (need >= 50); "
                    f"the map covers x {sm.x_mm[0]:.1f}..{sm.x_mm[-1]:.1f} mm, y {sm.y_mm[0]:.1f}..{sm.y_mm[-1]:.1f} mm")
     return SurfaceData(m, X[inside], Y[inside], sm.sag_um[inside], sm)
+
+
+#: A map whose valid points are centred farther than this (mm) from its (0, 0) is refused
+#: unless ``centre_mm`` says where the blank's centre is: twice the ``registration``
+#: effect's ±10 mm prior, so an off-centre map that effect can fit is never refused.
+OFF_CENTRE_LIMIT_MM = 20.0
+
+
+def _check_centred(m: Measurement, sm: SagMap, X: np.ndarray, Y: np.ndarray) -> None:
+    """Refuse a map whose valid points are centred far from (0, 0): interferometer exports
+    often count from a corner, and such a map would be read mostly off the blank (measured:
+    a 0..136 mm map kept 2 629 of 14 505 points and fitted registration at its bounds)."""
+    ok = sm.mask
+    cx, cy = float(X[ok].mean()), float(Y[ok].mean())
+    if math.hypot(cx, cy) > OFF_CENTRE_LIMIT_MM:
+        raise _err(m.name, "centre_mm", None,
+                   f"is required: the valid points of {m.file.name} are centred at x {cx:.1f}, y {cy:.1f} mm, "
+                   f"{math.hypot(cx, cy):.0f} mm from the map's (0, 0), which the diagnosis takes as the blank's "
+                   f"centre (an offset up to {OFF_CENTRE_LIMIT_MM:g} mm is accepted and fitted as registration); give "
+                   f"centre_mm = [{cx:.1f}, {cy:.1f}] (the map coordinates of the blank's centre, mm), or "
+                   "centre_mm = [0, 0] if the map is centred on the blank already")
 
 
 def unit_line_peak(intensity: np.ndarray, what: str, name: str, file: Path) -> np.ndarray:
@@ -521,6 +560,48 @@ def _read_psf_image(m: Measurement) -> PsfImageData:
 
 
 _READERS = {"surface": _read_surface, "line_profile": _read_profile, "psf_image": _read_psf_image}
+
+
+def _g(v: float) -> float:
+    return float(f"{v:.4g}")
+
+
+def read_summary(d) -> dict:
+    """What was read from one measurement's file, as the diagnosis uses it (units in the
+    keys), for the report: a wrong unit, axis or origin shows here before it shows as a
+    strange finding.
+
+    Surfaces: grid size and step, valid points inside the aperture of those in the file,
+    extent, P/V and RMS of the sag used (µm, piston removed), the centre shift applied and
+    how scattered points were gridded. Profiles: samples, step, offset range, the line's
+    centre (intensity-weighted over the samples above half the peak, file frame) and the
+    shift applied. PSF images: samples, extent and the shift applied."""
+    m = d.measurement
+    out = {"file": m.file.name}
+    if isinstance(d, SurfaceData):
+        sm, s = d.sagmap, d.sag_um - float(np.mean(d.sag_um))
+        out.update({"grid": f"{sm.x_mm.size} x {sm.y_mm.size}",
+                    "step_mm": f"{_g(sm.x_mm[1] - sm.x_mm[0])} x {_g(sm.y_mm[1] - sm.y_mm[0])}",
+                    "points_used": int(d.sag_um.size), "points_valid_in_file": int(sm.mask.sum()),
+                    "x_range_mm": [_g(sm.x_mm[0]), _g(sm.x_mm[-1])], "y_range_mm": [_g(sm.y_mm[0]), _g(sm.y_mm[-1])],
+                    "pv_um": _g(float(s.max() - s.min())), "rms_um": _g(float(np.sqrt(np.mean(s**2))))})
+        if m.centre_mm is not None:
+            out["centre_mm"] = f"({m.centre_mm[0]:g}, {m.centre_mm[1]:g}) subtracted"
+        if sm.meta.get("gridding"):
+            out["gridding"] = str(sm.meta["gridding"])
+    elif isinstance(d, ProfileData):
+        u, v = d.offset_um, d.intensity
+        hi = v >= 0.5
+        out.update({"samples": int(u.size), "step_um": _g(float(np.median(np.diff(u)))),
+                    "offset_range_um": [_g(u[0] + d.origin_um), _g(u[-1] + d.origin_um)],
+                    "line_centre_um": _g(float(np.sum(v[hi] * u[hi]) / np.sum(v[hi])) + d.origin_um),
+                    "shift_applied_um": _g(d.origin_um)})
+    else:
+        out.update({"samples": int(d.x_um.size),
+                    "x_range_um": [_g(d.x_um.min() + d.origin_um[0]), _g(d.x_um.max() + d.origin_um[0])],
+                    "y_range_um": [_g(d.y_um.min() + d.origin_um[1]), _g(d.y_um.max() + d.origin_um[1])],
+                    "shift_applied_um": f"({_g(d.origin_um[0])}, {_g(d.origin_um[1])})"})
+    return out
 
 
 def load_data(manifest: Manifest) -> tuple:

@@ -15,7 +15,7 @@ from pipeline.io.common import atomic_write
 
 from .effects import library_rows
 
-__all__ = ["write_report"]
+__all__ = ["read_text", "write_report"]
 
 
 def _png(fig) -> str:
@@ -101,6 +101,11 @@ def _absorbs_text(absorbed: str, k: dict) -> str:
     return ", ".join(terms) or f"{absorbed}: no parameter moves"
 
 
+def read_text(read: dict) -> str:
+    """One line of what was read from a file (:func:`.manifest.read_summary`; a list is a range)."""
+    return "; ".join(f"{k} {' .. '.join(map(str, v)) if isinstance(v, list) else v}" for k, v in read.items())
+
+
 def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
     """Write ``diagnosis.json`` and ``report.html`` into ``out_dir``; returns both paths."""
     out = Path(out_dir)
@@ -111,6 +116,9 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
     d = diagnosis
     parts = [f"<h1>Sim-to-real diagnosis</h1><p>manifest: {html.escape(d.manifest)}</p>",
              f"<h2>Verdict: {html.escape(d.verdict)}</h2>"]
+    read = [{"measurement": m["name"], "kind": m["kind"], "read": read_text(m["read"])} for m in d.measurements if m.get("read")]
+    if read:
+        parts.append("<h3>What was read</h3>" + _table(read, ["measurement", "kind", "read"]))
     if d.best:
         b = d.best
         parts.append(f"<p>Best: <b>{html.escape(b.effect)}</b> — parameters "

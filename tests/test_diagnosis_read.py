@@ -1,0 +1,115 @@
+"""What the diagnosis reads, what it says it read, and where it asks instead of guessing:
+a map counted from a corner, a profile sampled once per detector pixel. Every file is
+written here by numpy from analytic shapes (no project forward model makes the data)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from optics.sagmap import quilt_sag_map
+from pipeline.diagnosis.forward import NOISE_LEAK_LIMIT, ProfileForward
+from pipeline.diagnosis.manifest import load_data, parse_manifest, read_summary
+
+
+def quilt_um(x, y):
+    return 0.05 * np.cos(2 * np.pi * x / 21.0) * np.cos(2 * np.pi * y / 18.0) + 0.02 * (x * y) / 68.0**2
+
+
+def _map_csv(path, x0_mm, y0_mm):
+    """Points of a 1 mm grid inside a 136 mm circle about (x0, y0), the sag a function of
+    the blank's coordinates (x - x0, y - y0)."""
+    g = np.arange(-68.0, 68.5, 1.0)
+    X, Y = np.meshgrid(g, g)
+    inside = X**2 + Y**2 <= 68.0**2
+    x, y = X[inside], Y[inside]
+    np.savetxt(path, np.column_stack([x + x0_mm, y + y0_mm, quilt_um(x, y)]), delimiter=",",
+               header="x_mm,y_mm,sag_um", comments="", fmt="%.6f")
+    return path, int(inside.sum())
+
+
+def _surface(path, **extra):
+    return parse_manifest({"measurement": [{"kind": "surface", "file": str(path), "temperature_K": 128,
+                                            "aperture_diameter_mm": 136, **extra}]})
+
+
+def test_a_map_counted_from_a_corner_needs_its_centre(tmp_path):
+    """An export whose coordinates run 0..136 mm would be read mostly off the blank: it is
+    refused with the centre to give, and read as the centred map once it is given."""
+    f, n = _map_csv(tmp_path / "corner.csv", 68.0, 68.0)
+    with pytest.raises(ValueError, match=r"measurement 'corner': centre_mm=None is required: the valid points of "
+                                         r"corner.csv are centred at x 68.0, y 68.0 mm.*centre_mm = \[68.0, 68.0\]"):
+        load_data(_surface(f))
+    (d,) = load_data(_surface(f, centre_mm=[68.0, 68.0]))
+    assert d.sag_um.size == n
+    assert np.abs(d.x_mm).max() <= 68.0 and np.abs(d.y_mm).max() <= 68.0
+    np.testing.assert_allclose(d.sag_um, quilt_um(d.x_mm, d.y_mm), atol=5e-7)  # printed to 1e-6 µm
+    r = read_summary(d)
+    assert r["points_used"] == n and r["x_range_mm"] == [-68.0, 68.0] and "(68, 68) subtracted" in r["centre_mm"]
+    s = quilt_um(d.x_mm, d.y_mm)
+    assert r["pv_um"] == pytest.approx(s.max() - s.min(), rel=1e-3)
+
+
+def test_a_map_off_centre_within_registration_reach_is_read(tmp_path):
+    """8 mm off: within the registration effect's ±10 mm, so it is data, not a refusal."""
+    f, n = _map_csv(tmp_path / "off.csv", 8.0, -3.0)
+    (d,) = load_data(_surface(f, aperture_diameter_mm=160))  # 68 + 8.6 mm < 80
+    assert d.sag_um.size == n and "centre_mm" not in read_summary(d)
+
+
+@pytest.mark.parametrize("value, pattern", [([1000.0, 0.0], r"centre_mm=\[1000.0, 0.0\] must be \[x0, y0\] with "
+                                                             r"\|x0\|, \|y0\| <= 300 mm"),
+                                            (5.0, r"centre_mm=5.0 must be a list of 2 numbers")])
+def test_a_bad_centre_is_refused_by_name(tmp_path, value, pattern):
+    f, _ = _map_csv(tmp_path / "m.csv", 0.0, 0.0)
+    with pytest.raises(ValueError, match=pattern):
+        _surface(f, centre_mm=value)
+
+
+def test_a_manifest_path_given_to_parse_manifest_is_named():
+    with pytest.raises(TypeError, match=r"parse_manifest: data='m.toml' must be a dict.*load_manifest\(path\)"):
+        parse_manifest("m.toml")
+
+
+def _double_line(u):
+    """A quilted line's two peaks (26 µm apart) and its satellites, unit peak."""
+    g = lambda mu, s: np.exp(-0.5 * ((u - mu) / s) ** 2)  # noqa: E731
+    return g(-13, 10.5) + 0.92 * g(13, 10.5) + 0.08 * g(-45, 12) + 0.07 * g(45, 12)
+
+
+def _profile_forward(tmp_path, step_um, sigma_rel, seed):
+    rng = np.random.default_rng(seed)
+    u = np.arange(-90.0, 160.0, step_um) + 0.37 * step_um
+    counts = 500.0 + 20000.0 * _double_line(u - 35.0) + 20000.0 * sigma_rel * rng.normal(size=u.size)
+    f = tmp_path / f"p{step_um:g}.csv"
+    np.savetxt(f, np.column_stack([u, counts]), delimiter=",", header="offset_um,intensity", comments="", fmt="%.4f")
+    (pd,) = load_data(parse_manifest({"measurement": [{"kind": "line_profile", "file": str(f), "grating": "J",
+                                                       "wavelength_um": 1.25, "pixel_scale_mas": 250}]}))
+    fw = ProfileForward(pd, quilt_sag_map(0.6, "sum", spacing_mm=1.0), 80.0)
+    return pd, fw, fw.residual({}, fw.delta0_um)
+
+
+def test_a_profile_sampled_once_per_pixel_asks_for_its_noise(tmp_path):
+    """At one sample per 18 µm pixel the neighbour-prediction estimate reads the line's
+    structure as noise (here ~50x the true 0.002 of the peak): refused, naming noise_rel."""
+    pd, fw, r = _profile_forward(tmp_path, 18.0, 0.002, 1)
+    with pytest.raises(ValueError, match=r"measurement 'p18': noise_rel is required: its 14 samples \(18 µm apart\) "
+                                         r"are too coarse.*valid 1e-06..1\) in its \[\[measurement\]\]"):
+        fw.estimate_noise(r)
+    assert pd.origin_um == pytest.approx(35.0, abs=3.0)  # the line's centre, moved to the model's origin
+
+
+def test_a_densely_sampled_profile_gives_its_noise(tmp_path):
+    """The same line at 1 µm steps: the estimate is the noise written (250 samples:
+    relative sd ~1.7 / sqrt(250) = 0.11 of the estimator, so within 35 %), and the
+    nominal's leakage is far below the limit."""
+    pd, fw, r = _profile_forward(tmp_path, 1.0, 0.002, 2)
+    peak = 20000.0 * _double_line(np.array([-13.0]))[0]
+    sigma = fw.estimate_noise(r)
+    assert sigma == pytest.approx(0.002 * 20000.0 / peak, rel=0.35)
+    rd = read_summary(pd)
+    assert rd["samples"] == pd.offset_um.size and rd["step_um"] == pytest.approx(1.0)
+    # the half-maximum centre of two nearly equal peaks about 35 µm
+    assert rd["line_centre_um"] == pytest.approx(35.0, abs=2.0)
+    assert rd["shift_applied_um"] == pytest.approx(pd.origin_um)
+    assert NOISE_LEAK_LIMIT < 1.0
