@@ -113,3 +113,17 @@ def test_a_densely_sampled_profile_gives_its_noise(tmp_path):
     assert rd["line_centre_um"] == pytest.approx(35.0, abs=2.0)
     assert rd["shift_applied_um"] == pytest.approx(pd.origin_um)
     assert NOISE_LEAK_LIMIT < 1.0
+
+
+def test_the_help_shows_a_manifest_whose_keys_are_the_readers():
+    """`cryograting diagnose --help` carries the manifest layout; every key it shows is one
+    the manifest parser accepts (the help cannot drift from the parser unnoticed)."""
+    import re
+
+    from pipeline.diagnosis.cli import HELP_DESCRIPTION
+    from pipeline.diagnosis.manifest import MEASUREMENT_KEYS, SIMULATION_KEYS
+
+    keys = set(re.findall(r"^\s*#?\s*([a-z_A-Z0-9]+) = ", HELP_DESCRIPTION, flags=re.M))
+    accepted = set(SIMULATION_KEYS).union(*MEASUREMENT_KEYS.values())
+    assert {"centre_mm", "noise_rel", "noise_um", "pixel_scale_mas", "temperature_K"} <= keys
+    assert keys <= accepted, sorted(keys - accepted)

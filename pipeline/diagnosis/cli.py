@@ -12,7 +12,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-__all__ = ["register", "main"]
+__all__ = ["HELP_DESCRIPTION", "register", "main"]
 
 
 def _criteria(args, base=None):
@@ -71,7 +71,7 @@ def _run(args) -> int:
 
 
 def _add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("manifest", nargs="?", help="measurement manifest (TOML)")
+    p.add_argument("manifest", nargs="?", help="measurement manifest (TOML; layout above)")
     p.add_argument("--out", required=True, help="output directory (diagnosis.json, report.html)")
     p.add_argument("--cache-dir", default=str(Path.home() / ".cache" / "cryograting" / "diagnosis"),
                    help="cache of nominal FEA maps (default: ~/.cache/cryograting/diagnosis)")
@@ -117,10 +117,42 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                         "gradient (library companions, the first campaigns')")
 
 
+HELP_DESCRIPTION = """\
+Compare measured data (cold surface maps, line profiles, point-source images) with the
+simulation, find where they disagree, and name the effect that explains the gap, or say
+that none does. MANIFEST is a TOML file listing the simulation and the measurements:
+
+  [simulation]                # the nominal FEA case (any FEA parameter; default 200 um / 75 %)
+  cold_K = 80
+  # sag_file = "nominal.npz"  # or a cold map of the simulation itself
+
+  [[measurement]]
+  kind = "surface"            # cold-minus-warm map: .csv x_mm,y_mm,sag_um (valid points
+  file = "cryo_128K.csv"      #   only is fine), .nc, .npz, CODE V .int, Zemax/Zygo .dat, .asc, .datx
+  temperature_K = 128
+  aperture_diameter_mm = 137
+  # noise_um = 0.005          # optional: else estimated from the map
+  # spacing_mm = 0.5 | extent_mm = [x0, x1, y0, y1]   # a CODE V .int without its grid
+  # centre_mm = [68.5, 60]    # map coordinates of the blank's centre (corner-origin exports)
+
+  [[measurement]]
+  kind = "line_profile"       # .csv offset_um|offset_px|wavelength_nm,intensity or FITS
+  file = "J_1p25_250mas.csv"  #   (counts, pedestal, negative noise, any grid are fine)
+  grating = "J"
+  order = -2
+  wavelength_um = 1.25
+  pixel_scale_mas = 250       # 25, 100 or 250
+  # noise_rel = 0.003         # white noise / line peak; required for one sample per pixel
+
+Paths are relative to the manifest. Each error names the measurement and the field; the
+run prints what it read from each file. Details: README (Sim-to-real diagnosis) and
+docs/diagnosis.md."""
+
+
 def register(subparsers) -> argparse.ArgumentParser:
     """Add the ``diagnose`` subcommand to an argparse ``subparsers`` object."""
     p = subparsers.add_parser("diagnose", help="diagnose the sim-to-real gap of a measurement manifest",
-                              description=__doc__.splitlines()[0])
+                              description=HELP_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     _add_arguments(p)
     p.set_defaults(func=_run)
     return p
