@@ -127,3 +127,31 @@ def test_the_help_shows_a_manifest_whose_keys_are_the_readers():
     accepted = set(SIMULATION_KEYS).union(*MEASUREMENT_KEYS.values())
     assert {"centre_mm", "noise_rel", "noise_um", "pixel_scale_mas", "temperature_K"} <= keys
     assert keys <= accepted, sorted(keys - accepted)
+
+
+def test_the_verdict_is_said_in_words_with_the_reason():
+    """Each test a finding fails is named with its number and threshold."""
+    from types import SimpleNamespace
+
+    from pipeline.diagnosis.criteria import Criteria
+    from pipeline.diagnosis.finding import Finding
+    from pipeline.diagnosis.report import verdict_text
+    from pipeline.diagnosis.wings import WINGS_LABEL
+
+    def diag(verdict, f):
+        return SimpleNamespace(verdict=verdict, best=f, criteria=Criteria())
+
+    weak = Finding("slit_width", ("slit_width",), {}, {}, 0.0, -6.1, 1.0, 0.8, 0.2, 0.36, excess_explained=0.35)
+    assert verdict_text(diag("unexplained", weak)) == (
+        "No library effect explains the gap. The nearest candidate, slit_width, is not the explanation: it is not "
+        "significant (ΔBIC -6.1; a finding needs ≤ −10); it takes up only 35% of the residual beyond noise (needs 50%).")
+    pinned = Finding("amplitude_scale", ("amplitude_scale",), {"scale_J": 0.3}, {}, 0.0, -400.0, 1.0, 0.4, 0.6, 0.8,
+                     excess_explained=0.7, significant=True, at_bound=("scale_J",), degenerate_with=(WINGS_LABEL,))
+    t = verdict_text(diag("unexplained", pinned))
+    assert "scale_J ended at the bound of its prior range" in t and "fits as well: light added on the detector" in t
+    good = Finding("temperature", ("temperature",), {}, {}, 0.0, -250.0, 1.0, 0.3, 0.7, 0.9, excess_explained=0.92,
+                   significant=True, heldout_shrink_fraction=0.61)
+    assert verdict_text(diag("explained", good)) == ("temperature explains the gap: it lowers the BIC by 250 and takes "
+                                                     "up 92% of the residual beyond noise, and fitted on part of the "
+                                                     "data it shrinks the rest by 61%.")
+    assert "no gap" in verdict_text(diag("no_gap", None))

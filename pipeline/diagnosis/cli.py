@@ -54,7 +54,7 @@ def _run(args) -> int:
         return 2
     from .engine import diagnose
     from .manifest import load_manifest
-    from .report import read_text, write_report
+    from .report import read_text, verdict_text, write_report
 
     effects = tuple(args.effects.split(",")) if args.effects else None
     manifest = load_manifest(args.manifest, allow_outside=args.allow_outside_paths)
@@ -66,6 +66,7 @@ def _run(args) -> int:
         print(f"read {m['name']} ({m['kind']}): {read_text(m['read'])}")
     best = d.best
     print(f"verdict: {d.verdict}" + (f"; best: {best.effect} {best.parameters} shrink {best.shrink_fraction:.2f}" if best else ""))
+    print(verdict_text(d))
     print(f"wrote {j} and {h}")
     return 0
 

@@ -14,8 +14,10 @@ import numpy as np
 from pipeline.io.common import atomic_write
 
 from .effects import library_rows
+from .pupil_orders import OTHER_ORDERS_LABEL
+from .wings import WINGS_LABEL
 
-__all__ = ["read_text", "write_report"]
+__all__ = ["read_text", "verdict_text", "write_report"]
 
 
 def _png(fig) -> str:
@@ -101,6 +103,45 @@ def _absorbs_text(absorbed: str, k: dict) -> str:
     return ", ".join(terms) or f"{absorbed}: no parameter moves"
 
 
+def verdict_text(d) -> str:
+    """The verdict in one or two plain sentences: what explains the gap, or why the
+    nearest candidate does not (the tests of ``docs/diagnosis.md``, step 9)."""
+    b, c = d.best, d.criteria
+    if d.verdict == "no_gap":
+        return "The data agree with the simulation within their noise: there is no gap to explain."
+    if b is None:
+        return "No library effect applies to these data, so the gap is left unexplained."
+    if d.verdict == "explained":
+        held = ("" if b.heldout_shrink_fraction is None
+                else f", and fitted on part of the data it shrinks the rest by {b.heldout_shrink_fraction:.0%}")
+        return (f"{b.effect} explains the gap: it lowers the BIC by {-b.delta_bic:.0f} and takes up "
+                f"{b.excess_explained:.0%} of the residual beyond noise{held}.")
+    why = []
+    if not b.significant:
+        why.append(f"it is not significant (ΔBIC {b.delta_bic:+.1f}; a finding needs ≤ −{c.min_delta_bic:g})")
+    if not b.excess_explained >= c.min_variance_explained:
+        why.append(f"it takes up only {b.excess_explained:.0%} of the residual beyond noise (needs "
+                   f"{c.min_variance_explained:.0%})")
+    if b.overfit:
+        why.append("fitted on part of the data it does not predict the rest (held-out check)")
+    if b.at_bound:
+        why.append(f"{', '.join(b.at_bound)} ended at the bound of its prior range, so the prior stopped the fit")
+    outside = [e for e in b.degenerate_with if e in (OTHER_ORDERS_LABEL, WINGS_LABEL)]
+    if outside:
+        why.append("something outside the library fits as well: " + "; ".join(outside))
+    return ("No library effect explains the gap. The nearest candidate, " + b.effect + ", is not the explanation"
+            + (": " + "; ".join(why) if why else "") + ".")
+
+
+def _rms_unit(f) -> str:
+    units = {p["unit"] for p in f.per_measurement}
+    if units == {"um"}:
+        return "µm"
+    if units == {"fraction_of_peak"}:
+        return "of the line peak"
+    return "(weighted over the measurements, the nominal's = 1)"
+
+
 def read_text(read: dict) -> str:
     """One line of what was read from a file (:func:`.manifest.read_summary`; a list is a range)."""
     return "; ".join(f"{k} {' .. '.join(map(str, v)) if isinstance(v, list) else v}" for k, v in read.items())
@@ -115,7 +156,7 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
         fh.write(json.dumps(diagnosis.to_dict(), indent=1, default=float))
     d = diagnosis
     parts = [f"<h1>Sim-to-real diagnosis</h1><p>manifest: {html.escape(d.manifest)}</p>",
-             f"<h2>Verdict: {html.escape(d.verdict)}</h2>"]
+             f"<h2>Verdict: {html.escape(d.verdict)}</h2>", f"<p>{html.escape(verdict_text(d))}</p>"]
     read = [{"measurement": m["name"], "kind": m["kind"], "read": read_text(m["read"])} for m in d.measurements if m.get("read")]
     if read:
         parts.append("<h3>What was read</h3>" + _table(read, ["measurement", "kind", "read"]))
@@ -123,7 +164,8 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
         b = d.best
         parts.append(f"<p>Best: <b>{html.escape(b.effect)}</b> — parameters "
                      + ", ".join(html.escape(_param_text(b, k)) for k in b.parameters)
-                     + f"; residual RMS {b.residual_rms_before:.4g} → {b.residual_rms_after:.4g} (shrink {b.shrink_fraction:.2f}, "
+                     + f"; residual RMS {b.residual_rms_before:.4g} → {b.residual_rms_after:.4g} {_rms_unit(b)} "
+                     f"(shrink {b.shrink_fraction:.2f}, "
                      f"held-out shrink {b.heldout_shrink_fraction if b.heldout_shrink_fraction is None else round(b.heldout_shrink_fraction, 2)})"
                      + (f"; degenerate with {', '.join(b.degenerate_with)}" if b.degenerate_with else "")
                      + (f"; fitted together with {', '.join(b.companions)}" if b.companions else "")
