@@ -155,3 +155,11 @@ def test_the_verdict_is_said_in_words_with_the_reason():
                                                      "up 92% of the residual beyond noise, and fitted on part of the "
                                                      "data it shrinks the rest by 61%.")
     assert "no gap" in verdict_text(diag("no_gap", None))
+
+
+def test_an_untestable_fold_says_why_in_words():
+    from pipeline.diagnosis.heldout import untestable_reason
+
+    assert untestable_reason(0.0, 0.0) == "the training part's fit predicts no change on the withheld part"
+    assert untestable_reason(0.01, float("inf")) == "a parameter is left free within its prior by the training part"
+    assert untestable_reason(0.01, 0.02) == "the training part predicts the withheld change 0.01 only to ±0.02"

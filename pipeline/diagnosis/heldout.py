@@ -26,7 +26,7 @@ from .finding import all_effects
 from .fitting import Problem, fit
 from .ranking import parameters_of
 
-__all__ = ["folds", "heldout_check"]
+__all__ = ["folds", "heldout_check", "untestable_reason"]
 
 
 def folds(prob: Problem) -> list[tuple[dict, dict, str]]:
@@ -86,6 +86,15 @@ def _prediction_spread(prob: Problem, params, tr, test: dict) -> tuple[float, fl
     return math.sqrt(sig2), math.sqrt(spread2)
 
 
+def untestable_reason(signal: float, spread: float) -> str:
+    """Why a fold does not test the effect, in words (the fold's numbers where they mean something)."""
+    if not signal > 0:
+        return "the training part's fit predicts no change on the withheld part"
+    if not math.isfinite(spread):
+        return "a parameter is left free within its prior by the training part"
+    return f"the training part predicts the withheld change {signal:.3g} only to ±{spread:.3g}"
+
+
 def heldout_check(prob: Problem, finding, criteria) -> tuple[float | None, str]:
     """Held-out shrink fraction of ``finding`` (None if no fold constrains it) and a note."""
     params = parameters_of(all_effects(finding), prob.forwards)
@@ -95,8 +104,7 @@ def heldout_check(prob: Problem, finding, criteria) -> tuple[float | None, str]:
         tr = fit(prob, params, masks=train)
         signal, spread = _prediction_spread(prob, params, tr, test)
         if not spread < signal:
-            notes.append(f"{label}: untestable (training part predicts the withheld change "
-                         f"{signal:.3g} only to ±{spread:.3g})")
+            notes.append(f"{label}: untestable ({untestable_reason(signal, spread)})")
             continue
         b = fit(prob, (), masks=test)
         a = fit(prob, (), masks=test, fixed=tr.parameters)
