@@ -205,6 +205,27 @@ class SurfaceData:
     sag_um: np.ndarray
     sagmap: object = field(repr=False, default=None)
 
+    @property
+    def gridding(self) -> str | None:
+        """How the file's samples were put on the map's grid (``meta["gridding"]`` of the
+        point-list reader: put back on their grid, or scattered and interpolated), or None
+        for a file that holds its grid."""
+        return (getattr(self.sagmap, "meta", None) or {}).get("gridding")
+
+    @property
+    def points_noise_um(self) -> float | None:
+        """White-noise sigma (µm) of scattered points estimated before they were
+        interpolated onto the grid (:func:`pipeline.io.gridding.grid_points`), else None.
+        Interpolated nodes share their points' noise: the map's own rows understate it."""
+        v = (getattr(self.sagmap, "meta", None) or {}).get("points_noise_um")
+        return float(v) if v is not None and np.isfinite(v) and v > 0 else None
+
+    @property
+    def n_points(self) -> int | None:
+        """Number of scattered points behind the map (None for a file holding a grid)."""
+        v = (getattr(self.sagmap, "meta", None) or {}).get("n_points")
+        return None if v is None else int(v)
+
 
 @dataclass(frozen=True, eq=False)
 class ProfileData:
