@@ -101,6 +101,21 @@ def _absorbs_text(absorbed: str, k: dict) -> str:
     return ", ".join(terms) or f"{absorbed}: no parameter moves"
 
 
+def _measurement_rows(d) -> list[dict]:
+    """One row per measurement: its file, how its samples were gridded (scattered points
+    are interpolated: the map's nodes are then not independent samples) and its noise."""
+    noise = d.baseline.get("noise", {})
+    rows = []
+    for m in d.measurements:
+        sigma = noise.get(m["name"])
+        unit = "µm" if m["kind"] == "surface" else "of the peak"
+        rows.append({"measurement": m["name"], "kind": m["kind"], "file": m["file"],
+                     "gridding": m.get("gridding") or "—",
+                     "noise": f"{sigma:.3g} {unit}" if isinstance(sigma, float) else "—",
+                     "noise from": m.get("noise_from", "—")})
+    return rows
+
+
 def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
     """Write ``diagnosis.json`` and ``report.html`` into ``out_dir``; returns both paths."""
     out = Path(out_dir)
@@ -136,6 +151,8 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
         parts.append("<p>Residual still beyond noise (unexplained) in: " + "; ".join(
             html.escape(f"{g['measurement']} (RMS {g['rms_ratio']:.2f} × noise, χ² excess {g['z']:.1f} σ)")
             for g in d.unexplained_in) + "</p>")
+    parts.append("<h2>Measurements</h2>" + _table(_measurement_rows(d), ["measurement", "kind", "file", "gridding",
+                                                                         "noise", "noise from"]))
     rows = [{"effect": f.effect, "ΔBIC": _fmt(f.delta_bic), "shrink": _fmt(f.shrink_fraction),
              "variance explained": _fmt(f.variance_explained),
              "excess over noise explained (where it acts)": _fmt(f.excess_explained),
