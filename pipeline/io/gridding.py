@@ -183,7 +183,8 @@ def grid_points(x_mm: np.ndarray, y_mm: np.ndarray, sag_um: np.ndarray, *, spaci
 
 
 def _scattered(x, y, s, spacing_mm, source):
-    from pipeline.diagnosis.noise import estimate_noise_scattered  # not at the top: pipeline.diagnosis imports pipeline.io
+    # imported here, not at the top: pipeline.diagnosis imports pipeline.io
+    from pipeline.diagnosis.noise import estimate_noise_scattered
 
     ok = np.isfinite(s)
     x, y, s = x[ok], y[ok], s[ok]
