@@ -290,17 +290,18 @@ def test_quilt_amplitude_named_as_the_option(value, tmp_path, capsys):
 
 
 def test_dense_scattered_points_name_no_option_psf_lacks(tmp_path, capsys):
-    """Scattered points each with a partner 0.1 µm away: gridding at the points' own
-    (median nearest-neighbour) spacing would need (200 mm / 0.1 µm)^2 nodes; the message
+    """Scattered points along a 280 mm diagonal within 0.1 µm of it: one node per point
+    over their hull (area ~0.04 mm²) would need (200 mm / 9 µm)^2 nodes; the message
     names no spacing option, which psf does not have."""
     rng = np.random.default_rng(3)
-    pts = rng.uniform(-100, 100, (500, 2))
-    xy = np.vstack([pts, pts + 1e-4])
+    t = rng.uniform(-100, 100, 500)
+    xy = np.column_stack([t, t + rng.uniform(-1e-4, 1e-4, t.size)])
     f = tmp_path / "points.csv"
-    np.savetxt(f, np.column_stack([xy, np.zeros(len(xy))]), delimiter=",", header="x_mm,y_mm,sag_um", comments="")
+    np.savetxt(f, np.column_stack([xy, np.zeros(len(xy))]), delimiter=",", header="x_mm,y_mm,sag_um", comments="",
+               fmt="%.9f")
     assert main(["psf", "--grating", "J", "--wavelength-um", "1.25", "--sag", str(f),
                  "--out", str(tmp_path / "o")]) == 2
-    line = one_error_line(capsys, "median nearest-neighbour distance")
+    line = one_error_line(capsys, "sqrt(hull area / points)")
     assert "spacing_mm" not in line and "--spacing" not in line
 
 

@@ -171,7 +171,7 @@ def test_csv_scattered_gridded(tmp_path):
     f = tmp_path / "scat.csv"
     np.savetxt(f, np.column_stack([x, y, 2.0 + 0.1 * x - 0.05 * y]), delimiter=",",
                header="x_mm,y_mm,sag_um", comments="")
-    auto = ic.read_sag_map(f)  # spacing: median nearest-neighbour distance; a plane is exact
+    auto = ic.read_sag_map(f)  # spacing: one node per point over their hull; a plane is exact
     assert auto.meta["gridding"].startswith("scattered: linear")
     np.testing.assert_allclose(auto.sag_um[auto.mask], (2.0 + 0.1 * auto.grid()[0] - 0.05 * auto.grid()[1])[auto.mask],
                                atol=1e-9)

@@ -63,7 +63,8 @@ def _run(args) -> int:
                  criteria=_criteria(args))
     j, h = write_report(d, args.out)
     for m in d.measurements:
-        print(f"read {m['name']} ({m['kind']}): {read_text(m['read'])}")
+        print(f"read {m['name']} ({m['kind']}): {read_text(m['read'])}"
+              + (f"; gridding: {m['gridding']}" if m.get("gridding") else "") + f"; noise from {m['noise_from']}")
     best = d.best
     print(f"verdict: {d.verdict}" + (f"; best: {best.effect} {best.parameters} shrink {best.shrink_fraction:.2f}" if best else ""))
     print(verdict_text(d))

@@ -108,6 +108,14 @@ def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, Fi
     return prob, fit(prob, ())
 
 
+def _data_notes(data, forward) -> dict:
+    """How a measurement's samples came to be the diagnosed ones, for the report: ``gridding``
+    (scattered points interpolated onto a grid, a point list put back on its grid; None for
+    a file holding its grid or for a profile) and ``noise_from`` (where its noise comes from)."""
+    default = "manifest" if forward.noise_known else "the data"
+    return {"gridding": getattr(data, "gridding", None), "noise_from": getattr(forward, "noise_from", default)}
+
+
 def summary_context(prob: Problem, cold_K: float) -> SummaryContext:
     """What :func:`.effects.physical_summary` needs from the data and the simulation."""
     quilt = next((f.quilt for f in prob.forwards if getattr(f, "quilt", None) is not None), None)
@@ -224,6 +232,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     check_measurements(manifest, data, nominal)
     t["load_s"] = time.perf_counter() - t["start"]
     prob, nom = build_problem(manifest, data, nominal)
+    base_forwards = tuple(prob.forwards)  # one per measurement, in the manifest's order
     kinds = {f.kind for f in prob.forwards}
     cands = applicable_effects(kinds, effects)
     memo, errors = {}, {}
@@ -314,7 +323,8 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
                 "weights": dict(prob.weights), "nominal_map": nominal.label}
     ms = tuple({"name": m.name, "kind": m.kind, "file": str(m.file), "blank": m.blank, "grating": m.grating,
                 "wavelength_um": m.wavelength_um, "pixel_scale_mas": m.pixel_scale_mas,
-                "temperature_K": m.temperature_K, "read": read_summary(x)} for m, x in zip(manifest.measurements, data))
+                "temperature_K": m.temperature_K, "read": read_summary(d), **_data_notes(d, f)}
+               for m, d, f in zip(manifest.measurements, data, base_forwards))
     curves = {}
     if keep_curves:
         curves = {"nominal": predictions(prob, nom), "data": {f.name: (f.x, getattr(f, "y", None), f.data) for f in prob.forwards},

@@ -34,7 +34,7 @@ from optics.zernike import zernike_xy
 
 from .effects import LIBRARY, SHAPE_STAGES, SpectrographOptics, forward_effects
 from .manifest import NOISE_RANGES, ProfileData, SurfaceData
-from .noise import estimate_noise
+from .noise import SCATTERED_NOISE_REL_SD_SQRT_N, estimate_noise
 from .nominal import DEFAULT_MATERIALS, thermal_factor
 from .quilt import QuiltComponents, quilt_components
 
@@ -169,6 +169,7 @@ class SurfaceForward:
         self._map_terms = map_terms(self.x, self.y, self.radius_mm)
         self.nuisance = np.column_stack([np.ones(self.n), self.x / self.radius_mm, self.y / self.radius_mm])
         self.noise_known = m.noise_um
+        self.points_noise_um, self.n_points = data.points_noise_um, data.n_points
         self.quilt = quilt_components(nominal)
         self._quilt_at = quilt_parts(self.quilt, self.x, self.y)
 
@@ -204,8 +205,30 @@ class SurfaceForward:
         return r
 
     def estimate_noise(self, nominal_residual: np.ndarray) -> float:
-        """White-noise sigma (µm) from the map itself: cubic prediction along its rows."""
+        """White-noise sigma (µm) from the data: for a map interpolated from scattered
+        points, the points' own before interpolation (its nodes' errors are correlated,
+        which the row cubic reads as signal); else cubic prediction along the map's rows."""
+        if self.points_noise_um is not None:
+            return self.points_noise_um
         return estimate_noise(self.x, self.data, rows=self.y)
+
+    @property
+    def noise_rel_sd(self) -> float | None:
+        """Relative standard deviation of the estimated noise when it comes from scattered
+        points (:data:`.noise.SCATTERED_NOISE_REL_SD_SQRT_N` over the square root of their
+        count), else None (:func:`.gap._noise_rel_sd` then uses the map's own)."""
+        if self.points_noise_um is None or not self.n_points:
+            return None
+        return SCATTERED_NOISE_REL_SD_SQRT_N / np.sqrt(self.n_points)
+
+    @property
+    def noise_from(self) -> str:
+        """Where the map's noise comes from, for the report."""
+        if self.noise_known:
+            return "manifest noise_um"
+        if self.points_noise_um is not None:
+            return f"the {self.n_points} points before interpolation (local cubic over each point's 20 nearest)"
+        return "the map (cubic prediction along its rows)"
 
     def fitted(self, p: dict, mask: np.ndarray | None = None) -> np.ndarray:
         """Full model (with the fitted piston/tilt) at all points (µm)."""

@@ -72,8 +72,13 @@ def _nuisances(f) -> int:
 
 
 def _noise_rel_sd(f) -> float:
-    """Relative standard deviation of a measurement's noise: 0 if the manifest gives it."""
-    return 0.0 if f.noise_known else NOISE_ESTIMATE_REL_SD_SQRT_N / math.sqrt(max(f.n, 1))
+    """Relative standard deviation of a measurement's noise: 0 if the manifest gives it; the
+    estimator's own if the model states one (a map's scattered points), else that of
+    :func:`.noise.estimate_noise` over the measurement's samples."""
+    if f.noise_known:
+        return 0.0
+    own = getattr(f, "noise_rel_sd", None)
+    return own if own is not None else NOISE_ESTIMATE_REL_SD_SQRT_N / math.sqrt(max(f.n, 1))
 
 
 def _noise_cost(prob: Problem, n: dict) -> float:

@@ -212,6 +212,27 @@ class SurfaceData:
     sag_um: np.ndarray
     sagmap: object = field(repr=False, default=None)
 
+    @property
+    def gridding(self) -> str | None:
+        """How the file's samples were put on the map's grid (``meta["gridding"]`` of the
+        point-list reader: put back on their grid, or scattered and interpolated), or None
+        for a file that holds its grid."""
+        return (getattr(self.sagmap, "meta", None) or {}).get("gridding")
+
+    @property
+    def points_noise_um(self) -> float | None:
+        """White-noise sigma (µm) of scattered points estimated before they were
+        interpolated onto the grid (:func:`pipeline.io.gridding.grid_points`), else None.
+        Interpolated nodes share their points' noise: the map's own rows understate it."""
+        v = (getattr(self.sagmap, "meta", None) or {}).get("points_noise_um")
+        return float(v) if v is not None and np.isfinite(v) and v > 0 else None
+
+    @property
+    def n_points(self) -> int | None:
+        """Number of scattered points behind the map (None for a file holding a grid)."""
+        v = (getattr(self.sagmap, "meta", None) or {}).get("n_points")
+        return None if v is None else int(v)
+
 
 @dataclass(frozen=True, eq=False)
 class ProfileData:
@@ -572,8 +593,8 @@ def read_summary(d) -> dict:
     strange finding.
 
     Surfaces: grid size and step, valid points inside the aperture of those in the file,
-    extent, P/V and RMS of the sag used (µm, piston removed), the centre shift applied and
-    how scattered points were gridded. Profiles: samples, step, offset range, the line's
+    extent, P/V and RMS of the sag used (µm, piston removed) and the centre shift applied
+    (how scattered points were gridded is the measurement's ``gridding``). Profiles: samples, step, offset range, the line's
     centre (intensity-weighted over the samples above half the peak, file frame) and the
     shift applied. PSF images: samples, extent and the shift applied."""
     m = d.measurement
@@ -587,8 +608,6 @@ def read_summary(d) -> dict:
                     "pv_um": _g(float(s.max() - s.min())), "rms_um": _g(float(np.sqrt(np.mean(s**2))))})
         if m.centre_mm is not None:
             out["centre_mm"] = f"({m.centre_mm[0]:g}, {m.centre_mm[1]:g}) subtracted"
-        if sm.meta.get("gridding"):
-            out["gridding"] = str(sm.meta["gridding"])
     elif isinstance(d, ProfileData):
         u, v = d.offset_um, d.intensity
         hi = v >= 0.5

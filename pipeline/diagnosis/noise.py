@@ -2,6 +2,10 @@
 
 * :func:`estimate_noise` — white-noise sigma of a profile or a map: robust scatter
   about a local cubic through each sample's four neighbours (along rows for a map).
+* :func:`estimate_noise_scattered` — the same for scattered points ``(x, y)`` *before*
+  they are interpolated onto a grid: robust scatter about a local 2-D cubic fitted to
+  each point's nearest neighbours. Interpolated grid nodes share their points' noise,
+  so the row cubic sees only a fraction of it.
 * :func:`estimate_noise_band_limited` — the same for a focal-plane image sampled finer
   than its optical cut-off: the power at frequencies the optics cannot pass.
 * :func:`effective_samples` — ``n / L`` with ``L`` the integral correlation length of a
@@ -18,7 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["effective_samples", "estimate_noise", "estimate_noise_band_limited", "TwoPartErrors", "two_part_errors"]
+__all__ = ["effective_samples", "estimate_noise", "estimate_noise_band_limited", "estimate_noise_scattered",
+           "SCATTERED_NOISE_REL_SD_SQRT_N", "TwoPartErrors", "two_part_errors"]
 
 
 def _standardised_errors(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -57,6 +62,108 @@ def estimate_noise(x: np.ndarray, y: np.ndarray, rows: np.ndarray | None = None)
         e = np.concatenate(parts) if parts else np.empty(0)
     if e.size < 5:
         return float("nan")
+    return float(1.4826 * np.median(np.abs(e - np.median(e))))
+
+
+#: Relative standard deviation of :func:`estimate_noise_scattered` times sqrt(n) (n the
+#: points used as centres), measured by Monte Carlo on uniform random points in a 136 mm
+#: disc, 200 draws each: white noise alone 1.26 (n = 3 000) and 1.13 (n = 15 000); under a
+#: 0.05 µm quilt plus astigmatism 1.30 (n = 15 000), the quilt's leakage varying with the draw.
+SCATTERED_NOISE_REL_SD_SQRT_N = 1.3
+
+
+def _poly_terms(dx: np.ndarray, dy: np.ndarray, order: int) -> np.ndarray:
+    """Monomials ``dx^i dy^(d-i)`` for ``d <= order``, stacked on a new last axis (constant first)."""
+    return np.stack([dx**i * dy**(d - i) for d in range(order + 1) for i in range(d + 1)], axis=-1)
+
+
+def estimate_noise_scattered(x: np.ndarray, y: np.ndarray, values: np.ndarray, neighbours: int = 20,
+                             order: int = 3, max_centres: int = 100_000) -> float:
+    """White-noise sigma of values at scattered points ``(x, y)`` (unit of ``values``).
+
+    Each point is predicted from its ``neighbours`` nearest points (itself excluded) by a
+    least-squares 2-D polynomial of degree ``order`` about it: the prediction is a linear
+    combination ``sum_j L_j v_j`` of the neighbours' values, so its error has variance
+    ``sigma^2 (1 + sum_j L_j^2)`` under white noise whatever the layout of the points;
+    errors divided by that root have sigma ``sigma`` and their MAD (times 1.4826) gives it.
+    Neighbourhoods that do not span two dimensions (points along a scan line) fall back
+    to the polynomial along the line (minimum-norm least squares), still correctly scaled.
+
+    Smooth signal leaks in at order + 1 in the neighbourhood radius: with 20 neighbours
+    at one point per mm² a 0.08 µm quilt of 21 x 18 mm periods adds 0.12 nm in quadrature
+    (2 nm noise comes out 2.004 nm); at one point per 7 mm² (about 7 points per period)
+    the same quilt reads as twice the noise, as on any grid that samples it that coarsely.
+
+    Parameters
+    ----------
+    x, y : ndarray, shape (n,)
+        Point coordinates (any length unit, e.g. mm; only distances matter).
+    values : ndarray, shape (n,)
+        Values at the points (e.g. sag in µm); only finite values are used.
+    neighbours : int
+        Points in each local fit, > the polynomial's term count ((order+1)(order+2)/2).
+    order : int
+        Degree of the local polynomial, 1 to 4.
+    max_centres : int
+        At most this many points (evenly strided through the input) are predicted; every
+        point still serves as a neighbour. 100 000 gives a relative error of 0.4 %.
+
+    Returns
+    -------
+    float
+        Sigma, or nan with fewer than ``neighbours + 5`` finite points.
+
+    Raises
+    ------
+    ValueError
+        ``order`` outside 1-4, ``neighbours`` not above the term count, ``max_centres`` < 5,
+        or ``x``, ``y``, ``values`` of different lengths.
+    """
+    from scipy.spatial import cKDTree
+
+    if not (isinstance(order, (int, np.integer)) and 1 <= order <= 4):
+        raise ValueError(f"estimate_noise_scattered: order={order!r} must be an integer in 1..4")
+    n_terms = (order + 1) * (order + 2) // 2
+    if not (isinstance(neighbours, (int, np.integer)) and neighbours > n_terms):
+        raise ValueError(f"estimate_noise_scattered: neighbours={neighbours!r} must be an integer > {n_terms} "
+                         f"(the terms of a degree-{order} polynomial in x and y)")
+    if not (isinstance(max_centres, (int, np.integer)) and max_centres >= 5):
+        raise ValueError(f"estimate_noise_scattered: max_centres={max_centres!r} must be an integer >= 5")
+    x, y, v = (np.asarray(a, float).ravel() for a in (x, y, values))
+    if not x.size == y.size == v.size:
+        raise ValueError(f"estimate_noise_scattered: x, y and values have lengths {x.size}, {y.size}, {v.size}; "
+                         "they must be equal")
+    ok = np.isfinite(x) & np.isfinite(y) & np.isfinite(v)
+    x, y, v = x[ok], y[ok], v[ok]
+    if x.size < neighbours + 5:
+        return float("nan")
+    pts = np.column_stack([x, y])
+    centres = np.unique(np.linspace(0, x.size - 1, min(x.size, max_centres)).round().astype(int))
+    _, nb = cKDTree(pts).query(pts[centres], k=neighbours + 1)
+    # drop each centre from its own neighbours (normally column 0; not so for a coincident twin)
+    keep = nb != centres[:, None]
+    keep[keep.all(axis=1), -1] = False
+    nb = nb[keep].reshape(centres.size, neighbours)
+    parts = []
+    for lo in range(0, centres.size, 20_000):  # bounds memory: 20 000 x neighbours x terms floats per block
+        c, j = centres[lo:lo + 20_000], nb[lo:lo + 20_000]
+        dx, dy = x[j] - x[c, None], y[j] - y[c, None]
+        scale = np.sqrt(np.mean(dx**2 + dy**2, axis=1))[:, None]  # conditioning: unit-radius neighbourhoods
+        scale = np.where(scale > 0, scale, 1.0)
+        A = _poly_terms(dx / scale, dy / scale, order)
+        # weights of the fitted constant (the value at the centre): first row of pinv(A);
+        # normal equations where well conditioned (5x faster), pinv where not (a scan line)
+        AtA = A.transpose(0, 2, 1) @ A
+        eig = np.linalg.eigvalsh(AtA)
+        good = eig[:, 0] > 1e-10 * eig[:, -1]
+        L = np.empty(j.shape)
+        e0 = np.zeros((int(good.sum()), n_terms, 1))
+        e0[:, 0] = 1.0
+        L[good] = np.einsum("nkj,nj->nk", A[good], np.linalg.solve(AtA[good], e0)[..., 0])
+        if not good.all():
+            L[~good] = np.linalg.pinv(A[~good], rcond=1e-6)[:, 0, :]
+        parts.append((v[c] - np.sum(L * v[j], axis=1)) / np.sqrt(1.0 + np.sum(L**2, axis=1)))
+    e = np.concatenate(parts)
     return float(1.4826 * np.median(np.abs(e - np.median(e))))
 
 

@@ -147,6 +147,22 @@ def read_text(read: dict) -> str:
     return "; ".join(f"{k} {' .. '.join(map(str, v)) if isinstance(v, list) else v}" for k, v in read.items())
 
 
+def _measurement_rows(d) -> list[dict]:
+    """One row per measurement: its file, what was read from it, how its samples were
+    gridded (scattered points are interpolated: the map's nodes are then not independent
+    samples) and its noise."""
+    noise = d.baseline.get("noise", {})
+    rows = []
+    for m in d.measurements:
+        sigma = noise.get(m["name"])
+        unit = "µm" if m["kind"] == "surface" else "of the peak"
+        rows.append({"measurement": m["name"], "kind": m["kind"], "file": m["file"],
+                     "read": read_text(m["read"]) if m.get("read") else "—", "gridding": m.get("gridding") or "—",
+                     "noise": f"{sigma:.3g} {unit}" if isinstance(sigma, float) else "—",
+                     "noise from": m.get("noise_from", "—")})
+    return rows
+
+
 def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
     """Write ``diagnosis.json`` and ``report.html`` into ``out_dir``; returns both paths."""
     out = Path(out_dir)
@@ -156,10 +172,10 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
         fh.write(json.dumps(diagnosis.to_dict(), indent=1, default=float))
     d = diagnosis
     parts = [f"<h1>Sim-to-real diagnosis</h1><p>manifest: {html.escape(d.manifest)}</p>",
-             f"<h2>Verdict: {html.escape(d.verdict)}</h2>", f"<p>{html.escape(verdict_text(d))}</p>"]
-    read = [{"measurement": m["name"], "kind": m["kind"], "read": read_text(m["read"])} for m in d.measurements if m.get("read")]
-    if read:
-        parts.append("<h3>What was read</h3>" + _table(read, ["measurement", "kind", "read"]))
+             f"<h2>Verdict: {html.escape(d.verdict)}</h2>", f"<p>{html.escape(verdict_text(d))}</p>",
+             "<h3>What was read</h3>" + _table(_measurement_rows(d), ["measurement", "kind", "file", "read", "gridding",
+                                                                     "noise", "noise from"])]
+
     if d.best:
         b = d.best
         parts.append(f"<p>Best: <b>{html.escape(b.effect)}</b> — parameters "

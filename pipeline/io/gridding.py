@@ -5,15 +5,23 @@ into the regular µm grid of :class:`optics.sagmap.SagMap`.
   uniform grid with some nodes absent (a masked interferometer export lists only the
   points inside its aperture) are put back on that grid, absent nodes NaN. Otherwise
   the points are scattered: linear interpolation on their Delaunay triangulation
-  (what ``scipy.interpolate.griddata(method="linear")`` does), NaN outside the convex hull, at the median nearest-neighbour distance unless a
-  spacing is given. The map's ``meta["gridding"]`` says which, for the report.
+  (what ``scipy.interpolate.griddata(method="linear")`` does), NaN outside the convex
+  hull, on a square grid with as many nodes in the hull as there are points
+  (spacing ``sqrt(hull area / n)``) unless a spacing is given. A finer grid adds no
+  information but many nodes interpolated from the same few points: their errors are
+  correlated, so a noise or an effective sample count taken from the grid misreads the
+  measurement (at the median nearest-neighbour distance, about half this spacing for
+  random points, a 2 nm noise read 0.46 nm on the grid) and every fit costs more. The
+  points' white noise is estimated before interpolation
+  (:func:`pipeline.diagnosis.noise.estimate_noise_scattered`) and kept in
+  ``meta["points_noise_um"]``. The map's ``meta["gridding"]`` says which, for the report.
 * :func:`sag_unit_factor` — factor from a ``units`` string (nm, µm, mm, m, waves) to µm.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import QhullError, cKDTree
+from scipy.spatial import ConvexHull, QhullError
 
 from optics.triangulation import linear_on_grid
 
@@ -125,8 +133,9 @@ def grid_points(x_mm: np.ndarray, y_mm: np.ndarray, sag_um: np.ndarray, *, spaci
     sag_um : ndarray, shape (n,)
         Sag (µm); NaN marks a point without data.
     spacing_mm : float, optional
-        Grid spacing for scattered points (mm); default the median nearest-neighbour
-        distance. Ignored when the points lie on a uniform grid.
+        Grid spacing for scattered points (mm); default ``sqrt(A / n)`` for ``n`` points
+        with data over a convex hull of area ``A`` (mm²): one node per point. Ignored when
+        the points lie on a uniform grid.
     lines : ndarray of int, optional
         Source line of each point, for error messages.
     source : str
@@ -137,7 +146,8 @@ def grid_points(x_mm: np.ndarray, y_mm: np.ndarray, sag_um: np.ndarray, *, spaci
     x_mm, y_mm, sag_um, meta
         Axes (mm), ``sag_um[y, x]`` with NaN where there is no data, and a dict with
         ``gridding`` (``"uniform grid detected"`` or ``"scattered: linear ..."``) and
-        the spacing.
+        the spacing; for scattered points also ``n_points`` and ``points_noise_um``, the
+        points' white-noise sigma (µm) before interpolation (None if too few points).
 
     Raises
     ------
@@ -173,14 +183,20 @@ def grid_points(x_mm: np.ndarray, y_mm: np.ndarray, sag_um: np.ndarray, *, spaci
 
 
 def _scattered(x, y, s, spacing_mm, source):
+    # imported here, not at the top: pipeline.diagnosis imports pipeline.io
+    from pipeline.diagnosis.noise import estimate_noise_scattered
+
     ok = np.isfinite(s)
     x, y, s = x[ok], y[ok], s[ok]
     if x.size < 3:
         raise ValueError(f"{source}: scattered points need >= 3 finite sag values, found {x.size}")
+    try:
+        area_mm2 = float(ConvexHull(np.column_stack([x, y])).volume)  # a 2-D hull's "volume" is its area
+    except QhullError:
+        raise ValueError(f"{source}: the {x.size} points are collinear or coincident; cannot triangulate") from None
     if spacing_mm is None:
-        dist, _ = cKDTree(np.column_stack([x, y])).query(np.column_stack([x, y]), k=2)
-        spacing_mm = float(np.median(dist[:, 1]))
-        how = "median nearest-neighbour distance"
+        spacing_mm = float(np.sqrt(area_mm2 / x.size))
+        how = "sqrt(hull area / points): one node per point"
     else:
         how = "given"
     if not (np.isfinite(spacing_mm) and spacing_mm > 0):
@@ -194,18 +210,21 @@ def _scattered(x, y, s, spacing_mm, source):
         raise ValueError(f"{source}: gridding at spacing_mm={spacing_mm:g} gives {nx} x {ny} nodes; at most "
                          f"{MAX_GRID_NODES} are supported (give a larger spacing_mm)")
     if nx * ny > MAX_GRID_NODES:  # no spacing given: name none (not every caller can give one)
-        raise ValueError(f"{source}: gridding at the points' median nearest-neighbour distance {spacing_mm:g} mm "
-                         f"gives {nx} x {ny} nodes; at most {MAX_GRID_NODES} are supported (points far apart "
-                         "from the rest, or denser than the map needs?)")
+        raise ValueError(f"{source}: gridding at the points' mean spacing sqrt(hull area / points) = {spacing_mm:g} mm "
+                         f"gives {nx} x {ny} nodes; at most {MAX_GRID_NODES} are supported (the {x.size} points "
+                         f"cover {area_mm2:g} mm² of a {x.max() - x.min():g} x {y.max() - y.min():g} mm box: "
+                         "points along a line, or far apart from the rest?)")
     gx = x.min() + spacing_mm * np.arange(nx)
     gy = y.min() + spacing_mm * np.arange(ny)
     try:
         sag = linear_on_grid(x, y, s, gx, gy)
     except QhullError:
         raise ValueError(f"{source}: the {x.size} points are collinear or coincident; cannot triangulate") from None
-    meta = {"gridding": f"scattered: linear interpolation on the Delaunay triangulation (NaN outside the convex "
-                        f"hull), spacing {spacing_mm:.4g} mm ({how})",
-            "spacing_mm": [spacing_mm, spacing_mm], "n_points": int(x.size)}
+    noise = estimate_noise_scattered(x, y, s)
+    meta = {"gridding": f"scattered: linear interpolation of {x.size} points on their Delaunay triangulation onto a "
+                        f"{spacing_mm:.3g} mm grid (NaN outside the convex hull; spacing {how})",
+            "spacing_mm": [spacing_mm, spacing_mm], "n_points": int(x.size),
+            "points_noise_um": noise if np.isfinite(noise) else None}
     return gx, gy, sag, meta
 
 

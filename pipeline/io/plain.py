@@ -53,8 +53,10 @@ def read_sag_csv(path: str | Path, spacing_mm: float | None = None) -> SagMap:
     Points on a uniform grid, complete or not (a masked export lists only the points
     inside its aperture), are put back on that grid with NaN at the absent nodes and at
     ``nan`` sag values; truly scattered points are interpolated linearly onto a grid of
-    ``spacing_mm`` (default: their median nearest-neighbour distance), NaN outside their
-    convex hull (:func:`pipeline.io.gridding.grid_points`). ``meta["gridding"]`` says which.
+    ``spacing_mm`` (default: one node per point over their convex hull, ``sqrt(area / n)``),
+    NaN outside that hull, and their white noise before interpolation is kept in
+    ``meta["points_noise_um"]`` (:func:`pipeline.io.gridding.grid_points`).
+    ``meta["gridding"]`` says which.
 
     Parameters
     ----------

@@ -1,0 +1,150 @@
+"""Maps given as scattered points: the grid they are interpolated onto, the noise the
+diagnosis uses for them (the points' own, before interpolation), and the report naming
+the gridding. Points, surfaces and noise are made here with plain numpy; files are read
+through the public readers. A genuine grid with holes keeps the row-cubic noise."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from pipeline.diagnosis import diagnose
+from pipeline.diagnosis.engine import build_problem
+from pipeline.diagnosis.manifest import load_data, load_manifest
+from pipeline.diagnosis.noise import estimate_noise, estimate_noise_scattered
+from pipeline.diagnosis.nominal import thermal_factor
+from pipeline.diagnosis.report import write_report
+from pipeline.io.registry import read_sag_map
+
+from diagnosis_cases import nominal_map, surface_manifest
+
+R_MM = 68.0
+NOISE_UM = 0.002
+N_POINTS = 15_000
+#: Relative standard deviation of estimate_noise_scattered times sqrt(n), from a Monte Carlo
+#: of 200 draws of this very layout (uniform points in the disc): 1.13 for white noise alone,
+#: 1.30 under the quilt below (its leakage varies with the draw).
+REL_SD_SQRT_N = 1.3
+
+
+def surface_um(x, y):
+    """A quilt (0.05 µm, 21 x 18 mm periods) plus astigmatism (µm)."""
+    return (0.05 * np.cos(2 * np.pi * x / 21) * np.cos(2 * np.pi * y / 18)
+            + 0.04 * (x**2 - y**2) / R_MM**2 + 0.06 * 2 * x * y / R_MM**2)
+
+
+def disc_points(rng, n):
+    r, t = R_MM * np.sqrt(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n)
+    return r * np.cos(t), r * np.sin(t)
+
+
+def write_points(path, x, y, sag_um):
+    np.savetxt(path, np.column_stack([x, y, sag_um]), delimiter=",", header="x_mm,y_mm,sag_um", comments="",
+               fmt=["%.4f", "%.4f", "%.7f"])
+    return path
+
+
+def test_scattered_points_noise_and_grid_size(tmp_path):
+    rng = np.random.default_rng(11)
+    x, y = disc_points(rng, N_POINTS)
+    f = write_points(tmp_path / "scattered.csv", x, y, surface_um(x, y) + rng.normal(0, NOISE_UM, N_POINTS))
+    m = read_sag_map(f)
+    # statistical error 1.3/sqrt(15 000) = 1.1 %; the quilt's leakage adds 0.12 nm in quadrature
+    # on 2 nm (+0.2 %): 5 sd plus 0.5 % bias = 6 %
+    tol = 5 * REL_SD_SQRT_N / np.sqrt(N_POINTS) + 0.005
+    assert m.meta["points_noise_um"] == pytest.approx(NOISE_UM, rel=tol)
+    # one node per point over the hull: a disc fills pi/4 of its bounding box
+    assert m.sag_um.size <= 2 * N_POINTS
+    assert 0.9 * N_POINTS < int(m.mask.sum()) < 1.1 * N_POINTS
+    # the reason for the points' own estimate: interpolated nodes share their points' noise,
+    # and the row cubic on the grid reads only part of it
+    X, Y = m.grid()
+    assert estimate_noise(X[m.mask], m.sag_um[m.mask], rows=Y[m.mask]) < 0.8 * NOISE_UM
+
+
+def test_scattered_noise_is_white_noise_sigma_whatever_the_layout():
+    """Prediction errors are scaled per point by their own weights: white noise of sigma
+    gives sigma on random points, along scan lines (neighbourhoods on one line) and with
+    coincident twins."""
+    rng = np.random.default_rng(5)
+    n = 4000
+    tol = 5 * REL_SD_SQRT_N / np.sqrt(n)
+    x, y = rng.uniform(-50, 50, (2, n))
+    assert estimate_noise_scattered(x, y, rng.normal(0, 1.0, n)) == pytest.approx(1.0, rel=tol)
+    xs, ys = np.meshgrid(np.arange(-20, 20, 0.1), np.arange(-5, 5, 1.0))  # 400 x 10 scan lines
+    xs = xs + rng.uniform(-0.01, 0.01, xs.shape)
+    v = 0.05 * np.cos(xs / 5.0) + rng.normal(0, 0.002, xs.shape)
+    assert estimate_noise_scattered(xs.ravel(), ys.ravel(), v.ravel()) == pytest.approx(0.002, rel=tol)
+    pts = rng.uniform(-50, 50, (n // 2, 2))
+    twins = np.vstack([pts, pts])
+    assert estimate_noise_scattered(twins[:, 0], twins[:, 1], rng.normal(0, 1.0, n)) == pytest.approx(1.0, rel=tol)
+
+
+@pytest.mark.parametrize("kwargs, needle", [
+    ({"order": 5}, "order=5 must be an integer in 1..4"),
+    ({"neighbours": 10}, "neighbours=10 must be an integer > 10"),
+    ({"max_centres": 2}, "max_centres=2 must be an integer >= 5"),
+])
+def test_scattered_noise_options_refused(kwargs, needle):
+    x = np.arange(50.0)
+    with pytest.raises(ValueError, match=needle.replace("(", r"\(").replace(".", r"\.")):
+        estimate_noise_scattered(x, x[::-1], x, **kwargs)
+
+
+def test_diagnosis_uses_and_reports_the_points_noise(tmp_path):
+    """A map of scattered points that matches the nominal within 0.01 µm noise: the
+    diagnosis takes the points' noise, finds no gap, and its JSON and report say the points
+    were interpolated and where the noise came from."""
+    nom = nominal_map(tmp_path)
+    cold = nom.scaled(thermal_factor(128, 80))
+    rng = np.random.default_rng(7)
+    x, y = disc_points(rng, N_POINTS)
+    write_points(tmp_path / "scattered.csv", x, y, cold.sample(x, y) + rng.normal(0, 0.01, N_POINTS))
+    man = load_manifest(surface_manifest(tmp_path, file="scattered.csv"))
+    data = load_data(man)
+    prob, _ = build_problem(man, data, nom)
+    assert prob.noise["scattered"] == data[0].points_noise_um
+    assert prob.noise["scattered"] == pytest.approx(0.01, rel=5 * REL_SD_SQRT_N / np.sqrt(N_POINTS) + 0.005)
+    d = diagnose(man, nominal=nom, heldout=False)
+    assert d.verdict == "no_gap"
+    (entry,) = d.measurements
+    assert entry["gridding"].startswith(f"scattered: linear interpolation of {N_POINTS} points")
+    assert "mm grid" in entry["gridding"]
+    assert "points before interpolation" in entry["noise_from"]
+    jpath, hpath = write_report(d, tmp_path / "out")
+    (saved,) = json.loads(jpath.read_text())["measurements"]
+    assert saved["gridding"] == entry["gridding"] and saved["noise_from"] == entry["noise_from"]
+    html = hpath.read_text()
+    assert "<h3>What was read</h3>" in html and entry["gridding"] in html
+
+
+@pytest.mark.parametrize("suffix", ["npz", "csv"])
+def test_grid_with_holes_keeps_the_row_cubic_noise(tmp_path, suffix):
+    """A genuine 1 mm grid with NaN outside the disc and dropouts, as NumPy arrays or as a
+    masked point list: no points' noise, and the noise the diagnosis uses is the row-cubic
+    estimate of the grid's own samples inside the aperture."""
+    nom = nominal_map(tmp_path)
+    rng = np.random.default_rng(9)
+    g = np.arange(-68.0, 68.0 + 1e-9, 1.0)
+    X, Y = np.meshgrid(g, g)
+    Z = surface_um(X, Y) + rng.normal(0, NOISE_UM, X.shape)
+    Z[X**2 + Y**2 > R_MM**2] = np.nan
+    for i, j in rng.integers(10, 126, (20, 2)):
+        Z[i:i + 3, j:j + 3] = np.nan
+    if suffix == "npz":
+        np.savez(tmp_path / "grid.npz", x_mm=g, y_mm=g, sag_um=Z)
+    else:
+        ok = np.isfinite(Z)
+        write_points(tmp_path / "grid.csv", X[ok], Y[ok], Z[ok])
+    man = load_manifest(surface_manifest(tmp_path, file=f"grid.{suffix}"))
+    data = load_data(man)
+    assert data[0].points_noise_um is None
+    prob, _ = build_problem(man, data, nom)
+    inside = np.isfinite(Z) & (X**2 + Y**2 <= (0.5 * 137) ** 2)
+    # rows taken in the file's order (y ascending), as the reader keeps them; sag printed to 1e-7 µm in the CSV
+    expected = estimate_noise(X[inside], Z[inside], rows=Y[inside])
+    assert prob.noise["grid"] == pytest.approx(expected, rel=1e-12 if suffix == "npz" else 1e-3)
+    assert prob.noise["grid"] == pytest.approx(NOISE_UM, rel=0.15)
+    assert prob.forwards[0].noise_from == "the map (cubic prediction along its rows)"
