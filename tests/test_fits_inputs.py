@@ -320,7 +320,8 @@ def _cut_out():
     rng = np.random.default_rng(11)
     wl_um = (1250.0 + (np.arange(121) - 60) * 0.025) * 1e-3
     offset_um = (wl_um - 1.25) * CUT_DISPERSION
-    line = 1000.0 * np.exp(-0.5 * ((offset_um + 10.0) / 6.0) ** 2) + 800.0 * np.exp(-0.5 * ((offset_um - 10.0) / 6.0) ** 2)
+    line = (1000.0 * np.exp(-0.5 * ((offset_um + 10.0) / 6.0) ** 2)
+            + 800.0 * np.exp(-0.5 * ((offset_um - 10.0) / 6.0) ** 2))
     slit = np.exp(-0.5 * ((np.arange(30) - 14.5) / 6.0) ** 2)
     pedestal = 200.0
     frame = slit[:, None] * line[None, :] + pedestal + rng.normal(0.0, CUT_NOISE, (30, 121))

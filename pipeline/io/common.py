@@ -21,9 +21,9 @@ import csv
 import io
 import os
 import uuid
-from pathlib import Path
-
 import re
+from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -171,11 +171,14 @@ def read_csv_columns(path: Path, what: str, names: tuple[str, ...]) -> tuple[np.
 
 
 def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...],
-                     hint: str = "") -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+                     hint: str | Callable[[list[str], list[str]], str] = ""
+                     ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """As :func:`read_csv_columns`, each column being the first of several alternative
     names that the header has (e.g. an offset in µm, else in pixels); returns (values[n, k]
     in the chosen names' units, line numbers[n], the chosen names). The file is read once.
-    ``hint`` is added to the error when a column is missing."""
+    ``hint`` is added to the error when a column is missing: a text, or
+    ``hint(missing, header)`` of the missing columns' first names and the header's names
+    (:mod:`pipeline.io.columns` words what each quantity accepts)."""
     text = read_text(path, what)
     lines_ = [(n, t) for n, t in numbered_lines(text) if t.strip() and not t.lstrip().startswith("#")]
     names = [alts[0] for alts in choices]
@@ -193,6 +196,8 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
     header = _header(htext)
     found = [_found(header, alts) for alts in choices]
     missing = [n for n, f in zip(names, found) if f is None]
+    if callable(hint):
+        hint = hint(missing, header) if missing else ""
     if missing:
         if _numeric(htext, delim):
             raise parse_error(path, hline, f"the table has no header line naming its columns; add a first line "

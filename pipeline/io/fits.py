@@ -5,8 +5,9 @@ What is read
 ------------
 * **Line profile**: the first HDU holding a 1-D image (a degenerate axis of length 1 is
   dropped, so a ``1 x n`` extraction is 1-D too), else the first binary table with an
-  intensity column (``intensity``, ``flux``, ``counts``, ``data``, ``signal``) and an
-  axis column (``offset``, ``wave``/``wavelength``/``lambda``, ``pixel``) — a table of one
+  intensity column (``intensity``, ``flux``, ``counts``, ``signal``, ``data``, ``value``,
+  with or without a unit in the name, :mod:`pipeline.io.columns`) and an axis column
+  (``offset``, ``wave``/``wavelength``/``lambda``, ``pixel``) — a table of one
   row whose cells are arrays (the ESO spectroscopic data-product layout) is read as those
   arrays —, else a 2-D detector cut-out around the line, summed along the slit as the line
   profiles are. The cut-out's dispersion is the axis its WCS declares spectral (a wavelength
@@ -46,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from optics.sagmap import SagMap
+from pipeline.io.columns import INTENSITY, TABLE_AXIS_STEMS
 from pipeline.io.common import atomic_path, parse_error
 from pipeline.io.gridding import SAG_UNITS_TO_UM, GridUnknownError, grid_from_options, sag_unit_factor
 from pipeline.io.measured import checked_profile, checked_psf_image, profile_offsets_um
@@ -62,11 +64,6 @@ _WAVELENGTH_UNITS = frozenset({"angstrom", "a", "aa", "nm", "nanometer", "nanome
 _OTHER_SPECTRAL_CTYPES = ("FREQ", "ENER", "WAVN", "VRAD", "VOPT", "ZOPT", "VELO", "BETA")
 #: Length units (to µm): the project's spellings, Angstrom, and the FITS ``um``.
 _LENGTH_TO_UM = {**SAG_UNITS_TO_UM, "angstrom": 1e-4, "aa": 1e-4}
-#: Table column names: intensity, and the axis by kind (first match wins, case-insensitive).
-_INTENSITY_COLUMNS = ("intensity", "flux", "counts", "data", "signal", "value")
-_AXIS_COLUMNS = (("offset", "offset_um"), ("wave", "wavelength_um"), ("wavelength", "wavelength_um"),
-                 ("lambda", "wavelength_um"), ("wavelen", "wavelength_um"), ("pixel", "pixel"), ("px", "pixel"),
-                 ("x", "offset_um"))
 #: Header keywords that put an axis ``i`` under a WCS (without any of them it is in pixels).
 _WCS_KEYS = ("CTYPE{i}", "CUNIT{i}", "CRVAL{i}", "CDELT{i}", "CD{i}_{i}")
 
@@ -178,7 +175,8 @@ def _axis(path: Path, header, axis: int, n: int, naxis: int) -> tuple[np.ndarray
 
 def _is_wavelength(ctype: str, unit: str) -> bool:
     """Whether an axis of this ``CTYPE`` and unit is a wavelength (see the module notes)."""
-    return str(ctype).strip().upper().split("-")[0] in _WAVELENGTH_CTYPES or str(unit).strip().lower() in _WAVELENGTH_UNITS
+    return (str(ctype).strip().upper().split("-")[0] in _WAVELENGTH_CTYPES
+            or str(unit).strip().lower() in _WAVELENGTH_UNITS)
 
 
 def _is_spectral(header, axis: int) -> bool:
@@ -270,8 +268,8 @@ def _table_profile(path: Path, hdul) -> tuple[np.ndarray, np.ndarray, str, str] 
         if not isinstance(h, fits.BinTableHDU) or h.data is None or len(h.data) == 0:
             continue
         names = {n.lower(): n for n in h.columns.names}
-        iname = next((names[k] for k in names if k.split("_")[0] in _INTENSITY_COLUMNS), None)
-        axis = next(((names[k], kind) for stem, kind in _AXIS_COLUMNS for k in names
+        iname = (INTENSITY.find(h.columns.names) or (None,))[0]
+        axis = next(((names[k], kind) for stem, kind in TABLE_AXIS_STEMS for k in names
                      if k == stem or k.startswith(stem + "_")), None)
         if iname is None or axis is None:
             continue
@@ -326,7 +324,7 @@ def read_line_profile_fits(path: str | Path, normalise: bool = True, pixel_um: f
         found = _profile_image(path, hdul, 1) or _table_profile(path, hdul) or _profile_image(path, hdul, 2)
     if found is None:
         raise parse_error(path, None, "no 1-D or 2-D image and no binary table with an intensity column "
-                                      f"{list(_INTENSITY_COLUMNS)} and an axis column (offset, wavelength, pixel)")
+                                      f"({INTENSITY.describe()}) and an axis column (offset, wavelength, pixel)")
     a, y, unit, ctype = found
     values, kind = _profile_axis(path, a, unit, ctype)
     x = profile_offsets_um(values, kind, path, pixel_um, dispersion_um_per_um, "FITS axis")
