@@ -202,3 +202,18 @@ def test_psf_image_intensity_alias(tmp_path):
     np.testing.assert_array_equal(v, counts.ravel())  # rows were written sorted by (y, x)
     np.testing.assert_array_equal(x, X.ravel())
 
+
+# ------------------------------------------------------------------ decimal commas
+def test_decimal_comma_is_refused_naming_the_value(tmp_path):
+    f = tmp_path / "eu.csv"
+    f.write_text("offset_um;intensity\n" + "".join(f"{o:.1f};{c:.3f}\n".replace(".", ",")
+                                                   for o, c in zip(OFFSET_UM, COUNTS)))
+    with pytest.raises(ValueError, match=r"eu\.csv, line 2: decimal comma in '-60,0' .*export the table with '\.' "
+                                         r"as the decimal separator"):
+        ic.read_measured("line profile", f)
+    g = tmp_path / "eu_comma.csv"
+    g.write_text("offset_um,intensity\n" + "".join(f"{o:.1f},{c:.3f}\n".replace(".", ",")
+                                                   for o, c in zip(OFFSET_UM, COUNTS)))
+    with pytest.raises(ValueError, match=r"eu_comma\.csv, line 2: expected 2 values like the header, found 4; if the "
+                                         r"table uses decimal commas, they split its numbers"):
+        ic.read_measured("line profile", g)

@@ -11,7 +11,8 @@
   a byte-order mark) and the numeric columns of a delimited table with a header, errors by
   line; lines before the header (an export's title, date, exposure) are skipped. Tables other code writes are taken as they come: comma, semicolon, tab or
   whitespace delimited (told from the header line), and a column in another length unit
-  than the one asked for (``x [m]``, ``sag_nm``, ``Offset (mm)``) converted to it.
+  than the one asked for (``x [m]``, ``sag_nm``, ``Offset (mm)``) converted to it. A number
+  with a decimal comma is refused by name (``1,250`` is 1.25 or 1250 by the writer's locale).
 """
 
 from __future__ import annotations
@@ -109,6 +110,9 @@ def _column(header: list[str], name: str) -> tuple[int, float] | None:
             return i, SAG_UNITS_TO_UM[u] / SAG_UNITS_TO_UM[unit]
     return None
 
+
+#: A number written with a decimal comma (``1,25``, ``-0,5e-3``).
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d*,\d+([eE][+-]?\d+)?$")
 
 #: Lines of preamble (before the header line) a table may have.
 PREAMBLE_LINES = 50
@@ -218,10 +222,18 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
     for n, t in lines_[1:]:
         r = _split(t, delim)
         if len(r) != len(header):
-            raise parse_error(path, n, f"expected {len(header)} values like the header, found {len(r)}")
+            extra = delim == "," and len(r) > len(header)
+            comma = "; if the table uses decimal commas, they split its numbers: export with decimal points" if extra else ""
+            raise parse_error(path, n, f"expected {len(header)} values like the header, found {len(r)}{comma}")
         try:
             vals.append([float(r[i]) for i in idx])
         except ValueError:
+            comma = next((f for f in r if _DECIMAL_COMMA.match(f.strip())), None)
+            if comma is not None:
+                # "1,250" is 1.25 or 1250 depending on the writer's locale: not guessed
+                raise parse_error(path, n, f"decimal comma in {comma.strip()!r} ({t.strip()!r}): numbers are read "
+                                           "with a decimal point; export the table with '.' as the decimal "
+                                           "separator") from None
             raise parse_error(path, n, f"non-numeric value in {t.strip()!r}") from None
         lines.append(n)
     return np.array(vals, dtype=float).reshape(-1, len(choices)) * factor, np.array(lines, dtype=int), chosen
