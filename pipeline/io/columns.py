@@ -71,23 +71,26 @@ class Quantity:
     unit_required: bool
     example: str
 
-    def names(self, length_unit: str | None = None) -> tuple[str, ...]:
+    def names(self, length_unit: str | None = None, bare: bool = False) -> tuple[str, ...]:
         """Every accepted name, in order of preference. With ``length_unit`` the names in
         a length unit are given once, in that unit: the table reader
-        (:func:`pipeline.io.common.read_csv_choices`) matches and converts the others."""
+        (:func:`pipeline.io.common.read_csv_choices`) matches and converts the others.
+        ``bare`` lists the stems too where the unit comes from elsewhere (a NetCDF
+        ``units`` attribute)."""
         def units(stem):
             if length_unit is None:
                 return tuple(f"{stem}_{u}" for u in self.units)
             other = tuple(f"{stem}_{u}" for u in self.units if u not in SAG_UNITS_TO_UM)
             return ((f"{stem}_{length_unit}",) if any(u in SAG_UNITS_TO_UM for u in self.units) else ()) + other
 
-        return tuple(n for s in self.stems for n in ((() if self.unit_required else (s,)) + units(s)))
+        return tuple(n for s in self.stems for n in ((() if self.unit_required and not bare else (s,)) + units(s)))
 
-    def find(self, names: Iterable[str]) -> tuple[str, str] | None:
+    def find(self, names: Iterable[str], bare: bool = False) -> tuple[str, str] | None:
         """(name as given, its unit, "" for none) of the first of ``names`` that is
-        accepted, by order of preference; None if none is."""
+        accepted (with ``bare``, a stem without a unit too), by order of preference; None
+        if none is."""
         given = {str(n).strip().lower(): str(n) for n in names}
-        return next(((given[n], split_unit(n)[1]) for n in self.names() if n in given), None)
+        return next(((given[n], split_unit(n)[1]) for n in self.names(bare=bare) if n in given), None)
 
     def bare(self, names: Iterable[str]) -> list[str]:
         """The ``names`` that are a stem without the unit it needs."""

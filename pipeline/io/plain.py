@@ -187,8 +187,7 @@ def read_sag_netcdf(path: str | Path, wavelength_um: float | None = None) -> Sag
         raise ValueError(f"{path}: not a readable NetCDF file ({type(exc).__name__}: {exc})") from None
     with ds:
         variables = [str(n) for n in ds.data_vars]
-        found = columns.SAG.find(variables) or next(((n, "") for n in variables if n in columns.SAG.bare(variables)),
-                                                   None)
+        found = columns.SAG.find(variables, bare=True)  # a bare name's unit is its 'units' attribute
         if found is None:
             raise ValueError(f"{path}: no sag variable; found {sorted(variables)}; accepted "
                              f"{columns.SAG.describe()}, or the unit in a 'units' attribute")
