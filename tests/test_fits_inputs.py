@@ -306,3 +306,76 @@ def test_infinite_samples_are_refused_while_nan_ones_are_masked(tmp_path):
     p = _write(tmp_path / "inf_img.fits", fits.PrimaryHDU(img))
     with pytest.raises(ValueError, match="intensity finite or nan"):
         read_psf_image_fits(p, pixel_um=18.0)
+
+
+# A detector cut-out of a double-peaked line: 121 samples along a wavelength axis (1250 nm
+# at the 61st pixel, 0.025 nm per pixel), 30 along the slit; the dispersion is chosen so a
+# pixel is 3 µm on the detector and the two peaks lie 20 µm apart.
+CUT_DISPERSION = -1.2e5  # detector µm per µm of wavelength
+CUT_NOISE = 3.0  # counts RMS per pixel
+
+
+def _cut_out():
+    """(frame[slit, wavelength], offset_um of each wavelength column, noise-free summed line)."""
+    rng = np.random.default_rng(11)
+    wl_um = (1250.0 + (np.arange(121) - 60) * 0.025) * 1e-3
+    offset_um = (wl_um - 1.25) * CUT_DISPERSION
+    line = (1000.0 * np.exp(-0.5 * ((offset_um + 10.0) / 6.0) ** 2)
+            + 800.0 * np.exp(-0.5 * ((offset_um - 10.0) / 6.0) ** 2))
+    slit = np.exp(-0.5 * ((np.arange(30) - 14.5) / 6.0) ** 2)
+    pedestal = 200.0
+    frame = slit[:, None] * line[None, :] + pedestal + rng.normal(0.0, CUT_NOISE, (30, 121))
+    return frame, offset_um, slit.sum() * line + 30 * pedestal
+
+
+def _wave_keys(axis):
+    return [(f"CTYPE{axis}", "WAVE"), (f"CUNIT{axis}", "nm"), (f"CRVAL{axis}", 1250.0), (f"CRPIX{axis}", 61.0),
+            (f"CDELT{axis}", 0.025)]
+
+
+def test_cut_out_dispersion_axis_is_taken_from_the_wcs_in_either_orientation(tmp_path):
+    """The same cut-out written with the wavelength along NAXIS1 and, transposed, along
+    NAXIS2 (a long slit dispersed along y) reads as one profile: the written frame summed
+    along the slit, on the wavelength axis's offsets."""
+    frame, offset_um, model = _cut_out()
+    along_1 = _write(tmp_path / "cut.fits", fits.PrimaryHDU(frame, header=fits.Header(
+        _wave_keys(1) + [("CTYPE2", "PIXEL"), ("CRVAL2", 1.0), ("CRPIX2", 1.0), ("CDELT2", 1.0)])))
+    along_2 = _write(tmp_path / "cut_T.fits", fits.PrimaryHDU(frame.T.copy(), header=fits.Header(_wave_keys(2))))
+    order = np.argsort(offset_um)  # the negative dispersion reverses the columns on the detector
+    read = []
+    for p in (along_1, along_2):
+        x, y = read_measured("line profile", p, normalise=False, pixel_um=18.0, dispersion_um_per_um=CUT_DISPERSION)
+        np.testing.assert_allclose(x, offset_um[order], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(y, frame.sum(axis=0)[order], rtol=1e-12)
+        # the written line, within 5 sigma of the noise summed over the 30 slit pixels
+        assert np.max(np.abs(y - model[order])) < 5 * CUT_NOISE * np.sqrt(30)
+        read.append((x, y))
+    np.testing.assert_array_equal(read[0][0], read[1][0])
+    np.testing.assert_allclose(read[0][1], read[1][1], rtol=1e-12)
+    # the two peaks where they were written: -10 µm, the taller, and +10 µm
+    x, y = read[0]
+    assert x[np.argmax(np.where(x < 0, y, 0))] == pytest.approx(-10.0, abs=3.0)
+    assert x[np.argmax(np.where(x > 0, y, 0))] == pytest.approx(10.0, abs=3.0)
+
+
+def test_cut_out_without_a_wcs_is_dispersed_along_naxis1(tmp_path):
+    frame, _, _ = _cut_out()
+    p = _write(tmp_path / "raw.fits", fits.PrimaryHDU(frame))
+    x, y = read_measured("line profile", p, normalise=False, pixel_um=18.0)
+    np.testing.assert_allclose(x, 18.0 * np.arange(1, 122))
+    np.testing.assert_allclose(y, frame.sum(axis=0), rtol=1e-12)
+
+
+@pytest.mark.parametrize("data,keys,match", [
+    (np.ones((30, 121)), _wave_keys(1) + [("CTYPE2", "AWAV"), ("CUNIT2", "nm"), ("CRVAL2", 1250.0), ("CDELT2", 0.1)],
+     r"amb\.fits: ambiguous dispersion axis: axes \[1, 2\] are all spectral \(CTYPE1='WAVE', CUNIT1='nm', "
+     r"CTYPE2='AWAV', CUNIT2='nm'\); .*exactly one spectral axis"),
+    (np.ones((30, 121)), [("CTYPE1", "LINEAR"), ("CUNIT1", "Angstrom"), ("CTYPE2", "WAVE"), ("CUNIT2", "um")],
+     r"amb\.fits: ambiguous dispersion axis: .*CUNIT1='Angstrom'.*CTYPE2='WAVE'"),
+    (np.ones((1, 121)), [("CTYPE1", "PIXEL"), ("CTYPE2", "WAVE"), ("CUNIT2", "nm"), ("CRVAL2", 1250.0)],
+     r"amb\.fits: the spectral axis \(CTYPE2='WAVE', CUNIT2='nm'\) has a single pixel"),
+], ids=["two_wave_ctypes", "nm_unit_and_wave_ctype", "spectral_axis_of_one_pixel"])
+def test_cut_out_with_an_ambiguous_dispersion_axis_is_refused(tmp_path, data, keys, match):
+    p = _write(tmp_path / "amb.fits", fits.PrimaryHDU(data, header=fits.Header(keys)))
+    with pytest.raises(ValueError, match=match):
+        read_measured("line profile", p, pixel_um=18.0, dispersion_um_per_um=CUT_DISPERSION)

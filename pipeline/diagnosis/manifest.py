@@ -49,7 +49,8 @@ its white noise is estimated from the power beyond the optical cut-off when it l
 regular grid finer than ``wavelength f_cam / (2 D)`` (≈ 2 µm in J), else along the image
 rows (biased high where the Airy rings are not smooth on the sample step), so a coarser
 image, or one that is not on rows of >= 5 samples, should give ``noise_rel``.
-Surfaces may also give ``wavelength_um`` (for a NetCDF map in ``units = "waves"``);
+Surfaces may also give ``wavelength_um`` (for a sag in waves: a NetCDF ``units = "waves"``, a
+table column ``sag [waves]``);
 ``spacing_mm`` / ``extent_mm`` / ``wavelength_um`` go to the sag-map reader, which
 refuses those its format does not use. Profiles and images may be in counts, with a
 pedestal, negative (background-subtracted) samples, any centring and any offset grid;

@@ -11,7 +11,8 @@
   a byte-order mark) and the numeric columns of a delimited table with a header, errors by
   line; lines before the header (an export's title, date, exposure) are skipped. Tables other code writes are taken as they come: comma, semicolon, tab or
   whitespace delimited (told from the header line), and a column in another length unit
-  than the one asked for (``x [m]``, ``sag_nm``, ``Offset (mm)``) converted to it.
+  than the one asked for (``x [m]``, ``sag_nm``, ``Offset (mm)``) converted to it. A number
+  with a decimal comma is refused by name (``1,250`` is 1.25 or 1250 by the writer's locale).
 """
 
 from __future__ import annotations
@@ -21,9 +22,9 @@ import csv
 import io
 import os
 import uuid
-from pathlib import Path
-
 import re
+from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -110,6 +111,9 @@ def _column(header: list[str], name: str) -> tuple[int, float] | None:
     return None
 
 
+#: A number written with a decimal comma (``1,25``, ``-0,5e-3``).
+_DECIMAL_COMMA = re.compile(r"^[+-]?\d*,\d+([eE][+-]?\d+)?$")
+
 #: Lines of preamble (before the header line) a table may have.
 PREAMBLE_LINES = 50
 
@@ -171,11 +175,14 @@ def read_csv_columns(path: Path, what: str, names: tuple[str, ...]) -> tuple[np.
 
 
 def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...],
-                     hint: str = "") -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+                     hint: str | Callable[[list[str], list[str]], str] = ""
+                     ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """As :func:`read_csv_columns`, each column being the first of several alternative
     names that the header has (e.g. an offset in µm, else in pixels); returns (values[n, k]
     in the chosen names' units, line numbers[n], the chosen names). The file is read once.
-    ``hint`` is added to the error when a column is missing."""
+    ``hint`` is added to the error when a column is missing: a text, or
+    ``hint(missing, header)`` of the missing columns' first names and the header's names
+    (:mod:`pipeline.io.columns` words what each quantity accepts)."""
     text = read_text(path, what)
     lines_ = [(n, t) for n, t in numbered_lines(text) if t.strip() and not t.lstrip().startswith("#")]
     names = [alts[0] for alts in choices]
@@ -193,6 +200,8 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
     header = _header(htext)
     found = [_found(header, alts) for alts in choices]
     missing = [n for n, f in zip(names, found) if f is None]
+    if callable(hint):
+        hint = hint(missing, header) if missing else ""
     if missing:
         if _numeric(htext, delim):
             raise parse_error(path, hline, f"the table has no header line naming its columns; add a first line "
@@ -213,10 +222,18 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
     for n, t in lines_[1:]:
         r = _split(t, delim)
         if len(r) != len(header):
-            raise parse_error(path, n, f"expected {len(header)} values like the header, found {len(r)}")
+            extra = delim == "," and len(r) > len(header)
+            comma = "; if the table uses decimal commas, they split its numbers: export with decimal points" if extra else ""
+            raise parse_error(path, n, f"expected {len(header)} values like the header, found {len(r)}{comma}")
         try:
             vals.append([float(r[i]) for i in idx])
         except ValueError:
+            comma = next((f for f in r if _DECIMAL_COMMA.match(f.strip())), None)
+            if comma is not None:
+                # "1,250" is 1.25 or 1250 depending on the writer's locale: not guessed
+                raise parse_error(path, n, f"decimal comma in {comma.strip()!r} ({t.strip()!r}): numbers are read "
+                                           "with a decimal point; export the table with '.' as the decimal "
+                                           "separator") from None
             raise parse_error(path, n, f"non-numeric value in {t.strip()!r}") from None
         lines.append(n)
     return np.array(vals, dtype=float).reshape(-1, len(choices)) * factor, np.array(lines, dtype=int), chosen

@@ -5,12 +5,18 @@ What is read
 ------------
 * **Line profile**: the first HDU holding a 1-D image (a degenerate axis of length 1 is
   dropped, so a ``1 x n`` extraction is 1-D too), else the first binary table with an
-  intensity column (``intensity``, ``flux``, ``counts``, ``data``, ``signal``) and an
-  axis column (``offset``, ``wave``/``wavelength``/``lambda``, ``pixel``) — a table of one
+  intensity column (``intensity``, ``flux``, ``counts``, ``signal``, ``data``, ``value``,
+  with or without a unit in the name, :mod:`pipeline.io.columns`) and an axis column
+  (``offset``, ``wave``/``wavelength``/``lambda``, ``pixel``) — a table of one
   row whose cells are arrays (the ESO spectroscopic data-product layout) is read as those
-  arrays —, else a 2-D detector cut-out around the line (``NAXIS1`` along the dispersion,
-  ``NAXIS2`` along the slit), summed along the slit as the line profiles are. The axis comes from the WCS (``CRVAL1``, ``CRPIX1``, ``CDELT1`` or ``CD1_1``,
-  ``PC1_1``, ``CUNIT1``, ``CTYPE1``, via ``astropy.wcs``) or the column's ``TUNIT``.
+  arrays —, else a 2-D detector cut-out around the line, summed along the slit as the line
+  profiles are. The cut-out's dispersion is the axis its WCS declares spectral (a wavelength
+  ``CTYPE``: ``WAVE``, ``AWAV``…, or a ``CUNIT`` in nm or Angstrom), along ``NAXIS1`` or
+  ``NAXIS2``; with no spectral axis (no WCS, or pixel / linear axes) ``NAXIS1`` is the
+  dispersion and ``NAXIS2`` the slit. Two spectral axes, or a spectral axis of one pixel
+  (an image at one wavelength), are refused naming the ``CTYPE``/``CUNIT`` keys. The
+  profile's axis comes from the WCS (``CRVALi``, ``CRPIXi``, ``CDELTi`` or ``CDi_i``,
+  ``PCi_i``, ``CUNITi``, ``CTYPEi``, via ``astropy.wcs``) or the column's ``TUNIT``.
 * **Point-source image**: the first 2-D image HDU; ``NAXIS1`` is x (dispersion), ``NAXIS2``
   y (along the slit). NaN pixels (or ``BLANK`` in integer data) are masked points and are
   left out.
@@ -41,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from optics.sagmap import SagMap
+from pipeline.io.columns import INTENSITY, TABLE_AXIS_STEMS
 from pipeline.io.common import atomic_path, parse_error
 from pipeline.io.gridding import SAG_UNITS_TO_UM, GridUnknownError, grid_from_options, sag_unit_factor
 from pipeline.io.measured import checked_profile, checked_psf_image, profile_offsets_um
@@ -53,13 +60,10 @@ FITS_SUFFIXES = (".fits", ".fit", ".fts")
 _WAVELENGTH_CTYPES = ("WAVE", "AWAV", "VWAV", "LAMBDA", "WAVELEN")
 #: Units that are a wavelength on a profile's axis, not a detector offset.
 _WAVELENGTH_UNITS = frozenset({"angstrom", "a", "aa", "nm", "nanometer", "nanometre"})
+#: CTYPE prefixes of spectral axes that are not a wavelength (refused on a profile's axis).
+_OTHER_SPECTRAL_CTYPES = ("FREQ", "ENER", "WAVN", "VRAD", "VOPT", "ZOPT", "VELO", "BETA")
 #: Length units (to µm): the project's spellings, Angstrom, and the FITS ``um``.
 _LENGTH_TO_UM = {**SAG_UNITS_TO_UM, "angstrom": 1e-4, "aa": 1e-4}
-#: Table column names: intensity, and the axis by kind (first match wins, case-insensitive).
-_INTENSITY_COLUMNS = ("intensity", "flux", "counts", "data", "signal", "value")
-_AXIS_COLUMNS = (("offset", "offset_um"), ("wave", "wavelength_um"), ("wavelength", "wavelength_um"),
-                 ("lambda", "wavelength_um"), ("wavelen", "wavelength_um"), ("pixel", "pixel"), ("px", "pixel"),
-                 ("x", "offset_um"))
 #: Header keywords that put an axis ``i`` under a WCS (without any of them it is in pixels).
 _WCS_KEYS = ("CTYPE{i}", "CUNIT{i}", "CRVAL{i}", "CDELT{i}", "CD{i}_{i}")
 
@@ -169,14 +173,54 @@ def _axis(path: Path, header, axis: int, n: int, naxis: int) -> tuple[np.ndarray
     return values, unit, ctype
 
 
+def _is_wavelength(ctype: str, unit: str) -> bool:
+    """Whether an axis of this ``CTYPE`` and unit is a wavelength (see the module notes)."""
+    return (str(ctype).strip().upper().split("-")[0] in _WAVELENGTH_CTYPES
+            or str(unit).strip().lower() in _WAVELENGTH_UNITS)
+
+
+def _is_spectral(header, axis: int) -> bool:
+    """Whether the header declares FITS axis ``axis`` spectral: a wavelength (:func:`_is_wavelength`)
+    or another spectral ``CTYPE`` (frequency, energy, velocity...)."""
+    ctype, unit = str(header.get(f"CTYPE{axis}", "")), str(header.get(f"CUNIT{axis}", ""))
+    return _is_wavelength(ctype, unit) or ctype.strip().upper().split("-")[0] in _OTHER_SPECTRAL_CTYPES
+
+
+def _dispersion_axis(path: Path, header, axes: list[int]) -> int:
+    """The FITS axis (1-based) along the dispersion among the image's ``axes``: the one the
+    WCS declares spectral; without any spectral axis the first (``NAXIS1``). Two spectral
+    axes, or a spectral axis only among the degenerate ones (an image at one wavelength),
+    are refused naming the header keys."""
+    naxis = int(header.get("NAXIS", len(axes)))
+    spectral = [k for k in range(1, naxis + 1) if _is_spectral(header, k)]
+    kept = [k for k in spectral if k in axes]
+
+    def keys(ks):
+        return ", ".join(f"{key}{k}={header[f'{key}{k}']!r}" for k in ks for key in ("CTYPE", "CUNIT")
+                         if f"{key}{k}" in header)
+
+    accepted = ("a profile image needs exactly one spectral axis along the dispersion (CTYPE "
+                f"{'/'.join(_WAVELENGTH_CTYPES)}, or CUNIT nm/Angstrom) with the other along the slit, "
+                "or no spectral axis at all, when NAXIS1 is the dispersion")
+    if len(kept) > 1:
+        raise parse_error(path, None, f"ambiguous dispersion axis: axes {kept} are all spectral ({keys(kept)}); "
+                                      + accepted)
+    if kept:
+        return kept[0]
+    if spectral:
+        raise parse_error(path, None, f"the spectral axis ({keys(spectral)}) has a single pixel: the image is at one "
+                                      "wavelength, not a line profile; " + accepted)
+    return axes[0]
+
+
 def _profile_axis(path: Path, values: np.ndarray, unit: str, ctype: str) -> tuple[np.ndarray, str]:
     """(values in µm or pixels, axis kind for :func:`profile_offsets_um`)."""
-    is_wave = ctype.split("-")[0] in _WAVELENGTH_CTYPES or unit.strip().lower() in _WAVELENGTH_UNITS
+    is_wave = _is_wavelength(ctype, unit)
     try:
         f = _unit_to_um(unit)
     except ValueError as exc:
         raise parse_error(path, None, f"axis ({ctype or 'no CTYPE'}): {exc}") from None
-    if ctype and ctype.split("-")[0] in ("FREQ", "ENER", "WAVN", "VRAD", "VOPT", "ZOPT", "VELO", "BETA"):
+    if ctype and ctype.split("-")[0] in _OTHER_SPECTRAL_CTYPES:
         raise parse_error(path, None, f"axis CTYPE {ctype!r} is not a wavelength or a length; give the profile on "
                                       "a wavelength (WAVE), detector-offset (µm) or pixel axis")
     if f is None:
@@ -188,24 +232,30 @@ def _profile_axis(path: Path, values: np.ndarray, unit: str, ctype: str) -> tupl
 
 def _profile_image(path: Path, hdul, ndim: int) -> tuple | None:
     """(axis values, intensity, unit, ctype) of the first ``ndim``-D image, else None. A
-    2-D frame (``NAXIS1`` along the dispersion, ``NAXIS2`` along the slit) is summed along
-    the slit, as the line profiles are: each column's valid pixels, scaled to the full
-    column where some are masked (a column with none is left out)."""
+    2-D frame is summed along the slit, as the line profiles are: each slit line's valid
+    pixels, scaled to the full line where some are masked (a line with none is left out).
+    The dispersion is the axis the WCS declares spectral (:func:`_dispersion_axis`),
+    ``NAXIS1`` when none is."""
     try:
         data, header, axes = _image(path, hdul, ndim, "line profile")
     except ValueError:
         return None
+    dispersion = _dispersion_axis(path, header, axes)
     if ndim == 2:
-        valid = np.isfinite(data).sum(axis=0)
+        np_axis = {k: len(axes) - 1 - i for i, k in enumerate(axes)}  # numpy lists the FITS axes last first
+        slit = np_axis[next(k for k in axes if k != dispersion)]
+        valid = np.isfinite(data).sum(axis=slit)
         with np.errstate(invalid="ignore", divide="ignore"):
-            y = np.where(valid > 0, np.nansum(data, axis=0) * data.shape[0] / valid, np.nan)
+            y = np.where(valid > 0, np.nansum(data, axis=slit) * data.shape[slit] / valid, np.nan)
     else:
         y = data.ravel()
-    if header.get("DC-FLAG", 0) == 1 or str(header.get("CTYPE1", "")).upper().startswith("MULTISPE"):
+    ctype = str(header.get(f"CTYPE{dispersion}", "")).upper()
+    if header.get("DC-FLAG", 0) == 1 or ctype.startswith("MULTISPE"):
         # IRAF's log-linear and multispec dispersions look linear to a WCS reader
         raise parse_error(path, None, "IRAF log-linear (DC-FLAG = 1) or multispec wavelength axis; resample the "
-                                      "spectrum onto a linear axis (CRVAL1/CDELT1) or write it as a table")
-    a, unit, ctype = _axis(path, header, axes[0], y.size, header.get("NAXIS", ndim))
+                                      f"spectrum onto a linear axis (CRVAL{dispersion}/CDELT{dispersion}) or "
+                                      "write it as a table")
+    a, unit, ctype = _axis(path, header, dispersion, y.size, header.get("NAXIS", ndim))
     return a, y, unit, ctype
 
 
@@ -218,8 +268,8 @@ def _table_profile(path: Path, hdul) -> tuple[np.ndarray, np.ndarray, str, str] 
         if not isinstance(h, fits.BinTableHDU) or h.data is None or len(h.data) == 0:
             continue
         names = {n.lower(): n for n in h.columns.names}
-        iname = next((names[k] for k in names if k.split("_")[0] in _INTENSITY_COLUMNS), None)
-        axis = next(((names[k], kind) for stem, kind in _AXIS_COLUMNS for k in names
+        iname = (INTENSITY.find(h.columns.names) or (None,))[0]
+        axis = next(((names[k], kind) for stem, kind in TABLE_AXIS_STEMS for k in names
                      if k == stem or k.startswith(stem + "_")), None)
         if iname is None or axis is None:
             continue
@@ -241,7 +291,8 @@ def _table_profile(path: Path, hdul) -> tuple[np.ndarray, np.ndarray, str, str] 
 def read_line_profile_fits(path: str | Path, normalise: bool = True, pixel_um: float | None = None,
                            dispersion_um_per_um: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Read a line profile from a FITS file (a 1-D image with a WCS, a binary table, or a
-    2-D cut-out summed along the slit).
+    2-D cut-out summed along the slit: the dispersion is the axis the WCS declares
+    spectral, ``NAXIS1`` when none is).
 
     Parameters
     ----------
@@ -264,7 +315,8 @@ def read_line_profile_fits(path: str | Path, normalise: bool = True, pixel_um: f
     ------
     ValueError
         Naming the file: no 1-D image or profile table, an axis that is neither a
-        wavelength, a length nor pixels, a missing ``pixel_um``/dispersion, non-finite
+        wavelength, a length nor pixels, a cut-out with two spectral axes or a spectral
+        axis of one pixel, a missing ``pixel_um``/dispersion, non-finite
         values, fewer than 5 offsets, total flux <= 0.
     """
     path = Path(path)
@@ -272,7 +324,7 @@ def read_line_profile_fits(path: str | Path, normalise: bool = True, pixel_um: f
         found = _profile_image(path, hdul, 1) or _table_profile(path, hdul) or _profile_image(path, hdul, 2)
     if found is None:
         raise parse_error(path, None, "no 1-D or 2-D image and no binary table with an intensity column "
-                                      f"{list(_INTENSITY_COLUMNS)} and an axis column (offset, wavelength, pixel)")
+                                      f"({INTENSITY.describe()}) and an axis column (offset, wavelength, pixel)")
     a, y, unit, ctype = found
     values, kind = _profile_axis(path, a, unit, ctype)
     x = profile_offsets_um(values, kind, path, pixel_um, dispersion_um_per_um, "FITS axis")

@@ -25,7 +25,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from optics.triangulation import linear_on_grid
 
-__all__ = ["GRID_TOLERANCE", "MAX_GRID_NODES", "SAG_UNITS_TO_UM", "LENGTH_UNITS_TO_MM", "grid_points",
+__all__ = ["GRID_TOLERANCE", "MAX_GRID_NODES", "SAG_UNITS_TO_UM", "WAVE_UNITS", "LENGTH_UNITS_TO_MM", "grid_points",
            "detect_axis", "sag_unit_factor", "length_unit_factor", "GridUnknownError", "grid_from_options"]
 
 #: A coordinate is on the grid if it lies within this fraction of the step of a node:
@@ -41,7 +41,8 @@ SAG_UNITS_TO_UM = {"nm": 1e-3, "nanometer": 1e-3, "nanometers": 1e-3, "nanometre
                    "micrometers": 1.0, "micrometre": 1.0, "micrometres": 1.0,
                    "mm": 1e3, "millimeter": 1e3, "millimeters": 1e3, "millimetre": 1e3, "millimetres": 1e3,
                    "m": 1e6, "meter": 1e6, "meters": 1e6, "metre": 1e6, "metres": 1e6}
-_WAVES = ("waves", "wave", "wv", "lambda")
+#: Spellings of a sag in waves (one wave is ``wavelength_um``).
+WAVE_UNITS = ("waves", "wave", "wv", "lambda")
 #: Accepted length units of coordinates and their factor to mm.
 LENGTH_UNITS_TO_MM = {k: v * 1e-3 for k, v in SAG_UNITS_TO_UM.items()}
 
@@ -66,7 +67,7 @@ def sag_unit_factor(units: str, wavelength_um: float | None = None) -> float:
     u = str(units).strip().lower()
     if u in SAG_UNITS_TO_UM:
         return SAG_UNITS_TO_UM[u]
-    if u in _WAVES:
+    if u in WAVE_UNITS:
         if wavelength_um is None or not (np.isfinite(wavelength_um) and wavelength_um > 0):
             raise ValueError(f"units={units!r} needs wavelength_um (µm, > 0); got wavelength_um={wavelength_um!r}")
         return float(wavelength_um)

@@ -14,18 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.io.common import atomic_write, parse_error, read_csv_choices, read_csv_columns
+from pipeline.io.columns import INTENSITY, PIXEL_OFFSET_COLUMNS, WAVELENGTH_COLUMNS
+from pipeline.io.common import atomic_write, parse_error, read_csv_choices
 
 __all__ = ["PIXEL_OFFSET_COLUMNS", "WAVELENGTH_COLUMNS", "profile_offsets_um", "checked_profile",
            "checked_psf_image", "read_line_profile", "read_psf_image", "write_line_profile_csv", "write_psf_image_csv"]
-
-
-#: Column names of offsets given in detector pixels (after ``[px]`` -> ``_px``).
-PIXEL_OFFSET_COLUMNS = ("offset_px", "offset_pixel", "offset_pix", "pixel", "px")
-
-
-#: Column names of a profile's wavelength axis (any length unit: ``wavelength_nm``, ``lambda [nm]``).
-WAVELENGTH_COLUMNS = ("wavelength_um", "lambda_um", "wave_um")
 
 
 def profile_offsets_um(values: np.ndarray, axis: str, path: Path, pixel_um: float | None,
@@ -57,10 +50,14 @@ def _profile_columns(path: Path, pixel_um: float | None,
     """``offset_um, intensity`` of a profile table, the offset in a length unit, in
     detector pixels (times ``pixel_um``) or a wavelength (times ``dispersion_um_per_um``,
     about the median wavelength)."""
-    hint = (f"offsets in detector pixels may be a column {PIXEL_OFFSET_COLUMNS[0]!r} or 'pixel', a wavelength "
-            f"axis {WAVELENGTH_COLUMNS[0]!r} (any length unit)")
+    axis_hint = (f"offsets in detector pixels may be a column {PIXEL_OFFSET_COLUMNS[0]!r} or 'pixel', a "
+                 f"wavelength axis {WAVELENGTH_COLUMNS[0]!r} (any length unit)")
+
+    def hint(missing, header):
+        return "; ".join(axis_hint if m == "offset_um" else INTENSITY.refusal(header) for m in missing)
+
     v, lines, (name, _) = read_csv_choices(
-        path, "line profile", (("offset_um", *PIXEL_OFFSET_COLUMNS, *WAVELENGTH_COLUMNS), ("intensity",)), hint)
+        path, "line profile", (("offset_um", *PIXEL_OFFSET_COLUMNS, *WAVELENGTH_COLUMNS), INTENSITY.names()), hint)
     axis = "pixel" if name in PIXEL_OFFSET_COLUMNS else "wavelength_um" if name in WAVELENGTH_COLUMNS else "offset_um"
     v[:, 0] = profile_offsets_um(v[:, 0], axis, path, pixel_um, dispersion_um_per_um, f"column {name!r}")
     return v, lines
@@ -81,7 +78,9 @@ def read_line_profile(path: str | Path, normalise: bool = True, pixel_um: float 
     ----------
     path : str or Path
         CSV file with a header naming ``offset_um`` and ``intensity`` (any order,
-        case-insensitive, other columns ignored).
+        case-insensitive, other columns ignored). The intensity may also be named
+        ``flux``, ``counts``, ``signal``, ``data`` or ``value``, with or without a unit
+        (``Flux [ADU]``, ``intensity [counts]``; :mod:`pipeline.io.columns`).
     normalise : bool
         Divide the intensity by its total flux (trapezoid rule over ``offset_um``),
         the unit-area normalisation of :mod:`optics.imaging` profiles.
@@ -216,7 +215,8 @@ def _load_npz_columns(path: Path, names: tuple[str, ...]) -> np.ndarray:
 def read_psf_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Read a measured point-source image: CSV ``x_um,y_um,intensity`` (header, any
     column order, other columns ignored) or ``.npz`` with arrays ``x_um``, ``y_um``,
-    ``intensity``. ``x`` is along the dispersion, ``y`` along the slit (detector µm).
+    ``intensity`` (which may be named as a profile's, e.g. ``counts``, ``Flux [ADU]``).
+    ``x`` is along the dispersion, ``y`` along the slit (detector µm).
     Like line profiles: counts, negative (background-subtracted) samples, a pedestal and
     any grid are accepted; a point whose intensity is ``nan`` is a masked pixel, left out.
 
@@ -237,7 +237,9 @@ def read_psf_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray
         v = _load_npz_columns(path, ("x_um", "y_um", "intensity"))
         lines = np.zeros(v.shape[0], int)
     else:
-        v, lines = read_csv_columns(path, "PSF image", ("x_um", "y_um", "intensity"))
+        v, lines, _ = read_csv_choices(path, "PSF image", (("x_um",), ("y_um",), INTENSITY.names()),
+                                       lambda missing, header: INTENSITY.refusal(header) if "intensity" in missing
+                                       else "")
     return checked_psf_image(path, v, lines)
 
 

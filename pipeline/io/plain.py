@@ -12,7 +12,9 @@ suffix   layout                             precision
 ======== ================================== ==============================
 
 Readers take files other tools wrote (other units, descending or meshgrid axes,
-masked or scattered points); every writer is atomic (:mod:`pipeline.io.common`).
+masked or scattered points, a table under ``.txt``/``.tsv`` with any delimiter, the
+quantities under other names: :mod:`pipeline.io.columns`); every writer is atomic
+(:mod:`pipeline.io.common`).
 The registry of every format is :mod:`pipeline.io.registry`.
 """
 
@@ -25,8 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from optics.sagmap import SagMap
-from pipeline.io.common import atomic_path, atomic_write, parse_error, read_csv_columns
-from pipeline.io.gridding import grid_points, length_unit_factor, sag_unit_factor
+from pipeline.io import columns
+from pipeline.io.common import atomic_path, atomic_write, parse_error, read_csv_choices
+from pipeline.io.gridding import SAG_UNITS_TO_UM, grid_points, length_unit_factor, sag_unit_factor
 
 __all__ = ["write_sag_csv", "read_sag_csv", "write_sag_netcdf", "read_sag_netcdf", "write_sag_npz", "read_sag_npz"]
 
@@ -46,9 +49,20 @@ def write_sag_csv(sagmap: SagMap, path: str | Path) -> Path:
     return path
 
 
-def read_sag_csv(path: str | Path, spacing_mm: float | None = None) -> SagMap:
+def _refusal(quantities: dict[str, columns.Quantity]):
+    """``hint(missing, header)`` for :func:`read_csv_choices`: what each missing column accepts."""
+    return lambda missing, header: "; ".join(quantities[m].refusal(header) for m in missing)
+
+
+def read_sag_csv(path: str | Path, spacing_mm: float | None = None, wavelength_um: float | None = None) -> SagMap:
     """Read a table of points ``x_mm,y_mm,sag_um`` (header names case-insensitive, any
-    column order, extra columns ignored, rows in any order).
+    column order, extra columns ignored, rows in any order; comma, semicolon, tab or
+    whitespace delimited).
+
+    The sag column may be named ``sag``, ``height`` or ``z`` and the coordinates ``x``,
+    ``y``, each with its unit (``Height [nm]``, ``z_um``, ``X (m)``; converted), the sag
+    also in waves (``sag [waves]``, with ``wavelength_um``); a name without its unit is
+    refused, the error listing the accepted ones (:mod:`pipeline.io.columns`).
 
     Points on a uniform grid, complete or not (a masked export lists only the points
     inside its aperture), are put back on that grid with NaN at the absent nodes and at
@@ -64,9 +78,19 @@ def read_sag_csv(path: str | Path, spacing_mm: float | None = None) -> SagMap:
         The CSV file.
     spacing_mm : float, optional
         Grid spacing (mm) for scattered points; unused when the points form a grid.
+    wavelength_um : float, optional
+        Wavelength (µm) of one wave, for a sag column in waves.
     """
     path = Path(path)
-    v, lines = read_csv_columns(path, "sag CSV", _CSV_COLUMNS)
+    v, lines, (_, _, sag_name) = read_csv_choices(
+        path, "sag CSV", (columns.X.names("mm"), columns.Y.names("mm"), columns.SAG.names("um")),
+        _refusal({"x_mm": columns.X, "y_mm": columns.Y, "sag_um": columns.SAG}))
+    unit = columns.split_unit(sag_name)[1]
+    if unit not in SAG_UNITS_TO_UM:  # in waves: the reader converted every length unit to µm
+        try:
+            v[:, 2] *= sag_unit_factor(unit, wavelength_um)
+        except ValueError as exc:
+            raise parse_error(path, None, f"column {sag_name!r}: {exc}") from None
     if v.shape[0] < 3:
         raise parse_error(path, None, f"needs >= 3 data rows, found {v.shape[0]}")
     bad = ~np.isfinite(v[:, :2]).all(axis=1)
@@ -137,13 +161,15 @@ def write_sag_netcdf(sagmap: SagMap, path: str | Path) -> Path:
 
 
 def read_sag_netcdf(path: str | Path, wavelength_um: float | None = None) -> SagMap:
-    """Read a NetCDF sag map: variable ``sag_um`` (or ``sag``) on dims ``(y_mm, x_mm)``
-    (or ``(y, x)``), NaN or ``_FillValue`` = no data.
+    """Read a NetCDF sag map: variable ``sag_um`` (or ``sag``, ``height``, ``z``, bare or
+    with a unit, :mod:`pipeline.io.columns`) on dims ``(y_mm, x_mm)`` (or ``(y, x)``), NaN
+    or ``_FillValue`` = no data.
 
     The sag's ``units`` attribute is honoured (nm, um/µm, mm, m, or waves with
-    ``wavelength_um``) and converted to µm; without one, ``sag_um`` is taken as µm and
-    ``sag`` is refused. Coordinate ``units`` (nm, µm, mm, m; default mm) are honoured
-    too. Descending coordinates are flipped.
+    ``wavelength_um``) and converted to µm; without one, the unit in the variable's name
+    is (``sag_um``, ``height_nm``), and a bare name (``sag``, ``height``) is refused.
+    Coordinate ``units`` (nm, µm, mm, m; default mm) are honoured too. Descending
+    coordinates are flipped.
 
     Parameters
     ----------
@@ -162,20 +188,23 @@ def read_sag_netcdf(path: str | Path, wavelength_um: float | None = None) -> Sag
     except Exception as exc:  # netCDF4/h5 raise OSError, ValueError, KeyError... on a garbage file
         raise ValueError(f"{path}: not a readable NetCDF file ({type(exc).__name__}: {exc})") from None
     with ds:
-        field = next((n for n in ("sag_um", "sag") if n in ds.data_vars), None)
-        if field is None:
-            raise ValueError(f"{path}: no variable 'sag_um' (or 'sag'); found {sorted(map(str, ds.data_vars))}")
+        variables = [str(n) for n in ds.data_vars]
+        found = columns.SAG.find(variables, bare=True)  # a bare name's unit is its 'units' attribute
+        if found is None:
+            raise ValueError(f"{path}: no sag variable; found {sorted(variables)}; accepted "
+                             f"{columns.SAG.describe()}, or the unit in a 'units' attribute")
+        field, name_unit = found
         da = ds[field]
         dims = next((d for d in (("y_mm", "x_mm"), ("y", "x")) if set(da.dims) == set(d)), None)
         if dims is None:
             raise ValueError(f"{path}: {field!r} has dims {da.dims}; expected ('y_mm', 'x_mm') or ('y', 'x')")
         da = da.transpose(*dims)
-        units = da.attrs.get("units")
-        if units is None and field == "sag":
-            raise ValueError(f"{path}: variable 'sag' has no 'units' attribute; give units (nm, um, mm, m, waves) "
-                             "or name the variable 'sag_um'")
+        units = da.attrs.get("units", name_unit or None)
+        if units is None:
+            raise ValueError(f"{path}: variable {field!r} has no 'units' attribute; give units (nm, um, mm, m, "
+                             f"waves) or put the unit in its name ({field.lower()}_um)")
         try:
-            factor = 1.0 if units is None else sag_unit_factor(units, wavelength_um)
+            factor = sag_unit_factor(units, wavelength_um)
             axes = []
             for d in dims[::-1]:
                 cu = da[d].attrs.get("units") if d in da.coords else None
@@ -189,8 +218,7 @@ def read_sag_netcdf(path: str | Path, wavelength_um: float | None = None) -> Sag
             meta = json.loads(ds.attrs.get("meta_json", "{}"))
         except json.JSONDecodeError:
             meta = {}
-        if units is not None:
-            meta = {**meta, "source_units": str(units)}
+        meta = {**meta, "source_units": str(units)}
         return _axes_map(path, field, axes[0], axes[1], np.asarray(da.values) * factor,
                          str(ds.attrs.get("label", path.stem)), meta)
 
@@ -203,24 +231,48 @@ def write_sag_npz(sagmap: SagMap, path: str | Path) -> Path:
     return path
 
 
-def read_sag_npz(path: str | Path) -> SagMap:
+def read_sag_npz(path: str | Path, wavelength_um: float | None = None) -> SagMap:
     """Read a ``.npz`` sag map: arrays ``x_mm``, ``y_mm`` (1-D, or 2-D meshgrids),
     ``sag_um[y, x]`` (µm, NaN = no data) and optional ``label``. Complex arrays are
-    refused; descending axes are flipped."""
+    refused; descending axes are flipped.
+
+    The arrays may carry other names with their unit (:mod:`pipeline.io.columns`):
+    ``x_m``, ``y_um``, ``height_nm``, ``z_um``, ``sag_waves`` (with ``wavelength_um``);
+    converted. A name without its unit (``x``, ``z``) is refused, naming the accepted ones.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.npz`` file.
+    wavelength_um : float, optional
+        Wavelength (µm) of one wave, for a sag array in waves.
+    """
     path = Path(path)
     if not path.exists():
         raise ValueError(f"{path}: file does not exist")
     try:
         with np.load(path, allow_pickle=False) as d:
-            missing = {"x_mm", "y_mm", "sag_um"} - set(d.files)
+            found = [(q, q.find(d.files)) for q in (columns.X, columns.Y, columns.SAG)]
+            missing = [q for q, f in found if f is None]
             if missing:
-                raise ValueError(f"{path}: missing arrays {sorted(missing)}; found {sorted(d.files)}")
+                raise ValueError(f"{path}: no array for the {', '.join(q.what for q in missing)}; found "
+                                 f"{sorted(d.files)}; " + "; ".join(q.refusal(d.files) for q in missing))
             label = str(d["label"]) if "label" in d.files else path.stem
-            x, y, sag = d["x_mm"], d["y_mm"], d["sag_um"]
+            (x_name, x_unit), (y_name, y_unit), (field, sag_unit) = (f for _, f in found)
+            x, y, sag = d[x_name], d[y_name], d[field]
     except (OSError, EOFError, zipfile.BadZipFile) as exc:
         raise ValueError(f"{path}: not a readable .npz file ({type(exc).__name__}: {exc})") from None
     except ValueError as exc:
         if str(path) in str(exc):
             raise
         raise ValueError(f"{path}: not a readable .npz file ({exc})") from None
-    return _axes_map(path, "sag_um", x, y, sag, label, {})
+    try:
+        factors = length_unit_factor(x_unit), length_unit_factor(y_unit), sag_unit_factor(sag_unit, wavelength_um)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    meta = {} if (x_name, y_name, field) == ("x_mm", "y_mm", "sag_um") else {"source_units": sag_unit}
+    # scaled only where the unit differs, so a file in mm and µm reads back bit for bit; a
+    # non-numeric array is left for _axes_map to refuse by name
+    x, y, sag = ((a * f if f != 1.0 and np.issubdtype(a.dtype, np.number) else a)
+                 for a, f in zip((x, y, sag), factors))
+    return _axes_map(path, field, x, y, sag, label, meta)

@@ -15,6 +15,10 @@ Adding a format: write its reader/writer in a module of this package and add one
 :class:`Format` row below; a sag-map row makes it readable by ``--sag``, diagnosis
 manifests and :func:`read_sag_map` at once.
 
+The names each reader accepts for a quantity inside a file (a sag column ``Height [nm]``,
+an intensity ``Flux [ADU]``, a NetCDF variable ``height``) are one table too,
+:mod:`pipeline.io.columns`; ``python -m pipeline.io.registry`` prints it after the formats.
+
 Sign and frame when loading into a lens file
 --------------------------------------------
 Sag maps follow :mod:`optics.sagmap`: ``x`` dispersion, ``y`` ruling direction,
@@ -37,6 +41,7 @@ from typing import Callable
 from optics.sagmap import SagMap
 from pipeline.io.codev import read_codev_int, write_codev_int
 from pipeline.io.codev_zfr import read_codev_zernike, write_codev_zernike
+from pipeline.io.columns import names_table
 from pipeline.io.fe import read_fe_result
 from pipeline.io.fits import (FITS_SUFFIXES, read_line_profile_fits, read_psf_image_fits, read_sag_fits,
                               write_sag_fits)
@@ -108,6 +113,8 @@ FORMATS: tuple[Format, ...] = (
            "counts x S x O x wavelength / R; invalid pixels NaN"),
     Format("sag map", (".csv",), "x_mm,y_mm,sag_um point table", read_sag_csv, write_sag_csv,
            "12 significant digits; masked or scattered points gridded"),
+    Format("sag map", (".txt", ".tsv"), "x_mm,y_mm,sag_um point table as text (any delimiter)", read_sag_csv, None,
+           "as .csv: comma, semicolon, tab or whitespace delimited"),
     Format("sag map", (".nc",), "NetCDF4 sag_um[y_mm, x_mm]", read_sag_netcdf, write_sag_netcdf,
            "float64, exact; units attributes honoured"),
     Format("sag map", (".npz",), "NumPy arrays x_mm, y_mm, sag_um", read_sag_npz, write_sag_npz, "float64, exact"),
@@ -223,9 +230,10 @@ def read_sag_map(path: str | Path, **options) -> SagMap:
     """Read a sag map, choosing the reader by the suffix of ``path``.
 
     ``**options`` go to the reader (``extent_mm``/``spacing_mm``, ``quantity``,
-    ``wfr_to_sag_factor`` for ``.int``, ``spacing_mm`` for scattered ``.csv``,
-    ``wavelength_um`` for a ``.nc`` in waves, ``spacing_mm`` for a Zygo map without a
-    lateral scale); an option the format does not use is refused naming the valid ones.
+    ``wfr_to_sag_factor`` for ``.int``, ``spacing_mm`` for scattered ``.csv``/``.txt``,
+    ``wavelength_um`` for a ``.csv``, ``.txt``, ``.nc`` or ``.npz`` sag in waves,
+    ``spacing_mm`` for a Zygo map without a lateral scale); an option the format does not
+    use is refused naming the valid ones.
     """
     path = Path(path)
     reader = _reader_for(path)
@@ -271,4 +279,5 @@ def load_sag_map(path: str | Path) -> SagMap:
 
 
 if __name__ == "__main__":
-    sys.stdout.write(format_table() + "\n")
+    sys.stdout.write(format_table() + "\n\nNames accepted inside files (pipeline.io.columns):\n"
+                     + names_table() + "\n")
