@@ -74,8 +74,29 @@ GRID_REFUSALS = [
     ("t EXTENT_MM 0 1 0 1\nGRD 2 2 FIL WVL 1 SSZ 1\n1 2 3 4\n", r"line 2: unknown header keyword 'FIL'"),
     ("t EXTENT_MM 0 1 0 1\nGRD 2 2 SUR WVL nan SSZ 1\n1 2 3 4\n", r"line 2: WVL=nan must be a finite number"),
     ("t\nZFR 4 SUR WVL 1 SSZ 1\n1 2 3 4\n", r"line 2: INT type 'ZFR' is not a grid.*read_codev_zernike"),
-    ("GRD 2 2 SUR WVL 1 SSZ 1\n1 2\n3 4\n", r"line 1: the title line is missing"),
+    # no title line and so no EXTENT_MM: the grid keys are asked for
+    ("GRD 2 2 SUR WVL 1 SSZ 1\n1 2\n3 4\n", r"spacing_mm.*extent_mm|extent_mm.*spacing_mm"),
 ]
+
+
+def test_a_grid_without_its_title_line_is_read_with_the_grid_keys(tmp_path):
+    """Some writers leave out CODE V's title line: the header is then the first line, and
+    the grid's size comes from ``extent_mm`` (there is no title to carry it)."""
+    f = tmp_path / "notitle.int"
+    f.write_bytes(b"GRD 3 2 SUR WVL 0.5 SSZ 2 NDA -32767\r\n10 20 -32767\r\n-4 0 6\r\n")
+    m = read_codev_int(f, extent_mm=(-1.0, 1.0, 0.0, 2.0))
+    np.testing.assert_allclose(m.x_mm, [-1.0, 0.0, 1.0])
+    np.testing.assert_allclose(m.y_mm, [0.0, 2.0])
+    # the same values and holes as the same file with a title line
+    ref = read_codev_int(_titled(f, tmp_path), extent_mm=(-1.0, 1.0, 0.0, 2.0))
+    np.testing.assert_array_equal(np.isnan(m.sag_um), np.isnan(ref.sag_um))
+    np.testing.assert_allclose(m.sag_um[np.isfinite(m.sag_um)], ref.sag_um[np.isfinite(ref.sag_um)])
+
+
+def _titled(f, tmp_path):
+    g = tmp_path / "titled.int"
+    g.write_bytes(b"a title\r\n" + f.read_bytes())
+    return g
 
 
 def test_wide_legacy_file_with_nda_is_read(tmp_path):
@@ -175,9 +196,9 @@ def test_zfr_refusals(tmp_path):
     f.write_text("deck\nZFR 3 WFR WVL 1 SSZ 1\n0.1\n0.2\n")
     with pytest.raises(ValueError, match=r"b\.int, line 4: ZFR 3 needs 3 coefficients, found 2"):
         read_codev_zernike(f, normalised=False, radius_mm=1.0)
-    f.write_text("ZFR 2 SUR WVL 1 SSZ 1\n0.1\n0.2\n")
-    with pytest.raises(ValueError, match=r"b\.int, line 1: the title line is missing"):
-        read_codev_zernike(f, normalised=False, radius_mm=1.0)
+    f.write_text("ZFR 2 SUR WVL 1 SSZ 1\n0.1\n0.2\n")  # no title line: the header is the first line
+    c, _ = read_codev_zernike(f, normalised=False, radius_mm=1.0)
+    assert c[(0, 0)] == pytest.approx(0.1 * 1.0) and c[(1, 1)] == pytest.approx(0.2 * 1.0)
     f.write_text("deck\nZFR 2 WFR WVL 1 SSZ 1\n0.1\n0.2\n")
     with pytest.raises(ValueError, match="WFR is a wavefront"):
         read_codev_zernike(f, normalised=False, radius_mm=1.0)

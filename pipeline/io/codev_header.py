@@ -59,8 +59,10 @@ def split_int_file(path: str | Path, what: str, header_form: str) -> tuple[str, 
         raise parse_error(path, lines[-1][0] if lines else None, f"file ends before the {keyword} header line")
     title = lines[0][1].strip()
     if title.split()[0].upper() == keyword and lines[1][1].split()[0].upper() != keyword:
-        raise parse_error(path, lines[0][0], "the title line is missing: a CODE V INT file starts with a "
-                                             f"title line, then the '{header_form} ...' header")
+        # CODE V's layout opens with a title line, but some writers leave it out: the
+        # header is then the first line (a title that itself starts with the keyword is
+        # told apart by the header on the next line)
+        return "", lines[0], lines[1:]
     return title, lines[1], lines[2:]
 
 
