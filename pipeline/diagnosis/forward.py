@@ -402,13 +402,20 @@ class ProfileForward(SpectrographImageModel):
         leak = estimate_noise(self.x, self.data - nominal_residual)
         if not leak < NOISE_LEAK_LIMIT * sigma:
             step = float(np.median(np.diff(np.sort(self.x))))
+            wings = (self.data - nominal_residual) < 0.05  # where the nominal line is below 5 % of its peak
+            hint = ""
+            if wings.sum() >= 4:
+                hint = (f"; the {int(wings.sum())} samples where the nominal line is below 5 % of its peak scatter "
+                        f"about the fit by {float(np.sqrt(np.mean(nominal_residual[wings] ** 2))):.2g} of the peak "
+                        "(a guide, not the noise: it holds any wing mismatch, and misses photon noise that grows "
+                        "with the signal)")
             raise ValueError(
                 f"measurement {self.name!r}: noise_rel is required: its {self.n} samples ({step:.3g} µm apart) are "
                 f"too coarse for the noise to be told from the line (the nominal line sampled the same way, "
                 f"noise-free, reads as noise {leak:.3g} of the peak against {sigma:.3g} from the data; the estimate "
                 f"needs the first below {NOISE_LEAK_LIMIT:g} x the second); give noise_rel = the white noise as a "
                 f"fraction of the line's peak above background (valid {NOISE_RANGES['noise_rel'][0]:g}.."
-                f"{NOISE_RANGES['noise_rel'][1]:g}) in its [[measurement]]")
+                f"{NOISE_RANGES['noise_rel'][1]:g}) in its [[measurement]]{hint}")
         return sigma
 
     def residual(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
