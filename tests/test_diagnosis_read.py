@@ -4,6 +4,8 @@ written here by numpy from analytic shapes (no project forward model makes the d
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -37,9 +39,14 @@ def test_a_map_counted_from_a_corner_needs_its_centre(tmp_path):
     """An export whose coordinates run 0..136 mm would be read mostly off the blank: it is
     refused with the centre to give, and read as the centred map once it is given."""
     f, n = _map_csv(tmp_path / "corner.csv", 68.0, 68.0)
-    with pytest.raises(ValueError, match=r"measurement 'corner': centre_mm=None is required: the valid points of "
-                                         r"corner.csv are centred at x 68.0, y 68.0 mm.*centre_mm = \[68.0, 68.0\]"):
+    with pytest.raises(ValueError, match=r"measurement 'corner': centre_mm=None puts the blank off the map: with no "
+                                         r"centre_mm, only (\d+) of the \d+ valid points of corner.csv fall inside "
+                                         r".*centred at x 68.0, y 68.0 mm.*centre_mm = \[68.0, 68.0\]") as exc:
         load_data(_surface(f))
+    # inside: the lens where two 68 mm discs 96.2 mm apart overlap, at one point per mm^2
+    r, dist = 68.0, 68.0 * np.sqrt(2.0)
+    lens = 2 * r**2 * np.arccos(dist / (2 * r)) - 0.5 * dist * np.sqrt(4 * r**2 - dist**2)
+    assert int(re.search(r"only (\d+) of", str(exc.value)).group(1)) == pytest.approx(lens, rel=0.02)
     (d,) = load_data(_surface(f, centre_mm=[68.0, 68.0]))
     assert d.sag_um.size == n
     assert np.abs(d.x_mm).max() <= 68.0 and np.abs(d.y_mm).max() <= 68.0
@@ -119,7 +126,6 @@ def test_a_densely_sampled_profile_gives_its_noise(tmp_path):
 def test_the_help_shows_a_manifest_whose_keys_are_the_readers():
     """`cryograting diagnose --help` carries the manifest layout; every key it shows is one
     the manifest parser accepts (the help cannot drift from the parser unnoticed)."""
-    import re
 
     from pipeline.diagnosis.cli import HELP_DESCRIPTION
     from pipeline.diagnosis.manifest import MEASUREMENT_KEYS, SIMULATION_KEYS
@@ -164,3 +170,42 @@ def test_an_untestable_fold_says_why_in_words():
     assert untestable_reason(0.0, 0.0) == "the training part's fit predicts no change on the withheld part"
     assert untestable_reason(0.01, float("inf")) == "a parameter is left free within its prior by the training part"
     assert untestable_reason(0.01, 0.02) == "the training part predicts the withheld change 0.01 only to ±0.02"
+
+
+def test_a_centre_from_the_wrong_corner_is_refused_with_the_right_one(tmp_path):
+    """A map whose blank centre is at (68, 68) in its own coordinates, given centre_mm from
+    another corner: most of it would fall off the blank, so it is refused with the centre
+    that puts it back."""
+    f, _ = _map_csv(tmp_path / "corner.csv", 68.0, 68.0)
+    with pytest.raises(ValueError, match=r"centre_mm=\[0.0, 136.0\] puts the blank off the map: with centre_mm = "
+                                         r"\[0, 136\], only \d+ of the \d+ valid points.*give centre_mm = \[68.0, 68.0\]"):
+        load_data(_surface(f, centre_mm=[0.0, 136.0]))
+
+
+def test_a_map_with_heights_along_minus_z_is_read_with_sag_sign(tmp_path):
+    f, _ = _map_csv(tmp_path / "m.csv", 0.0, 0.0)
+    (d,) = load_data(_surface(f, sag_sign=-1))
+    np.testing.assert_allclose(d.sag_um, -quilt_um(d.x_mm, d.y_mm), atol=5e-7)
+    with pytest.raises(ValueError, match=r"sag_sign=2 must be 1 or -1"):
+        _surface(f, sag_sign=2)
+
+
+def test_a_map_reversed_or_turned_by_90_degrees_is_named_with_its_remedy():
+    """The nominal here is the analytic quilt (21 x 18 mm pitches). Reversed heights and a
+    +90° turn are named with the reading that undoes them; the map as it should be, with
+    noise, passes; applying the named remedy makes the turned map pass."""
+    from pipeline.diagnosis.plausibility import orientation_problems
+
+    rng = np.random.default_rng(3)
+    g = np.arange(-68.0, 68.5, 1.0)
+    X, Y = np.meshgrid(g, g)
+    ok = X**2 + Y**2 <= 68.0**2
+    x, y = X[ok], Y[ok]
+    noise = 0.002 * rng.normal(size=x.size)
+    assert orientation_problems("m", x, y, quilt_um(x, y) + noise, quilt_um) == []
+    (p,) = orientation_problems("m", x, y, -quilt_um(x, y) + noise, quilt_um)
+    assert p.fatal and "with its heights reversed" in p.message and "sag_sign = -1" in p.message
+    turned = quilt_um(y, -x) + noise  # the blank turned by +90°: map point p shows blank point R(-90) p
+    (p,) = orientation_problems("m", x, y, turned, quilt_um)
+    assert "turned by +90°" in p.message and "x_new = y, y_new = -x" in p.message
+    assert orientation_problems("m", y, -x, turned, quilt_um) == []  # read as the message says

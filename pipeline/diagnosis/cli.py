@@ -136,6 +136,7 @@ that none does. MANIFEST is a TOML file listing the simulation and the measureme
   # noise_um = 0.005          # optional: else estimated from the map
   # spacing_mm = 0.5 | extent_mm = [x0, x1, y0, y1]   # a CODE V .int without its grid
   # centre_mm = [68.5, 60]    # map coordinates of the blank's centre (corner-origin exports)
+  # sag_sign = -1             # heights along -z (the diagnosis takes the sag along +z)
 
   [[measurement]]
   kind = "line_profile"       # .csv offset_um|offset_px|wavelength_nm,intensity or FITS

@@ -20,7 +20,8 @@ A manifest names the nominal simulation and the measurements it is compared with
     # EXTENT_MM title): spacing_mm = 0.5 (or [dx, dy]), or instead
     # extent_mm = [-68.5, 68.5, -60, 60]  (first/last sample centres x0, x1, y0, y1, mm)
     # optional: centre_mm = [68.5, 60]  (map coordinates of the blank's centre; needed
-    # when the map counts from a corner: a map centred > 20 mm off (0, 0) is refused)
+    # when the map counts from a corner: a map read mostly off the blank is refused)
+    # optional: sag_sign = -1  (the file's heights are along -z, e.g. a surface height)
 
     [[measurement]]
     kind = "line_profile"     # CSV offset_um,intensity (offset in nm/mm, offset_px in 18 µm pixels,
@@ -97,7 +98,7 @@ _COMMON_KEYS = ("name", "kind", "file", "blank")
 #: Valid fields of a [[measurement]] table, per kind.
 MEASUREMENT_KEYS = {
     "surface": _COMMON_KEYS + ("grating", "temperature_K", "aperture_diameter_mm", "noise_um", "spacing_mm",
-                               "extent_mm", "wavelength_um", "centre_mm"),
+                               "extent_mm", "wavelength_um", "centre_mm", "sag_sign"),
     "line_profile": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_scale_mas", "slit_position",
                                     "noise_rel"),
     "psf_image": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_um", "noise_rel"),
@@ -183,6 +184,9 @@ class Measurement:
     #: Map coordinates (mm) of the blank's centre; None: the map is taken as centred on
     #: the blank and checked (:data:`OFF_CENTRE_LIMIT_MM`).
     centre_mm: tuple[float, float] | None = None
+    #: +1, or -1 for a map whose heights are measured the other way (surface height along
+    #: -z, the grating's sag along +z): multiplies the file's values.
+    sag_sign: int = 1
 
     @property
     def read_options(self) -> dict:
@@ -363,10 +367,14 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
         centre = _numbers(entry, "centre_mm", name, (2,))
         if centre is not None and not all(abs(v) <= 300.0 for v in centre):
             raise _err(name, "centre_mm", list(centre), "must be [x0, y0] with |x0|, |y0| <= 300 mm")
+        sign = entry.get("sag_sign", 1)
+        if isinstance(sign, bool) or sign not in (1, -1):
+            raise _err(name, "sag_sign", sign, "must be 1 or -1 (-1: the file's heights are along -z)")
         return Measurement(name, kind, path, blank, temperature_K=float(t), aperture_diameter_mm=float(ap),
                            grating=grating, noise_um=noise_um, spacing_mm=spacing, extent_mm=extent,
                            wavelength_um=None if wl is None else float(wl),
-                           centre_mm=None if centre is None else (float(centre[0]), float(centre[1])))
+                           centre_mm=None if centre is None else (float(centre[0]), float(centre[1])),
+                           sag_sign=int(sign))
     from optics.grating import GRATINGS
 
     g = entry.get("grating")
@@ -477,12 +485,12 @@ def _read_surface(m: Measurement) -> SurfaceData:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc.with_remedy(remedy)}") from None
     except ValueError as exc:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
-    if m.centre_mm is not None:
-        sm = SagMap(sm.x_mm - m.centre_mm[0], sm.y_mm - m.centre_mm[1], sm.sag_um, sm.label, dict(sm.meta))
+    if m.centre_mm is not None or m.sag_sign != 1:
+        c = m.centre_mm or (0.0, 0.0)
+        sm = SagMap(sm.x_mm - c[0], sm.y_mm - c[1], m.sag_sign * sm.sag_um, sm.label, dict(sm.meta))
     X, Y = sm.grid()
-    if m.centre_mm is None:
-        _check_centred(m, sm, X, Y)
     inside = (X**2 + Y**2 <= (0.5 * m.aperture_diameter_mm) ** 2) & sm.mask
+    _check_centred(m, sm, X, Y, inside)
     if inside.sum() < 50:
         raise _err(m.name, "aperture_diameter_mm", m.aperture_diameter_mm,
                    f"leaves {int(inside.sum())} valid pixels of {m.file.name} (need >= 50); "
@@ -490,25 +498,30 @@ def _read_surface(m: Measurement) -> SurfaceData:
     return SurfaceData(m, X[inside], Y[inside], sm.sag_um[inside], sm)
 
 
-#: A map whose valid points are centred farther than this (mm) from its (0, 0) is refused
-#: unless ``centre_mm`` says where the blank's centre is: twice the ``registration``
-#: effect's ±10 mm prior, so an off-centre map that effect can fit is never refused.
+#: A map whose valid points are centred farther than this (mm) from the blank's centre
+#: (its (0, 0), or ``centre_mm``) *and* mostly outside the aperture is refused: twice the
+#: ``registration`` effect's ±10 mm prior, so an offset that effect can fit is never refused.
 OFF_CENTRE_LIMIT_MM = 20.0
 
 
-def _check_centred(m: Measurement, sm: SagMap, X: np.ndarray, Y: np.ndarray) -> None:
-    """Refuse a map whose valid points are centred far from (0, 0): interferometer exports
-    often count from a corner, and such a map would be read mostly off the blank (measured:
-    a 0..136 mm map kept 2 629 of 14 505 points and fitted registration at its bounds)."""
+def _check_centred(m: Measurement, sm: SagMap, X: np.ndarray, Y: np.ndarray, inside: np.ndarray) -> None:
+    """Refuse a map read mostly off the blank: centred far from the blank's centre with
+    less than half its valid points inside the aperture. Interferometer exports often
+    count from a corner (measured: a 0..136 mm map kept 2 629 of 14 505 points and fitted
+    registration at its bounds), and a ``centre_mm`` taken from the wrong corner does the
+    same. A map of part of the blank (all inside) or one wider than the blank but centred
+    passes."""
     ok = sm.mask
     cx, cy = float(X[ok].mean()), float(Y[ok].mean())
-    if math.hypot(cx, cy) > OFF_CENTRE_LIMIT_MM:
-        raise _err(m.name, "centre_mm", None,
-                   f"is required: the valid points of {m.file.name} are centred at x {cx:.1f}, y {cy:.1f} mm, "
-                   f"{math.hypot(cx, cy):.0f} mm from the map's (0, 0), which the diagnosis takes as the blank's "
-                   f"centre (an offset up to {OFF_CENTRE_LIMIT_MM:g} mm is accepted and fitted as registration); give "
-                   f"centre_mm = [{cx:.1f}, {cy:.1f}] (the map coordinates of the blank's centre, mm), or "
-                   "centre_mm = [0, 0] if the map is centred on the blank already")
+    if math.hypot(cx, cy) > OFF_CENTRE_LIMIT_MM and 2 * int(inside.sum()) < int(ok.sum()):
+        c = m.centre_mm or (0.0, 0.0)
+        given = f"centre_mm = [{c[0]:g}, {c[1]:g}]" if m.centre_mm is not None else "no centre_mm"
+        raise _err(m.name, "centre_mm", None if m.centre_mm is None else list(m.centre_mm),
+                   f"puts the blank off the map: with {given}, only {int(inside.sum())} of the {int(ok.sum())} valid "
+                   f"points of {m.file.name} fall inside the {m.aperture_diameter_mm:g} mm aperture, and they are "
+                   f"centred at x {cx:.1f}, y {cy:.1f} mm from the blank's centre (offsets up to "
+                   f"{OFF_CENTRE_LIMIT_MM:g} mm are fitted as registration); give centre_mm = [{c[0] + cx:.1f}, "
+                   f"{c[1] + cy:.1f}] (the map coordinates of the blank's centre, mm)")
 
 
 def unit_line_peak(intensity: np.ndarray, what: str, name: str, file: Path) -> np.ndarray:

@@ -15,7 +15,9 @@ the nominal model predicts for it:
   spike (a non-fatal "spike" problem naming the samples), not a refusal;
 * surface map: its RMS about piston and tilt must exceed ``min_signal_ratio`` times its
   white noise ("no signal" otherwise), and lie within ``max_orders`` decades of the
-  nominal's RMS at the measurement temperature (else "wrong unit (nm)?" / "(mm)?");
+  nominal's RMS at the measurement temperature (else "wrong unit (nm)?" / "(mm)?"); and it
+  must not match the nominal better with its heights reversed or turned by 90° (a height or
+  mount convention: :func:`orientation_problems`);
 * PSF image: a peak at least ``min_peak_sigma`` noise sigmas above its median.
 
 :func:`measurement_problems` lists the problems of every measurement;
@@ -42,7 +44,7 @@ import numpy as np
 from .noise import estimate_noise
 
 __all__ = ["Plausibility", "Problem", "line_fwhm", "peak_sigma", "running_median3", "profile_problems", "map_problems",
-           "image_problems", "measurement_problems", "check_measurements", "at_prior_bound", "unit_hint"]
+           "image_problems", "orientation_problems", "measurement_problems", "check_measurements", "at_prior_bound", "unit_hint"]
 
 
 @dataclass(frozen=True)
@@ -65,6 +67,10 @@ class Plausibility:
     max_orders: float = 2.0
     #: offsets must span [lo, hi] times the nominal FWHM
     span_range: tuple = (1.0, 100.0)
+    #: a map that correlates with the nominal above this when reversed or turned by 90°,
+    #: and better by ``orientation_margin`` than as given, is refused (:func:`orientation_problems`)
+    min_orientation_correlation: float = 0.5
+    orientation_margin: float = 0.3
 
     def __post_init__(self) -> None:
         lo, hi = self.width_range
@@ -73,7 +79,7 @@ class Plausibility:
         lo, hi = self.span_range
         if not 0 < lo < hi:
             raise ValueError(f"Plausibility: span_range={self.span_range!r} must be (lo, hi) with 0 < lo < hi")
-        for name in ("min_peak_sigma", "min_signal_ratio", "max_orders"):
+        for name in ("min_peak_sigma", "min_signal_ratio", "max_orders", "min_orientation_correlation", "orientation_margin"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"Plausibility: {name}={v!r} must be a finite number > 0")
@@ -242,6 +248,56 @@ def map_problems(name: str, x_mm: np.ndarray, y_mm: np.ndarray, sag_um: np.ndarr
     return []
 
 
+#: (label, how to read the file so it matches, blank coordinates of a map point (x, y))
+_ORIENTATIONS = (("turned by +90°", "x_new = y, y_new = -x", lambda x, y: (y, -x)),
+                 ("turned by -90°", "x_new = -y, y_new = x", lambda x, y: (-y, x)))
+
+
+def _correlation(a: np.ndarray, b: np.ndarray) -> float:
+    ok = np.isfinite(b)
+    if ok.sum() < 10:
+        return 0.0
+    na, nb = float(np.linalg.norm(a[ok])), float(np.linalg.norm(b[ok]))
+    return float(a[ok] @ b[ok] / (na * nb)) if na > 0 and nb > 0 else 0.0
+
+
+def orientation_problems(name: str, x_mm: np.ndarray, y_mm: np.ndarray, sag_um: np.ndarray, nominal_at,
+                         rules: Plausibility = Plausibility()) -> list[Problem]:
+    """A map that matches the nominal only with its heights reversed or turned by 90°.
+
+    The quilt prints through with one sign (set by the plating's and the substrate's
+    contractions) and its pitches differ along x and y (21 and 18 mm), so a map
+    anti-correlated with the nominal is a height convention (surface height along -z), and
+    one that matches the nominal turned by 90° a mount or an axis convention; no library
+    effect reaches either (``amplitude_scale`` stops at its 0.3 bound). Correlations are of
+    the piston/tilt residuals; ``nominal_at(x_mm, y_mm)`` gives the nominal at the
+    measurement's temperature. Fatal when another reading correlates above
+    ``min_orientation_correlation`` and beats the map as given by ``orientation_margin``."""
+    x, y, v = (np.asarray(a, float) for a in (x_mm, y_mm, sag_um))
+    d = _piston_tilt_residual(x, y, v)
+
+    def nominal(bx, by):
+        n = np.asarray(nominal_at(bx, by), float)
+        ok = np.isfinite(n)
+        out = np.full(n.shape, np.nan)
+        if ok.sum() >= 10:
+            out[ok] = _piston_tilt_residual(x[ok], y[ok], n[ok])
+        return out
+
+    given = _correlation(d, nominal(x, y))
+    readings = [(-given, "with its heights reversed", "give sag_sign = -1 (the file's heights along -z)")]
+    for label, how, to_blank in _ORIENTATIONS:
+        c = _correlation(d, nominal(*to_blank(x, y)))
+        readings.append((abs(c), label + (" with its heights reversed" if c < 0 else ""),
+                         f"read the file with {how}" + (" and sag_sign = -1" if c < 0 else "")))
+    best, what, remedy = max(readings, key=lambda r: r[0])
+    if best > rules.min_orientation_correlation and best - given > rules.orientation_margin:
+        return [Problem(name, "orientation", f"the map matches the nominal {what} (correlation {best:.2f}, "
+                        f"against {given:.2f} as given): the diagnosis takes the sag along +z, x along the dispersion "
+                        f"(21 mm quilt pitch) and y along the rulings (18 mm); {remedy}")]
+    return []
+
+
 def image_problems(name: str, x_um: np.ndarray, y_um: np.ndarray, intensity: np.ndarray,
                    noise_rel: float | None = None, rules: Plausibility = Plausibility()) -> list[Problem]:
     """Problems of a point-source image: a peak ``min_peak_sigma`` noise sigmas above its
@@ -292,8 +348,12 @@ def measurement_problems(manifest, data: tuple, nominal, rules: Plausibility = P
         elif isinstance(d, SurfaceData):
             k = thermal_factor(m.temperature_K, sim.cold_K, sim.warm_K, *sim.materials)
             noise = m.noise_um if m.noise_um is not None else d.points_noise_um  # scattered: the points' own
-            out += map_problems(m.name, d.x_mm, d.y_mm, d.sag_um, k * _nominal_at(nominal, d.x_mm, d.y_mm),
-                                noise, rules)
+            found = map_problems(m.name, d.x_mm, d.y_mm, d.sag_um, k * _nominal_at(nominal, d.x_mm, d.y_mm),
+                                 noise, rules)
+            if not found:  # a map with signal and the right magnitude: is it the right way round?
+                found = orientation_problems(m.name, d.x_mm, d.y_mm, d.sag_um,
+                                             lambda bx, by, k=k: k * _nominal_at(nominal, bx, by), rules)
+            out += found
         elif isinstance(d, PsfImageData):
             out += image_problems(m.name, d.x_um, d.y_um, d.intensity, m.noise_rel, rules)
     return out

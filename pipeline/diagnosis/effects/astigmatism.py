@@ -10,7 +10,9 @@ __all__ = ["ASTIGMATISM"]
 
 def _disc(radii) -> str:
     r = sorted(set(round(float(v), 2) for v in radii))
-    return "disc r=" + "/".join(f"{v:g}" for v in r) + " mm (map aperture)" if r else "map aperture disc"
+    if not r:
+        return "disc of aperture_diameter_mm"
+    return "disc r=" + "/".join(f"{v:g}" for v in r) + " mm (the measurement's aperture_diameter_mm)"
 
 
 def _summary(p: dict, ctx: SummaryContext) -> dict:
@@ -21,9 +23,11 @@ def _summary(p: dict, ctx: SummaryContext) -> dict:
 ASTIGMATISM = Effect(
     "astigmatism", ("surface",),
     (Parameter("astig_0_um", 0.0, -1.0, 1.0, floor=0.02, unit="µm",
-               meaning="surface Zernike Z(2,2), RMS-normalised over the map's aperture disc"),
+               meaning="surface Zernike Z(2,2), RMS-normalised over the disc of the measurement's "
+                       "aperture_diameter_mm (not the valid data's extent)"),
      Parameter("astig_45_um", 0.0, -1.0, 1.0, floor=0.02, unit="µm",
-               meaning="surface Zernike Z(2,-2), RMS-normalised over the map's aperture disc")),
+               meaning="surface Zernike Z(2,-2), RMS-normalised over the disc of the measurement's "
+                       "aperture_diameter_mm (not the valid data's extent)")),
     description="mount-induced surface astigmatism (Zernike (2,2) and (2,-2), RMS-normalised over the aperture)",
     vector=True, draw_truth=effect_draws.astigmatism, truth_stage="map", summary=_summary,
     map_zernike=(("astig_0_um", (2, 2)), ("astig_45_um", (2, -2))))
