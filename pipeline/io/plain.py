@@ -55,7 +55,8 @@ def read_sag_csv(path: str | Path, spacing_mm: float | None = None) -> SagMap:
     ``nan`` sag values; truly scattered points are interpolated linearly onto a grid of
     ``spacing_mm`` (default: one node per point over their convex hull, ``sqrt(area / n)``),
     NaN outside that hull, and their white noise before interpolation is kept in
-    ``meta["points_noise_um"]`` (:func:`pipeline.io.gridding.grid_points`).
+    ``meta["points_noise_um"]``, the nodes' share of it in ``meta["node_noise_factor"]``
+    (:func:`pipeline.io.gridding.grid_points`).
     ``meta["gridding"]`` says which.
 
     Parameters
