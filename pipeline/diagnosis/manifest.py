@@ -228,6 +228,23 @@ class SurfaceData:
         return float(v) if v is not None and np.isfinite(v) and v > 0 else None
 
     @property
+    def node_noise_factor(self) -> float | None:
+        """White noise of the map's interpolated nodes over that of its scattered points
+        (dimensionless, :func:`pipeline.io.gridding.node_noise_factor`), else None."""
+        v = (getattr(self.sagmap, "meta", None) or {}).get("node_noise_factor")
+        return float(v) if v is not None and np.isfinite(v) and v > 0 else None
+
+    @property
+    def node_noise_um(self) -> float | None:
+        """White-noise sigma (µm) of the map's nodes interpolated from scattered points:
+        :attr:`points_noise_um` times :attr:`node_noise_factor` (the points' own when a map
+        does not state the factor), else None."""
+        sigma = self.points_noise_um
+        if sigma is None:
+            return None
+        return sigma * (self.node_noise_factor or 1.0)
+
+    @property
     def n_points(self) -> int | None:
         """Number of scattered points behind the map (None for a file holding a grid)."""
         v = (getattr(self.sagmap, "meta", None) or {}).get("n_points")
