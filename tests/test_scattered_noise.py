@@ -10,13 +10,14 @@ import json
 import numpy as np
 import pytest
 
+from optics.sagmap import SagMap
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.engine import build_problem
 from pipeline.diagnosis.manifest import load_data, load_manifest
 from pipeline.diagnosis.noise import estimate_noise, estimate_noise_scattered
 from pipeline.diagnosis.nominal import thermal_factor
 from pipeline.diagnosis.report import write_report
-from pipeline.io.registry import read_sag_map
+from pipeline.io.registry import read_sag_map, write_sag_map
 
 from diagnosis_cases import nominal_map, surface_manifest
 
@@ -161,3 +162,134 @@ def test_grid_with_holes_keeps_the_row_cubic_noise(tmp_path, suffix):
     assert prob.noise["grid"] == pytest.approx(expected, rel=1e-12 if suffix == "npz" else 1e-3)
     assert prob.noise["grid"] == pytest.approx(NOISE_UM, rel=0.15)
     assert prob.forwards[0].noise_from == "the map (cubic prediction along its rows)"
+
+
+# --- the nodes' noise: a node averages its triangle's three points ---------------------------
+
+#: Reduced-chi^2 tolerance in standard deviations for the checks below.
+Z_TOL = 4.0
+QUILT_NOISE_UM = 0.01
+
+
+def quilt_um(x, y):
+    """A smooth quilt (0.05 µm, 21 x 18 mm periods), µm."""
+    return 0.05 * np.cos(2 * np.pi * x / 21) * np.cos(2 * np.pi * y / 18)
+
+
+def astigmatism_um(x, y, rms_um):
+    """Astigmatism of RMS ``rms_um`` over the disc of radius R_MM: for uniform points in a
+    disc E[(x^2 - y^2)^2] / R^4 = E[r^4] E[cos^2 2t] / R^4 = (1/3)(1/2), so the shape
+    (x^2 - y^2) / R^2 has RMS 1/sqrt(6)."""
+    return rms_um * np.sqrt(6.0) * (x**2 - y**2) / R_MM**2
+
+
+def barycentric_matrix(px, py, qx, qy):
+    """Sparse matrix W (queries x points) of the linear interpolant on the points' Delaunay
+    triangulation, from scipy's point location and affine transform: row i holds query i's
+    barycentric weights on its triangle's three points."""
+    from scipy.sparse import csr_matrix
+    from scipy.spatial import Delaunay
+
+    tri = Delaunay(np.column_stack([px, py]))
+    q = np.column_stack([qx, qy])
+    s = tri.find_simplex(q)
+    assert (s >= 0).all()
+    T = tri.transform[s]
+    b = np.einsum("nij,nj->ni", T[:, :2], q - T[:, 2])
+    w = np.column_stack([b, 1.0 - b.sum(axis=1)])
+    return csr_matrix((w.ravel(), (np.repeat(np.arange(q.shape[0]), 3), tri.simplices[s].ravel())),
+                      shape=(q.shape[0], px.size))
+
+
+def test_node_noise_factor_is_the_rms_barycentric_weight():
+    """The map's node-noise factor is the RMS over its nodes of sqrt(sum w^2), ``w`` the
+    barycentric weights, computed here with scipy's own point location; and it is
+    1/sqrt(2) within its statistical error: a node placed uniformly in a triangle has
+    Dirichlet(1, 1, 1) weights whatever the triangle's shape, E[w^2] = 2 / (3^2 4) + 1/9 =
+    1/6, so E[sum w^2] = 1/2, with variance 3 E[w^4] + 6 E[w_i^2 w_j^2] - 1/4 = 3/15 + 6/90
+    - 1/4 = 1/60 per node."""
+    from pipeline.io.gridding import grid_points
+
+    rng = np.random.default_rng(21)
+    x, y = disc_points(rng, N_POINTS)
+    gx, gy, sag, meta = grid_points(x, y, rng.normal(0, 1.0, N_POINTS))
+    X, Y = np.meshgrid(gx, gy)
+    ok = np.isfinite(sag)
+    W = barycentric_matrix(x, y, X[ok], Y[ok])
+    sq = np.asarray(W.multiply(W).sum(axis=1)).ravel()
+    assert meta["node_noise_factor"] == pytest.approx(np.sqrt(sq.mean()), rel=1e-12)
+    # mean of sum w^2 over n nodes: sd sqrt(1/60 / n); the factor is its square root (d sqrt(m) = dm / (2 sqrt(m)))
+    sd = np.sqrt(1 / 60 / ok.sum()) / (2 * np.sqrt(0.5))
+    assert meta["node_noise_factor"] == pytest.approx(np.sqrt(0.5), abs=Z_TOL * sd)
+
+
+def quilt_case(tmp_path, seed, astig_rms_um=0.0):
+    """Scattered points of the quilt (plus astigmatism) with white noise, gridded by the
+    reader, against a nominal that is the noise-free quilt on a 0.25 mm grid, at the
+    nominal's temperature (thermal factor 1). Returns the problem and its nominal fit, the
+    manifest, the nominal, and the expectation computed independently: the node-noise
+    factor, the reduced chi^2 the mismatch at the nodes adds (the linear interpolant of the
+    noise-free points minus the nominal quilt, piston and tilt removed) and the reduced
+    chi^2's standard deviation."""
+    g = np.arange(-70.0, 70.0 + 1e-9, 0.25)
+    G = np.meshgrid(g, g)
+    nominal = SagMap(g, g, quilt_um(*G))
+    write_sag_map(nominal, tmp_path / "nominal.npz")
+    rng = np.random.default_rng(seed)
+    x, y = disc_points(rng, N_POINTS)
+    clean = quilt_um(x, y) + astigmatism_um(x, y, astig_rms_um)
+    write_points(tmp_path / "quilt.csv", x, y, clean + rng.normal(0, QUILT_NOISE_UM, N_POINTS))
+    x, y = np.loadtxt(tmp_path / "quilt.csv", delimiter=",", skiprows=1, usecols=(0, 1)).T  # as printed
+    (tmp_path / "m.toml").write_text('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\n'
+                                     'kind = "surface"\nfile = "quilt.csv"\ntemperature_K = 80\n'
+                                     'aperture_diameter_mm = 137\n')
+    man = load_manifest(tmp_path / "m.toml")
+    prob, nom = build_problem(man, load_data(man), nominal)
+    (f,) = prob.forwards
+    W = barycentric_matrix(x, y, f.x, f.y)
+    factor = np.sqrt(W.multiply(W).sum() / f.n)
+    sigma_node = QUILT_NOISE_UM * factor
+    # mismatch at the nodes: the nominal's bilinear sampling on 0.25 mm adds ~1e-4 µm, negligible
+    A = np.column_stack([np.ones(f.n), f.x, f.y])
+    d = W @ clean - quilt_um(f.x, f.y)
+    d = d - A @ np.linalg.lstsq(A, d, rcond=None)[0]
+    dof = f.n - 3
+    # the nodes' noise covariance is sigma_p^2 W W^T: sum r^2 has variance 2 sigma_p^4 ||W W^T||_F^2
+    # (correlated nodes), and the mismatch's cross term 4 sigma_p^2 d^T W W^T d
+    C = W @ W.T
+    var = (2 * QUILT_NOISE_UM**4 * C.multiply(C).sum() + 4 * QUILT_NOISE_UM**2 * d @ (C @ d)) / (dof * sigma_node**2)**2
+    # and the points' noise is estimated (relative sd 1.3 / sqrt(n)): chi^2 scales as its inverse square
+    sd = np.sqrt(var + (2 * REL_SD_SQRT_N / np.sqrt(N_POINTS)) ** 2)
+    expected = {"factor": factor, "mismatch_chi2": float(d @ d) / (dof * sigma_node**2), "sd": sd, "dof": dof}
+    return prob, nom, man, nominal, expected
+
+
+def test_matching_map_leaves_reduced_chi2_of_one_against_the_nodes_noise(tmp_path):
+    """A model equal to the surface leaves the nodes' noise: reduced chi^2 1 within its
+    statistical error against the points' noise times the node factor (it was 0.5 against
+    the points' noise alone: measured 0.53 and 0.51 on two draws), and no gap. The
+    expectation adds the linear interpolation's own error on the quilt, computed here
+    from the noise-free points (about 1.2 nm RMS against 7.1 nm: +0.030, about one
+    standard deviation of the reduced chi^2, 0.027)."""
+    prob, nom, man, nominal, exp = quilt_case(tmp_path, seed=1)
+    m = "quilt"
+    assert prob.forwards[0].node_noise_factor == pytest.approx(exp["factor"], rel=1e-9)
+    chi2_red = nom.rss[m] / (exp["dof"] * prob.noise[m] ** 2)
+    assert chi2_red == pytest.approx(1.0 + exp["mismatch_chi2"], abs=Z_TOL * exp["sd"])
+    assert diagnose(man, nominal=nominal, heldout=False).verdict == "no_gap"
+
+
+def test_mismatch_below_the_points_noise_is_a_gap(tmp_path):
+    """Astigmatism of 0.6 x the nodes' noise (0.6 x 0.01 / sqrt(2) µm RMS) on 15 000 points
+    is a gap. Against the points' noise alone it was not: measured reduced chi^2 0.72 and
+    0.69, gap z -11.7 and -12.7 on two draws (no_gap). Against the nodes' noise the
+    reduced chi^2 is 1 + 0.36 + the interpolation error's share, z about +16 to +18."""
+    from pipeline.diagnosis.criteria import Criteria
+    from pipeline.diagnosis.gap import gap_statistics, gaps
+
+    prob, nom, _, _, exp = quilt_case(tmp_path, seed=1, astig_rms_um=0.6 * QUILT_NOISE_UM / np.sqrt(2))
+    m = "quilt"
+    chi2_red = nom.rss[m] / (exp["dof"] * prob.noise[m] ** 2)
+    assert chi2_red == pytest.approx(1.0 + exp["mismatch_chi2"], abs=Z_TOL * exp["sd"])
+    assert gap_statistics(prob, nom)[m]["z"] > Criteria().no_gap_z
+    assert [g["measurement"] for g in gaps(prob, nom, Criteria())] == [m]
