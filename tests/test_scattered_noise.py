@@ -266,8 +266,8 @@ def quilt_case(tmp_path, seed, astig_rms_um=0.0):
 
 def test_matching_map_leaves_reduced_chi2_of_one_against_the_nodes_noise(tmp_path):
     """A model equal to the surface leaves the nodes' noise: reduced chi^2 1 within its
-    statistical error against the points' noise times the node factor (it was 0.5 against
-    the points' noise alone: measured 0.53 and 0.51 on two draws), and no gap. The
+    statistical error against the points' noise times the node factor (against the points'
+    noise alone it is 0.5: measured 0.53 and 0.51 on two draws), and no gap. The
     expectation adds the linear interpolation's own error on the quilt, computed here
     from the noise-free points (about 1.2 nm RMS against 7.1 nm: +0.030, about one
     standard deviation of the reduced chi^2, 0.027)."""
@@ -281,9 +281,9 @@ def test_matching_map_leaves_reduced_chi2_of_one_against_the_nodes_noise(tmp_pat
 
 def test_mismatch_below_the_points_noise_is_a_gap(tmp_path):
     """Astigmatism of 0.6 x the nodes' noise (0.6 x 0.01 / sqrt(2) µm RMS) on 15 000 points
-    is a gap. Against the points' noise alone it was not: measured reduced chi^2 0.72 and
-    0.69, gap z -11.7 and -12.7 on two draws (no_gap). Against the nodes' noise the
-    reduced chi^2 is 1 + 0.36 + the interpolation error's share, z about +16 to +18."""
+    is a gap. Against the points' noise alone it is not: measured reduced chi^2 0.72 and
+    0.69, gap z -11.7 and -12.7 on two draws (no_gap). Against the nodes' noise: 1.43 and
+    1.39, z +18.0 and +16.0 (expected 1 + 0.36 + the interpolation error's share, 0.03)."""
     from pipeline.diagnosis.criteria import Criteria
     from pipeline.diagnosis.gap import gap_statistics, gaps
 
