@@ -17,11 +17,16 @@ into the regular µm grid of :class:`optics.sagmap.SagMap`.
   ``meta["points_noise_um"]``; a node, the weighted mean ``sum_i w_i v_i`` of its
   triangle's three points, carries ``sqrt(sum_i w_i^2)`` of it, and the RMS of that over
   the map's nodes is kept in ``meta["node_noise_factor"]`` (:func:`node_noise_factor`).
-  The map's ``meta["gridding"]`` says which, for the report.
+  The map's ``meta["gridding"]`` says which, for the report. The grid serves what
+  needs one (plots, exports, ``cryograting convert``); the diagnosis fits scattered
+  points at the points themselves (:class:`ScatteredPoints`), so neither the nodes'
+  correlated noise nor the interpolation's own error on a curved surface enters its fit.
 * :func:`sag_unit_factor` — factor from a ``units`` string (nm, µm, mm, m, waves) to µm.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
@@ -30,7 +35,7 @@ from optics.triangulation import linear_on_grid, weight_square_sums
 
 __all__ = ["GRID_TOLERANCE", "MAX_GRID_NODES", "SAG_UNITS_TO_UM", "LENGTH_UNITS_TO_MM", "grid_points",
            "detect_axis", "sag_unit_factor", "length_unit_factor", "GridUnknownError", "grid_from_options",
-           "node_noise_factor"]
+           "node_noise_factor", "ScatteredPoints", "scattered_points"]
 
 #: A coordinate is on the grid if it lies within this fraction of the step of a node:
 #: far above print noise (6 significant digits of a 100 mm coordinate: 5e-5 mm), far
@@ -124,6 +129,33 @@ def detect_axis(v: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     n = int(ki.max()) + 1
     nodes = centres if centres.size == n else origin + step * np.arange(n)
     return nodes, ki
+
+
+@dataclass(frozen=True, eq=False)
+class ScatteredPoints:
+    """The measured points of a map given as scattered points, before any gridding.
+
+    Attributes
+    ----------
+    x_mm, y_mm : ndarray, shape (n,)
+        Point coordinates (mm), in the file's order.
+    sag_um : ndarray, shape (n,)
+        Sag (µm), finite (points without data are left out).
+    """
+
+    x_mm: np.ndarray
+    y_mm: np.ndarray
+    sag_um: np.ndarray
+
+
+def scattered_points(x_mm: np.ndarray, y_mm: np.ndarray, sag_um: np.ndarray, meta: dict) -> ScatteredPoints | None:
+    """The points with data of a point list that :func:`grid_points` found scattered (its
+    ``meta``), else None (the points lie on a grid, which then holds them exactly)."""
+    if not str(meta.get("gridding", "")).startswith("scattered"):
+        return None
+    x, y, s = (np.asarray(a, float).ravel() for a in (x_mm, y_mm, sag_um))
+    ok = np.isfinite(s)
+    return ScatteredPoints(x[ok], y[ok], s[ok])
 
 
 def grid_points(x_mm: np.ndarray, y_mm: np.ndarray, sag_um: np.ndarray, *, spacing_mm: float | None = None,
@@ -240,9 +272,10 @@ def node_noise_factor(x_mm: np.ndarray, y_mm: np.ndarray, gx_mm: np.ndarray, gy_
     over the nodes inside the points' convex hull of ``sqrt(sum_i w_i^2)``, ``w_i`` a node's
     barycentric weights (:func:`optics.triangulation.weight_square_sums`).
 
-    The nodes' mean noise variance is ``sigma_p^2 * factor^2`` exactly, for the given layout,
-    so a model that matches the surface leaves a reduced chi^2 of 1 against
-    ``sigma_p * factor``. A node placed uniformly at random in a triangle has Dirichlet(1, 1, 1)
+    The nodes' mean noise variance is ``sigma_p^2 * factor^2`` exactly, for the given layout:
+    the noise of the nodes when a gridded map is fitted as a grid (saved to a grid format;
+    a map of scattered points is fitted at its points). The nodes also carry the linear
+    interpolation's own error on a curved surface, which this factor does not cover. A node placed uniformly at random in a triangle has Dirichlet(1, 1, 1)
     barycentric weights whatever the triangle's shape, so ``E[sum w^2] = 3 E[w^2] = 1/2``
     with a standard deviation of ``sqrt(1/60) = 0.13`` per node (``sum w^2`` in [1/3, 1]): a
     grid laid over random points gives ``1/sqrt(2) = 0.707`` (0.7077, 0.7070 and 0.7069
