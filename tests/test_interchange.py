@@ -348,13 +348,14 @@ def test_csv_ragged_row_named(tmp_path):
 
 
 def test_registry_lists_every_reader_and_writer_of_the_io_package():
-    """One registry: every public read_*/write_* of a pipeline.io module is a row of FORMATS."""
+    """One registry: every public read_*/write_* of a pipeline.io module is a row of FORMATS
+    (a reader, a writer, or a reader that also returns a file's scattered points)."""
     import importlib
     import pkgutil
 
     import pipeline.io
 
-    registered = {f for fmt in ic.FORMATS for f in (fmt.reader, fmt.writer) if f is not None}
+    registered = {f for fmt in ic.FORMATS for f in (fmt.reader, fmt.writer, fmt.points_reader) if f is not None}
     missing = []
     for m in pkgutil.iter_modules(pipeline.io.__path__):
         if m.name in ("common", "registry"):  # shared helpers; the dispatchers themselves

@@ -78,3 +78,43 @@ def test_memoised_weights_give_the_values_of_a_fresh_evaluation():
         triangulation._weights_of.cache_clear()
         np.testing.assert_array_equal(got, linear_on_grid(*c, gx, gy))
     assert not np.array_equal(seen[0], seen[1], equal_nan=True)
+
+
+def test_weight_square_sums_equal_scipy_barycentric_weights():
+    """Each node's sum of squared weights against scipy's own point location and affine
+    transform (``Delaunay.find_simplex`` and ``transform``) on the same samples."""
+    from scipy.spatial import Delaunay
+
+    from optics.triangulation import weight_square_sums
+
+    rng = np.random.default_rng(4)
+    x, y = rng.uniform(-20, 20, 2000), rng.uniform(-15, 15, 2000)
+    gx, gy = np.arange(-22.0, 22.01, 0.7), np.arange(-17.0, 17.01, 0.7)
+    got = weight_square_sums(x, y, gx, gy)
+    X, Y = np.meshgrid(gx, gy)
+    q = np.column_stack([X.ravel(), Y.ravel()])
+    tri = Delaunay(np.column_stack([x, y]))
+    s = tri.find_simplex(q)
+    inside = s >= 0
+    T = tri.transform[s[inside]]
+    b = np.einsum("nij,nj->ni", T[:, :2], q[inside] - T[:, 2])
+    w = np.column_stack([b, 1.0 - b.sum(axis=1)])
+    ref = np.full(X.size, np.nan)
+    ref[inside] = np.sum(w**2, axis=1)
+    ref = ref.reshape(X.shape)
+    assert np.array_equal(np.isnan(got), np.isnan(ref))
+    assert np.nanmax(np.abs(got - ref)) < 1e-12
+    # bounds of sum w^2 for w >= 0 summing to 1: 1/3 (centroid) to 1 (on a sample)
+    assert np.nanmin(got) >= 1 / 3 - 1e-12 and np.nanmax(got) <= 1 + 1e-12
+
+
+def test_weight_square_sums_on_samples_and_edge_midpoints():
+    """A node on a sample has weight 1 (sum 1); a node at the midpoint of an edge has two
+    weights of 1/2 (sum 1/2), whichever of the edge's two triangles holds it."""
+    from optics.triangulation import weight_square_sums
+
+    x, y = np.array([0.0, 2.0, 0.0, 2.0]), np.array([0.0, 0.0, 2.0, 2.0])
+    got = weight_square_sums(x, y, np.array([0.0, 1.0, 2.0]), np.array([0.0, 1.0, 2.0]))
+    assert got[0, 0] == pytest.approx(1.0) and got[2, 2] == pytest.approx(1.0)
+    assert got[0, 1] == pytest.approx(0.5) and got[1, 0] == pytest.approx(0.5)
+    assert got[1, 1] == pytest.approx(0.5)  # the square's centre: midpoint of the diagonal

@@ -170,6 +170,8 @@ class SurfaceForward:
         self.nuisance = np.column_stack([np.ones(self.n), self.x / self.radius_mm, self.y / self.radius_mm])
         self.noise_known = m.noise_um
         self.points_noise_um, self.n_points = data.points_noise_um, data.n_points
+        self.scattered = data.scattered  # the samples are the file's scattered points themselves
+        self.node_noise_factor, self.samples_noise_um = data.node_noise_factor, data.samples_noise_um
         self.quilt = quilt_components(nominal)
         self._quilt_at = quilt_parts(self.quilt, self.x, self.y)
 
@@ -205,18 +207,23 @@ class SurfaceForward:
         return r
 
     def estimate_noise(self, nominal_residual: np.ndarray) -> float:
-        """White-noise sigma (µm) from the data: for a map interpolated from scattered
-        points, the points' own before interpolation (its nodes' errors are correlated,
-        which the row cubic reads as signal); else cubic prediction along the map's rows."""
-        if self.points_noise_um is not None:
-            return self.points_noise_um
+        """White-noise sigma (µm) from the data: scattered points, the points' own (local
+        2-D cubic, :func:`.noise.estimate_noise_scattered`); grid nodes interpolated from
+        scattered points (a gridded map saved to a grid format), that times the nodes'
+        interpolation factor (:attr:`.manifest.SurfaceData.samples_noise_um`: a node
+        averages its triangle's three points, and its errors are correlated with its
+        neighbours', which the row cubic reads as signal); else cubic prediction along the
+        map's rows."""
+        if self.samples_noise_um is not None:
+            return self.samples_noise_um
         return estimate_noise(self.x, self.data, rows=self.y)
 
     @property
     def noise_rel_sd(self) -> float | None:
         """Relative standard deviation of the estimated noise when it comes from scattered
         points (:data:`.noise.SCATTERED_NOISE_REL_SD_SQRT_N` over the square root of their
-        count), else None (:func:`.gap._noise_rel_sd` then uses the map's own)."""
+        count; the nodes' factor is computed from the layout, without error), else None
+        (:func:`.gap._noise_rel_sd` then uses the map's own)."""
         if self.points_noise_um is None or not self.n_points:
             return None
         return SCATTERED_NOISE_REL_SD_SQRT_N / np.sqrt(self.n_points)
@@ -227,7 +234,13 @@ class SurfaceForward:
         if self.noise_known:
             return "manifest noise_um"
         if self.points_noise_um is not None:
-            return f"the {self.n_points} points before interpolation (local cubic over each point's 20 nearest)"
+            text = (f"the {self.n_points} points (local cubic over each point's 20 nearest; "
+                    f"{1e3 * self.points_noise_um:.3g} nm)")
+            if self.scattered:
+                return text + f", fitted at the {self.n} points inside the aperture"
+            if self.node_noise_factor is not None:
+                text += f", times {self.node_noise_factor:.3f} for the grid nodes' interpolation weights"
+            return text
         return "the map (cubic prediction along its rows)"
 
     def fitted(self, p: dict, mask: np.ndarray | None = None) -> np.ndarray:

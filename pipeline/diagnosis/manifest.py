@@ -209,13 +209,19 @@ class Manifest:
 
 @dataclass(frozen=True, eq=False)
 class SurfaceData:
-    """Valid samples of a surface map inside its aperture (mm, µm), plus the map itself."""
+    """Valid samples of a surface map inside its aperture (mm, µm), plus the map itself.
+
+    For a file of scattered points (``scattered``) the samples are the measured points
+    themselves, the map their linear interpolation onto a grid (for plots and exports):
+    the fit then meets the points' own, independent noise, and no interpolation error. For
+    any other file they are the map's valid grid nodes."""
 
     measurement: Measurement
     x_mm: np.ndarray
     y_mm: np.ndarray
     sag_um: np.ndarray
     sagmap: object = field(repr=False, default=None)
+    scattered: bool = False
 
     @property
     def gridding(self) -> str | None:
@@ -226,15 +232,36 @@ class SurfaceData:
 
     @property
     def points_noise_um(self) -> float | None:
-        """White-noise sigma (µm) of scattered points estimated before they were
-        interpolated onto the grid (:func:`pipeline.io.gridding.grid_points`), else None.
-        Interpolated nodes share their points' noise: the map's own rows understate it."""
+        """White-noise sigma (µm) of scattered points estimated from the points themselves
+        (:func:`pipeline.io.gridding.grid_points`), else None."""
         v = (getattr(self.sagmap, "meta", None) or {}).get("points_noise_um")
         return float(v) if v is not None and np.isfinite(v) and v > 0 else None
 
     @property
+    def node_noise_factor(self) -> float | None:
+        """White noise of grid nodes interpolated from scattered points over that of the
+        points (dimensionless, :func:`pipeline.io.gridding.node_noise_factor`) when the
+        samples are such nodes (a gridded map of scattered points saved to a grid format),
+        else None (the samples are points, or a grid measured as such)."""
+        if self.scattered:
+            return None
+        v = (getattr(self.sagmap, "meta", None) or {}).get("node_noise_factor")
+        return float(v) if v is not None and np.isfinite(v) and v > 0 else None
+
+    @property
+    def samples_noise_um(self) -> float | None:
+        """White-noise sigma (µm) of the samples known from how they were made, else None:
+        the points' own (:attr:`points_noise_um`) for scattered points; for grid nodes
+        interpolated from them, that times :attr:`node_noise_factor` (a node averages its
+        triangle's three points); None for a grid measured as such (its own rows give it)."""
+        sigma = self.points_noise_um
+        if sigma is None or self.scattered:
+            return sigma
+        return sigma * (self.node_noise_factor or 1.0)
+
+    @property
     def n_points(self) -> int | None:
-        """Number of scattered points behind the map (None for a file holding a grid)."""
+        """Number of scattered points in the file (None for a file holding a grid)."""
         v = (getattr(self.sagmap, "meta", None) or {}).get("n_points")
         return None if v is None else int(v)
 
@@ -475,27 +502,32 @@ def load_manifest(path_or_obj, allow_outside: bool = False) -> Manifest:
 
 
 def _read_surface(m: Measurement) -> SurfaceData:
-    from pipeline.io.registry import read_sag_map
+    from pipeline.io.registry import read_sag_map_points
     from pipeline.io.gridding import GridUnknownError
 
     try:
-        sm = read_sag_map(m.file, **m.read_options)
+        sm, points = read_sag_map_points(m.file, **m.read_options)
     except GridUnknownError as exc:
         remedy = "give extent_mm = [x0, x1, y0, y1] or spacing_mm = 0.5 (or [dx, dy]) (mm) in its [[measurement]]"
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc.with_remedy(remedy)}") from None
     except ValueError as exc:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
+    c = m.centre_mm or (0.0, 0.0)
     if m.centre_mm is not None or m.sag_sign != 1:
-        c = m.centre_mm or (0.0, 0.0)
         sm = SagMap(sm.x_mm - c[0], sm.y_mm - c[1], m.sag_sign * sm.sag_um, sm.label, dict(sm.meta))
-    X, Y = sm.grid()
-    inside = (X**2 + Y**2 <= (0.5 * m.aperture_diameter_mm) ** 2) & sm.mask
-    _check_centred(m, sm, X, Y, inside)
+    if points is None:
+        X, Y = sm.grid()
+        x, y, sag = X[sm.mask], Y[sm.mask], sm.sag_um[sm.mask]
+    else:  # the measured points, not their interpolation: independent noise, no interpolation error
+        x, y, sag = points.x_mm - c[0], points.y_mm - c[1], m.sag_sign * points.sag_um
+    inside = x**2 + y**2 <= (0.5 * m.aperture_diameter_mm) ** 2
+    _check_centred(m, x, y, inside)
     if inside.sum() < 50:
+        what = "points" if points is not None else "pixels"
         raise _err(m.name, "aperture_diameter_mm", m.aperture_diameter_mm,
-                   f"leaves {int(inside.sum())} valid pixels of {m.file.name} (need >= 50); "
+                   f"leaves {int(inside.sum())} valid {what} of {m.file.name} (need >= 50); "
                    f"the map covers x {sm.x_mm[0]:.1f}..{sm.x_mm[-1]:.1f} mm, y {sm.y_mm[0]:.1f}..{sm.y_mm[-1]:.1f} mm")
-    return SurfaceData(m, X[inside], Y[inside], sm.sag_um[inside], sm)
+    return SurfaceData(m, x[inside], y[inside], sag[inside], sm, scattered=points is not None)
 
 
 #: A map whose valid points are centred farther than this (mm) from the blank's centre
@@ -504,20 +536,19 @@ def _read_surface(m: Measurement) -> SurfaceData:
 OFF_CENTRE_LIMIT_MM = 20.0
 
 
-def _check_centred(m: Measurement, sm: SagMap, X: np.ndarray, Y: np.ndarray, inside: np.ndarray) -> None:
+def _check_centred(m: Measurement, x: np.ndarray, y: np.ndarray, inside: np.ndarray) -> None:
     """Refuse a map read mostly off the blank: centred far from the blank's centre with
     less than half its valid points inside the aperture. Interferometer exports often
     count from a corner (measured: a 0..136 mm map kept 2 629 of 14 505 points and fitted
     registration at its bounds), and a ``centre_mm`` taken from the wrong corner does the
     same. A map of part of the blank (all inside) or one wider than the blank but centred
-    passes."""
-    ok = sm.mask
-    cx, cy = float(X[ok].mean()), float(Y[ok].mean())
-    if math.hypot(cx, cy) > OFF_CENTRE_LIMIT_MM and 2 * int(inside.sum()) < int(ok.sum()):
+    passes. ``x``, ``y``: the valid samples (mm, blank frame); ``inside``: those in the aperture."""
+    cx, cy = float(np.mean(x)), float(np.mean(y))
+    if math.hypot(cx, cy) > OFF_CENTRE_LIMIT_MM and 2 * int(inside.sum()) < x.size:
         c = m.centre_mm or (0.0, 0.0)
         given = f"centre_mm = [{c[0]:g}, {c[1]:g}]" if m.centre_mm is not None else "no centre_mm"
         raise _err(m.name, "centre_mm", None if m.centre_mm is None else list(m.centre_mm),
-                   f"puts the blank off the map: with {given}, only {int(inside.sum())} of the {int(ok.sum())} valid "
+                   f"puts the blank off the map: with {given}, only {int(inside.sum())} of the {x.size} valid "
                    f"points of {m.file.name} fall inside the {m.aperture_diameter_mm:g} mm aperture, and they are "
                    f"centred at x {cx:.1f}, y {cy:.1f} mm from the blank's centre (offsets up to "
                    f"{OFF_CENTRE_LIMIT_MM:g} mm are fitted as registration); give centre_mm = [{c[0] + cx:.1f}, "
@@ -606,9 +637,10 @@ def read_summary(d) -> dict:
     keys), for the report: a wrong unit, axis or origin shows here before it shows as a
     strange finding.
 
-    Surfaces: grid size and step, valid points inside the aperture of those in the file,
-    extent, P/V and RMS of the sag used (µm, piston removed) and the centre shift applied
-    (how scattered points were gridded is the measurement's ``gridding``). Profiles: samples, step, offset range, the line's
+    Surfaces: grid size and step, valid points inside the aperture of those in the file
+    (scattered points: the points themselves, the grid being their interpolation for
+    display), extent, P/V and RMS of the sag used (µm, piston removed) and the centre shift
+    applied (how scattered points were gridded is the measurement's ``gridding``). Profiles: samples, step, offset range, the line's
     centre (intensity-weighted over the samples above half the peak, file frame) and the
     shift applied. PSF images: samples, extent and the shift applied."""
     m = d.measurement
@@ -617,7 +649,8 @@ def read_summary(d) -> dict:
         sm, s = d.sagmap, d.sag_um - float(np.mean(d.sag_um))
         out.update({"grid": f"{sm.x_mm.size} x {sm.y_mm.size}",
                     "step_mm": f"{_g(sm.x_mm[1] - sm.x_mm[0])} x {_g(sm.y_mm[1] - sm.y_mm[0])}",
-                    "points_used": int(d.sag_um.size), "points_valid_in_file": int(sm.mask.sum()),
+                    "points_used": int(d.sag_um.size),
+                    "points_valid_in_file": int(d.n_points if d.scattered else sm.mask.sum()),
                     "x_range_mm": [_g(sm.x_mm[0]), _g(sm.x_mm[-1])], "y_range_mm": [_g(sm.y_mm[0]), _g(sm.y_mm[-1])],
                     "pv_um": _g(float(s.max() - s.min())), "rms_um": _g(float(np.sqrt(np.mean(s**2))))})
         if m.centre_mm is not None:

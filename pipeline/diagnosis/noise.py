@@ -9,8 +9,9 @@
 * :func:`estimate_noise_band_limited` — the same for a focal-plane image sampled finer
   than its optical cut-off: the power at frequencies the optics cannot pass.
 * :func:`effective_samples` — ``n / L`` with ``L`` the integral correlation length of a
-  residual in samples (per axis for a map or image): how many independent samples a
-  smooth model discrepancy amounts to.
+  residual in samples (per axis for a map or image; scattered points are read along
+  thin strips and counted as a grid of their density would be): how many independent
+  samples a smooth model discrepancy amounts to.
 
 Units are those of the values passed (µm for maps, fraction of the data peak for
 profiles and images); positions in µm or mm, only their spacing matters.
@@ -282,10 +283,20 @@ def _integral_scale(rows: list[np.ndarray], max_lag: int = 200) -> float:
 
 def effective_samples(residual: np.ndarray, x: np.ndarray, y: np.ndarray | None = None) -> float:
     """Effective number of independent samples of a residual on points ``x`` (profile)
-    or ``x, y`` (map on a regular grid; correlation taken along rows and columns)."""
+    or ``x, y`` (a map or image: correlation taken along rows and columns).
+
+    Samples on a regular grid (rows of equal ``y``) are read along their rows and columns:
+    ``L = L_x L_y`` in nodes. Scattered points (fewer than two samples per distinct ``y``
+    on average) are read along strips as wide as their mean spacing
+    :func:`_scattered_correlation_area`, which counts them as a grid of the same density
+    would be counted."""
     r = np.asarray(residual, float) - np.mean(residual)
     if y is None:
         L = _integral_scale([r[np.argsort(x)]])
+        return float(np.clip(r.size / L, min(10.0, r.size), r.size))
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    if r.size >= 10 and 2 * np.unique(np.round(y, 6)).size > r.size:
+        L = _scattered_correlation_area(r, x, y)
         return float(np.clip(r.size / L, min(10.0, r.size), r.size))
     rows, cols = [], []
     for key, other, bucket in ((y, x, rows), (x, y, cols)):
@@ -295,6 +306,43 @@ def effective_samples(residual: np.ndarray, x: np.ndarray, y: np.ndarray | None 
             bucket.append(r[sel[np.argsort(other[sel])]])
     L = _integral_scale(rows) * _integral_scale(cols)
     return float(np.clip(r.size / L, min(10.0, r.size), r.size))
+
+
+def _scattered_correlation_area(r: np.ndarray, x: np.ndarray, y: np.ndarray) -> float:
+    """Correlation area, in points, of a residual ``r`` at scattered points ``(x, y)``.
+
+    The points are cut into strips of width ``h = sqrt(hull area / n)`` (their mean
+    spacing) along x and along y, and each strip is read in order as a row of samples:
+    :func:`_integral_scale` gives ``1 + S`` with ``S = 2 sum_k rho(k g)`` over lags of
+    ``g``, the mean gap between successive points of a strip. Independent points give
+    ``S = 0`` whatever their layout (successive points of a strip share no error). A grid
+    of the same density has a node spacing ``h_e = sqrt(g h)`` (density ``1 / (g h)``),
+    and a correlation reaching ``l`` gives ``S = l / g`` along a strip against
+    ``l / h_e`` along the grid's rows, so each ``S`` is rescaled by ``sqrt(g / h)``:
+    ``L = (1 + S_x sqrt(g_x / h)) (1 + S_y sqrt(g_y / h))``, the grid estimator's
+    ``L_x L_y`` at the points' density, independent of the strip width while the strips
+    are narrow against the correlation."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        area = float(ConvexHull(np.column_stack([x, y])).volume)  # a 2-D hull's "volume" is its area
+    except QhullError:
+        area = float(np.ptp(x) * np.ptp(y))
+    h = np.sqrt(area / r.size) if area > 0 else 0.0
+    if not h > 0:
+        return 1.0
+    L = 1.0
+    for key, along in ((y, x), (x, y)):
+        strip = np.floor((key - key.min()) / h).astype(int)
+        order = np.lexsort((along, strip))
+        cuts = np.flatnonzero(np.diff(strip[order])) + 1
+        rows = np.split(r[order], cuts)
+        pos = np.split(along[order], cuts)
+        span = sum(float(p[-1] - p[0]) for p in pos if p.size > 1)
+        steps = sum(p.size - 1 for p in pos)
+        g = span / steps if steps else h
+        L *= 1.0 + (_integral_scale(rows) - 1.0) * np.sqrt(g / h)
+    return L
 
 
 @dataclass(frozen=True)

@@ -29,8 +29,8 @@ the deformation is below its noise). :func:`at_prior_bound` names fitted paramet
 that sit at their prior bound: such a fit is the prior speaking, not the data.
 
 Noise is the measurement's stated ``noise_um`` / ``noise_rel`` or else estimated from
-the data (:func:`pipeline.diagnosis.noise.estimate_noise`; a map of scattered points: the
-points' own before interpolation, :attr:`.manifest.SurfaceData.points_noise_um`).
+the data (:func:`pipeline.diagnosis.noise.estimate_noise`; scattered points: the points'
+own, :attr:`.manifest.SurfaceData.samples_noise_um`).
 """
 
 from __future__ import annotations
@@ -347,7 +347,7 @@ def measurement_problems(manifest, data: tuple, nominal, rules: Plausibility = P
             out += profile_problems(m.name, d.offset_um, d.intensity, _nominal_fwhm_um(m, nominal), m.noise_rel, rules)
         elif isinstance(d, SurfaceData):
             k = thermal_factor(m.temperature_K, sim.cold_K, sim.warm_K, *sim.materials)
-            noise = m.noise_um if m.noise_um is not None else d.points_noise_um  # scattered: the points' own
+            noise = m.noise_um if m.noise_um is not None else d.samples_noise_um  # scattered: the points' own
             found = map_problems(m.name, d.x_mm, d.y_mm, d.sag_um, k * _nominal_at(nominal, d.x_mm, d.y_mm),
                                  noise, rules)
             if not found:  # a map with signal and the right magnitude: is it the right way round?

@@ -149,8 +149,8 @@ def read_text(read: dict) -> str:
 
 def _measurement_rows(d) -> list[dict]:
     """One row per measurement: its file, what was read from it, how its samples were
-    gridded (scattered points are interpolated: the map's nodes are then not independent
-    samples) and its noise."""
+    gridded (scattered points are interpolated onto a grid for display; the fit uses the
+    points) and its noise."""
     noise = d.baseline.get("noise", {})
     rows = []
     for m in d.measurements:

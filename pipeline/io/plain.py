@@ -29,9 +29,10 @@ import numpy as np
 from optics.sagmap import SagMap
 from pipeline.io import columns
 from pipeline.io.common import atomic_path, atomic_write, parse_error, read_csv_choices
-from pipeline.io.gridding import SAG_UNITS_TO_UM, grid_points, length_unit_factor, sag_unit_factor
+from pipeline.io.gridding import (SAG_UNITS_TO_UM, ScatteredPoints, grid_points, length_unit_factor, sag_unit_factor,
+                                  scattered_points)
 
-__all__ = ["write_sag_csv", "read_sag_csv", "write_sag_netcdf", "read_sag_netcdf", "write_sag_npz", "read_sag_npz"]
+__all__ = ["write_sag_csv", "read_sag_csv", "read_sag_csv_points", "write_sag_netcdf", "read_sag_netcdf", "write_sag_npz", "read_sag_npz"]
 
 _CSV_COLUMNS = ("x_mm", "y_mm", "sag_um")
 
@@ -69,8 +70,27 @@ def read_sag_csv(path: str | Path, spacing_mm: float | None = None, wavelength_u
     ``nan`` sag values; truly scattered points are interpolated linearly onto a grid of
     ``spacing_mm`` (default: one node per point over their convex hull, ``sqrt(area / n)``),
     NaN outside that hull, and their white noise before interpolation is kept in
-    ``meta["points_noise_um"]`` (:func:`pipeline.io.gridding.grid_points`).
-    ``meta["gridding"]`` says which.
+    ``meta["points_noise_um"]``, the nodes' share of it in ``meta["node_noise_factor"]``
+    (:func:`pipeline.io.gridding.grid_points`).
+    ``meta["gridding"]`` says which. :func:`read_sag_csv_points` also returns the points.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file.
+    spacing_mm : float, optional
+        Grid spacing (mm) for scattered points; unused when the points form a grid.
+    wavelength_um : float, optional
+        Wavelength (µm) of one wave, for a sag column in waves.
+    """
+    return read_sag_csv_points(path, spacing_mm, wavelength_um)[0]
+
+
+def read_sag_csv_points(path: str | Path, spacing_mm: float | None = None,
+                        wavelength_um: float | None = None) -> tuple[SagMap, ScatteredPoints | None]:
+    """:func:`read_sag_csv`'s map and, when the file holds scattered points, the points
+    themselves (:class:`pipeline.io.gridding.ScatteredPoints`: what a fit should use, the
+    grid being their interpolation); None when the points lie on a grid.
 
     Parameters
     ----------
@@ -101,7 +121,8 @@ def read_sag_csv(path: str | Path, spacing_mm: float | None = None, wavelength_u
     if inf.any():
         raise parse_error(path, int(lines[inf][0]), "sag_um is infinite; write nan (or leave the point out) for no data")
     gx, gy, sag, meta = grid_points(v[:, 0], v[:, 1], v[:, 2], spacing_mm=spacing_mm, lines=lines, source=str(path))
-    return _sagmap(path, gx, gy, sag, path.stem, {"format": "csv", **meta})
+    sagmap = _sagmap(path, gx, gy, sag, path.stem, {"format": "csv", **meta})
+    return sagmap, scattered_points(v[:, 0], v[:, 1], v[:, 2], meta)
 
 
 def _sagmap(path: Path, x_mm, y_mm, sag_um, label: str, meta: dict) -> SagMap:

@@ -47,14 +47,14 @@ from pipeline.io.fits import (FITS_SUFFIXES, read_line_profile_fits, read_psf_im
                               write_sag_fits)
 from pipeline.io.gridding import GridUnknownError
 from pipeline.io.measured import read_line_profile, read_psf_image, write_line_profile_csv, write_psf_image_csv
-from pipeline.io.plain import (read_sag_csv, read_sag_netcdf, read_sag_npz, write_sag_csv, write_sag_netcdf,
+from pipeline.io.plain import (read_sag_csv, read_sag_csv_points, read_sag_netcdf, read_sag_npz, write_sag_csv, write_sag_netcdf,
                                write_sag_npz)
 from pipeline.io.zemax import read_zemax_grid_sag, read_zemax_zernike, write_zemax_grid_sag, write_zemax_zernike
 from pipeline.io.zernike import read_zernike_list, write_zernike_list
 from pipeline.io.zygo import is_zygo_dat, read_zygo_ascii, read_zygo_dat, read_zygo_datx
 
 __all__ = ["KINDS", "Format", "FORMATS", "SAG_FORMATS", "SAG_READERS", "formats", "format_table", "write_sag_map", "read_sag_map",
-           "load_sag_map", "read_measured"]
+           "read_sag_map_points", "load_sag_map", "read_measured"]
 
 #: What a file holds.
 KINDS = ("sag map", "zernike list", "line profile", "psf image", "fe result")
@@ -80,6 +80,10 @@ class Format:
     sniff : callable or None
         ``sniff(path) -> bool``: the file is in this format (by its content). A format
         that shares a suffix with another has one; it is tried before the other.
+    points_reader : callable or None
+        For a sag-map format that may hold scattered points: ``points_reader(path,
+        **options) -> (SagMap, ScatteredPoints or None)``, the reader's map and the points
+        themselves (:func:`read_sag_map_points`).
     """
 
     kind: str
@@ -89,6 +93,7 @@ class Format:
     writer: Callable | None
     notes: str = ""
     sniff: Callable | None = None
+    points_reader: Callable | None = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -112,9 +117,9 @@ FORMATS: tuple[Format, ...] = (
     Format("sag map", (".asc",), "Zygo MetroPro ASCII interferogram", read_zygo_ascii, None,
            "counts x S x O x wavelength / R; invalid pixels NaN"),
     Format("sag map", (".csv",), "x_mm,y_mm,sag_um point table", read_sag_csv, write_sag_csv,
-           "12 significant digits; masked or scattered points gridded"),
+           "12 significant digits; masked or scattered points gridded", points_reader=read_sag_csv_points),
     Format("sag map", (".txt", ".tsv"), "x_mm,y_mm,sag_um point table as text (any delimiter)", read_sag_csv, None,
-           "as .csv: comma, semicolon, tab or whitespace delimited"),
+           "as .csv: comma, semicolon, tab or whitespace delimited", points_reader=read_sag_csv_points),
     Format("sag map", (".nc",), "NetCDF4 sag_um[y_mm, x_mm]", read_sag_netcdf, write_sag_netcdf,
            "float64, exact; units attributes honoured"),
     Format("sag map", (".npz",), "NumPy arrays x_mm, y_mm, sag_um", read_sag_npz, write_sag_npz, "float64, exact"),
@@ -241,6 +246,33 @@ def read_sag_map(path: str | Path, **options) -> SagMap:
     if not path.exists():
         raise ValueError(f"{path}: file does not exist")
     return reader(path, **options)
+
+
+def read_sag_map_points(path: str | Path, **options) -> tuple:
+    """:func:`read_sag_map`'s map and, for a file of scattered points, the points
+    themselves (:class:`pipeline.io.gridding.ScatteredPoints`), else None: the points are
+    the measurement, the map their interpolation onto a grid (for what needs one).
+
+    Parameters
+    ----------
+    path : str or Path
+        The sag-map file.
+    **options
+        As for :func:`read_sag_map`.
+
+    Returns
+    -------
+    (SagMap, ScatteredPoints or None)
+    """
+    path = Path(path)
+    reader = _reader_for(path)
+    _check_options(reader, path, options)
+    if not path.exists():
+        raise ValueError(f"{path}: file does not exist")
+    row = next((f for f in formats("sag map") if f.reader is reader), None)
+    if row is None or row.points_reader is None:
+        return reader(path, **options), None
+    return row.points_reader(path, **options)
 
 
 def read_measured(kind: str, path: str | Path, **instrument):
