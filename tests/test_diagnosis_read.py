@@ -209,3 +209,50 @@ def test_a_map_reversed_or_turned_by_90_degrees_is_named_with_its_remedy():
     (p,) = orientation_problems("m", x, y, turned, quilt_um)
     assert "turned by +90°" in p.message and "x_new = y, y_new = -x" in p.message
     assert orientation_problems("m", y, -x, turned, quilt_um) == []  # read as the message says
+
+
+def test_a_profile_with_photon_noise_gets_its_mean_noise():
+    """An arc line's variance grows with its counts: the noise the gap test compares an
+    unweighted residual with is the RMS over the samples, sqrt(mean(var)). Written here
+    with Poisson counts (peak 2e4, background 300, read 10) at 2000 random offsets: the
+    estimate is within 4 of its relative sd (3.2 / sqrt(n) = 0.072) of the truth, where the
+    wings' white scatter reads half of it; white noise still gives its sigma."""
+    from pipeline.diagnosis.noise import (SIGNAL_DEPENDENT_NOISE_REL_SD_SQRT_N, estimate_noise,
+                                          estimate_noise_signal_dependent)
+
+    rng = np.random.default_rng(11)
+    n = 2000
+    u = np.sort(rng.uniform(-130.0, 130.0, n))
+    shape = _double_line(u) / _double_line(np.array([-13.0]))[0]
+    peak, bg, read = 2e4, 300.0, 10.0
+    counts = rng.poisson(peak * shape + bg) + rng.normal(0.0, read, n) - bg
+    truth = np.sqrt(np.mean(peak * shape + bg + read**2)) / peak
+    tol = 4 * SIGNAL_DEPENDENT_NOISE_REL_SD_SQRT_N / np.sqrt(n)
+    assert estimate_noise_signal_dependent(u, counts / peak) == pytest.approx(truth, rel=tol)
+    assert estimate_noise(u, counts / peak) < 0.7 * truth  # the wings' scatter misses the line's
+    white = shape + rng.normal(0.0, 0.003, n)
+    assert estimate_noise_signal_dependent(u, white) == pytest.approx(0.003, rel=tol)
+
+
+def test_the_explained_excess_is_counted_per_measurement():
+    """Two profiles with stated noise (so the noise is not discounted): one with a residual
+    four times its noise (chi^2_red 4), one whose stated noise is too large (chi^2_red 0.4).
+    A fit that brings the first to its noise explains all of its excess (3 units of noise
+    variance per sample); the second neither cancels that excess nor adds to it."""
+    from types import SimpleNamespace
+
+    from pipeline.diagnosis.fitting import FitOutcome, Problem
+    from pipeline.diagnosis.gap import excess_explained
+
+    def fw(name):
+        return SimpleNamespace(name=name, kind="line_profile", n=103, noise_known=0.01, nuisance_count=2, n_shift=1)
+
+    prob = Problem([fw("a"), fw("b")], weights={"a": 1.0, "b": 1.0}, noise={"a": 0.01, "b": 0.01})
+    n = {"a": 103, "b": 103}  # 100 degrees of freedom each after 3 nuisances
+
+    def outcome(rss):
+        return FitOutcome({}, {}, {}, rss, n, n, 0, True, 0, 0.0)
+
+    nominal = outcome({"a": 4 * 100 * 1e-4, "b": 0.4 * 100 * 1e-4})
+    assert excess_explained(prob, nominal, outcome({"a": 1 * 100 * 1e-4, "b": 0.4 * 100 * 1e-4})) == 1.0
+    assert excess_explained(prob, nominal, outcome({"a": 2.5 * 100 * 1e-4, "b": 0.1 * 100 * 1e-4})) == pytest.approx(0.5)

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["effective_samples", "estimate_noise", "estimate_noise_band_limited", "estimate_noise_scattered",
+           "estimate_noise_signal_dependent", "SIGNAL_DEPENDENT_NOISE_REL_SD_SQRT_N", "WING_LEVEL",
            "SCATTERED_NOISE_REL_SD_SQRT_N", "TwoPartErrors", "two_part_errors"]
 
 
@@ -39,6 +40,69 @@ def _standardised_errors(x: np.ndarray, y: np.ndarray) -> np.ndarray:
             if a != b:
                 L[a] *= (x0 - xs[b]) / (xs[a] - xs[b])
     return (y[i] - np.sum(L * y[nb], axis=0)) / np.sqrt(1.0 + np.sum(L**2, axis=0))
+
+
+#: Median of a chi-square variable with one degree of freedom: the median of e^2 / var for
+#: Gaussian errors e of variance var.
+_CHI2_1_MEDIAN = 0.454936
+
+#: Samples below this fraction of a profile's peak are its wings, where read and background
+#: noise alone set the scatter (:func:`estimate_noise_signal_dependent`).
+WING_LEVEL = 0.05
+
+
+#: Relative standard deviation of :func:`estimate_noise_signal_dependent` times sqrt(n):
+#: measured by Monte Carlo (150 draws each) on a double-peaked line at 140/500/2000 random
+#: offsets over ±130 µm: 3.0/3.0/3.25 with photon noise (peak 5e3-2e4 counts, 300 counts of
+#: background, 10 read), 2.3/2.1/1.8 with white noise; its mean 1.00-1.03 and 1.02-1.07.
+SIGNAL_DEPENDENT_NOISE_REL_SD_SQRT_N = 3.2
+
+
+def estimate_noise_signal_dependent(x: np.ndarray, y: np.ndarray) -> float:
+    """RMS noise of a line profile whose variance grows with its signal (photon noise on
+    top of read and background noise), from the data alone: ``sqrt(mean(a + b y))``.
+
+    An arc line's counts are Poisson: at a 20 000-count peak its noise is ~14x that of its
+    wings, and the scatter of most samples, which lie in the wings, misses it. The local
+    cubic's standardised prediction errors ``e`` (:func:`estimate_noise`) are modelled as
+    having variance ``a + b max(y, 0)``: ``a`` from the wings (``y`` below
+    :data:`WING_LEVEL` of the peak, robustly by their MAD), ``b >= 0`` so that the median of
+    ``e^2 / (a + b y)`` over the line's samples is that of a chi-square with one degree of
+    freedom. White noise gives ``b ~ 0`` and the wings' sigma. The mean variance is what an
+    unweighted residual sum over the profile compares with (the gap test, the explained
+    excess). ``y`` in units of the line's peak above background; fewer than 10 wing or 10
+    line samples: the white-noise estimate of all samples."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    o = np.argsort(x)
+    x, y = x[o], y[o]
+    e = _standardised_errors(x, y)
+    white = estimate_noise(x, y)
+    if e.size < 20:
+        return white
+    level = np.clip(y[2:-2], 0.0, None)
+    wings, line = level < WING_LEVEL, level >= WING_LEVEL
+    if wings.sum() < 10 or line.sum() < 10:
+        return white
+    ew = e[wings]
+    a = float((1.4826 * np.median(np.abs(ew - np.median(ew)))) ** 2)
+    if not a > 0:
+        return white
+    e2, s = e[line] ** 2, level[line]
+
+    def excess(b):  # > 0 while b is too small to explain the line's scatter
+        return float(np.median(e2 / (a + b * s))) - _CHI2_1_MEDIAN
+
+    b = 0.0
+    if excess(0.0) > 0:
+        hi = max(float(np.max(e2 / s)), a)
+        while excess(hi) > 0:
+            hi *= 2.0
+        lo = 0.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if excess(mid) > 0 else (lo, mid)
+        b = 0.5 * (lo + hi)
+    return float(np.sqrt(np.mean(a + b * np.clip(y, 0.0, None))))
 
 
 def estimate_noise(x: np.ndarray, y: np.ndarray, rows: np.ndarray | None = None) -> float:
