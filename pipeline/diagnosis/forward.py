@@ -48,8 +48,9 @@ __all__ = ["FIT_LSF_SETTINGS", "NOISE_LEAK_LIMIT", "PROFILE_KEYS", "SurfaceForwa
 #: The measured line's own leakage can exceed the nominal's 2.5x (a quilted line with
 #: deeper structure than the nominal, sampled once per pixel: 0.097 against 0.039), so at
 #: this limit it may reach half the estimate (sigma then ~13 % high, beyond the
-#: estimator's statistical error). Measured on profiles made outside the project: 0.000-0.021
-#: for 1-3 µm steps, 0.40-0.46 for 18 µm (one sample per pixel).
+#: estimator's statistical error). Measured on profiles made outside the project, against
+#: the signal-dependent estimate: 0.000-0.009 for 1-3 µm steps, 0.30-0.37 for 18 µm (one
+#: sample per pixel).
 NOISE_LEAK_LIMIT = 0.2
 
 #: Line-profile sampling used while fitting (measured: 0.1-0.45 % L1 from the defaults).
@@ -415,7 +416,7 @@ class ProfileForward(SpectrographImageModel):
         and noise-free reading 0.039). Where the nominal's leakage reaches
         :data:`NOISE_LEAK_LIMIT` of the estimate, the noise is not measurable from the data
         and ``noise_rel`` is required (a noise read 50x too high makes a real gap ``no_gap``)."""
-        sigma = estimate_noise(self.x, self.data)
+        sigma = estimate_noise_signal_dependent(self.x, nominal_residual, level=self.data)
         leak = estimate_noise(self.x, self.data - nominal_residual)
         if not leak < NOISE_LEAK_LIMIT * sigma:
             step = float(np.median(np.diff(np.sort(self.x))))
@@ -433,7 +434,7 @@ class ProfileForward(SpectrographImageModel):
                 f"needs the first below {NOISE_LEAK_LIMIT:g} x the second); give noise_rel = the white noise as a "
                 f"fraction of the line's peak above background (valid {NOISE_RANGES['noise_rel'][0]:g}.."
                 f"{NOISE_RANGES['noise_rel'][1]:g}) in its [[measurement]]{hint}")
-        return estimate_noise_signal_dependent(self.x, self.data)
+        return sigma
 
     @property
     def noise_rel_sd(self) -> float:
