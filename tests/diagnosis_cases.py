@@ -37,10 +37,11 @@ def sag_function_of(nominal):
     return sag
 
 
-def abbe_profiles_manifest(tmp_path, pixel_scales, seed, distortion=None, **abbe_kwargs):
-    """Manifest of J 1.25 µm order -2 profiles of the nominal blank (:func:`nominal_map`) at
+def abbe_profiles_manifest(tmp_path, pixel_scales, seed, distortion=None, line=("J", 1.25, -2), **abbe_kwargs):
+    """Manifest of profiles of ``line`` (grating, wavelength µm, order; default J 1.25 µm
+    order -2) of the nominal blank (:func:`nominal_map`) at
     ``pixel_scales`` (mas), made by the independent truth's 2-D Abbe sum with
-    ``abbe_kwargs`` (collimator, camera, pupil shift) and measured with photon and read
+    ``abbe_kwargs`` (collimator, camera, pupil shift, slit width) and measured with photon and read
     noise, background, coupling and sub-pixel phases, ``distortion`` on the detector
     (:func:`pipeline.diagnosis.truth.detector.measure_profile`)."""
     from pipeline.diagnosis.truth.abbe import RELATIVE_NA, abbe_line_profile
@@ -49,12 +50,13 @@ def abbe_profiles_manifest(tmp_path, pixel_scales, seed, distortion=None, **abbe
     sag = sag_function_of(nominal_map(tmp_path))
     rng = np.random.default_rng(seed)
     lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
+    grating, wl, order = line
     for ps in pixel_scales:
-        u, det = abbe_line_profile("J", 1.25, -2, RELATIVE_NA[ps], sag, **abbe_kwargs)
+        u, det = abbe_line_profile(grating, wl, order, RELATIVE_NA[ps], sag, **abbe_kwargs)
         x, counts, _ = measure_profile(u, det, rng, distortion=distortion)
         write_line_profile_csv(tmp_path / f"p{ps}.csv", x, counts)
-        lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{ps}.csv"\ngrating = "J"\norder = -2\n'
-                     f'wavelength_um = 1.25\npixel_scale_mas = {ps}\n')
+        lines.append(f'[[measurement]]\nkind = "line_profile"\nfile = "p{ps}.csv"\ngrating = "{grating}"\n'
+                     f'order = {order}\nwavelength_um = {wl}\npixel_scale_mas = {ps}\n')
     p = tmp_path / "m.toml"
     p.write_text("\n".join(lines))
     return p

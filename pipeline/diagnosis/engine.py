@@ -124,7 +124,8 @@ def summary_context(prob: Problem, cold_K: float) -> SummaryContext:
                           surface_radii_mm=tuple(f.radius_mm for f in prob.forwards if f.kind == "surface"),
                           quilt_rms_um=quilt.amplitudes_um() if quilt is not None else None,
                           quilt_weights=quilt.weights or None if quilt is not None else None,
-                          warm_K=float(fw.warm_K), materials=tuple(fw.materials))
+                          warm_K=float(fw.warm_K), materials=tuple(fw.materials),
+                          gratings=tuple(dict.fromkeys(f.m.grating for f in prob.forwards if f.kind == "line_profile")))
 
 
 _N_EFF_PASSES = 2  # re-counts (Criteria.n_eff_from = "best_fit")

@@ -42,6 +42,11 @@ A manifest names the nominal simulation and the measurements it is compared with
     wavelength_um = 1.25
     pixel_um = 18             # optional: detector pixel the image is integrated over (default 18)
 
+A profile's or image's ``wavelength_um`` lies in its grating's band (``band_um`` of
+:data:`optics.grating.GRATINGS`, edges included) when ``order`` is the blaze order (the
+default); in another order (an off-band line, the grating turned) it must need a turn
+within the optical model's domain (:meth:`optics.grating.Grating.check_in_domain`).
+
 Optional per measurement: ``name`` (default: file stem), ``blank`` (which grating blank
 the data see; default the grating for profiles, ``grating`` or "spare" for surfaces),
 ``noise_um`` (surface) / ``noise_rel`` (profile or PSF image, fraction of the peak) when
@@ -295,6 +300,30 @@ def _err(name: str, fld: str, value, valid: str) -> ValueError:
     return ValueError(f"measurement {name!r}: {fld}={value!r} {valid}")
 
 
+def _check_line(name: str, g, wl: float, order: int) -> None:
+    """Refuse a line that grating ``g`` does not put on the detector as the optical model
+    describes it; every error names the measurement ``name``, the fields and their values.
+
+    In the blaze order the line must lie in the grating's band (``band_um``, edges
+    included): the band is what the detector covers at the design angle, so a line
+    outside it is not on the detector (e.g. 1.65 µm on the K grating is the H band's).
+    In another order the line is an off-band measurement with the grating turned (the
+    paper's 1.25 µm on the H grating in order -3): it must propagate and need no more than
+    the optical model's largest turn (:meth:`optics.grating.Grating.check_in_domain`).
+    """
+    lo, _, hi = g.band_um
+    if order == g.order:
+        if not lo <= wl <= hi:
+            raise _err(name, "wavelength_um", wl, f"is outside grating {g.name}'s band {lo:g}..{hi:g} µm "
+                       f"(order {order}, its blaze order)")
+        return
+    try:
+        g.check_in_domain(wl, order)
+    except ValueError as exc:
+        raise ValueError(f"measurement {name!r}: order={order!r}, wavelength_um={wl!r}: grating {g.name} "
+                         f"(blaze order {g.order}, band {lo:g}..{hi:g} µm) cannot take this line: {exc}") from None
+
+
 def _number(entry: dict, key: str, name: str, default=None, required: bool = False):
     if key not in entry:
         if required:
@@ -412,10 +441,7 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
     order = entry.get("order", GRATINGS[key].order)
     if isinstance(order, bool) or not isinstance(order, int) or order == 0:
         raise _err(name, "order", order, "must be a non-zero integer")
-    try:
-        GRATINGS[key].beta_deg(wl, order)
-    except ValueError as exc:
-        raise _err(name, "wavelength_um", wl, f"cannot be diffracted by grating {key} in order {order}: {exc}") from None
+    _check_line(name, GRATINGS[key], float(wl), order)
     if kind == "psf_image":
         pix = _number(entry, "pixel_um", name, 18.0)
         if not 0 <= pix <= 100:

@@ -31,8 +31,10 @@ pupil_shift         pupil_x_mm, pupil_y_mm (0; ±10 mm)           beam footprint
                                                                  grating
 collimator_wfe      coll_coma_um Z(3,1), coll_defocus_um Z(2,0), extra spectrograph WFE on top
                     coll_astig45_um Z(2,-2) (0; ±0.4 µm)         of the default collimator
-slit_width          slit_image_width_um (27; 15…45 µm)           slit image width ≠ 27 µm
-                                                                 (29 µm grating HK scaled alike)
+slit_width          slit_image_width_um (27; 15…45 µm): the      the slit image width differs
+                    J, H, K gratings' width, one for every       from the nominal (one slit for
+                    grating (HK's: 29/27 of it; the summary      every grating: 27 µm J, H, K;
+                    gives each measured grating's own, µm)       29 µm HK)
 plating_gradient    plating_grad_x, plating_grad_y (0; ±0.1)     NiP thickness varies linearly
                     relative change of the deformation           across the blank: deformation
                     amplitude at x or y = +70 mm                 x (1 + gx x/70 + gy y/70)

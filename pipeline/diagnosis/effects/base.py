@@ -219,7 +219,7 @@ class SummaryContext:
     amplitudes (µm, :meth:`pipeline.diagnosis.quilt.QuiltComponents.amplitudes_um`; None: no quilt fit),
     its parts' shares of the nominal's projection (:func:`pipeline.diagnosis.quilt.projection_weights`;
     None: no quilt fit), and the warm temperature (K) and (substrate, film) that set the
-    thermal factor."""
+    thermal factor, and the gratings of the line profiles (names, :data:`optics.grating.GRATINGS`)."""
 
     cold_K: float
     blanks: tuple = ()
@@ -228,6 +228,7 @@ class SummaryContext:
     quilt_weights: dict | None = None
     warm_K: float = 293.0
     materials: tuple = ("Al6061-T6", "NiP")
+    gratings: tuple = ()
 
 
 def vector_norm(p: dict, names) -> float:
