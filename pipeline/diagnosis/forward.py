@@ -35,7 +35,7 @@ from optics.zernike import zernike_xy
 from .effects import LIBRARY, SHAPE_STAGES, SpectrographOptics, forward_effects
 from .manifest import NOISE_RANGES, ProfileData, SurfaceData
 from .noise import (SCATTERED_NOISE_REL_SD_SQRT_N, SIGNAL_DEPENDENT_NOISE_REL_SD_SQRT_N, estimate_noise,
-                    estimate_noise_signal_dependent)
+                    WING_LEVEL, estimate_noise_signal_dependent)
 from .nominal import DEFAULT_MATERIALS, thermal_factor
 from .quilt import QuiltComponents, quilt_components
 
@@ -420,10 +420,11 @@ class ProfileForward(SpectrographImageModel):
         leak = estimate_noise(self.x, self.data - nominal_residual)
         if not leak < NOISE_LEAK_LIMIT * sigma:
             step = float(np.median(np.diff(np.sort(self.x))))
-            wings = (self.data - nominal_residual) < 0.05  # where the nominal line is below 5 % of its peak
+            wings = (self.data - nominal_residual) < WING_LEVEL
             hint = ""
             if wings.sum() >= 4:
-                hint = (f"; the {int(wings.sum())} samples where the nominal line is below 5 % of its peak scatter "
+                hint = (f"; the {int(wings.sum())} samples where the nominal line is below {100 * WING_LEVEL:g} % of its "
+                        f"peak scatter "
                         f"about the fit by {float(np.sqrt(np.mean(nominal_residual[wings] ** 2))):.2g} of the peak "
                         "(a guide, not the noise: it holds any wing mismatch, and misses photon noise that grows "
                         "with the signal)")
@@ -431,8 +432,8 @@ class ProfileForward(SpectrographImageModel):
                 f"measurement {self.name!r}: noise_rel is required: its {self.n} samples ({step:.3g} µm apart) are "
                 f"too coarse for the noise to be told from the line (the nominal line sampled the same way, "
                 f"noise-free, reads as noise {leak:.3g} of the peak against {sigma:.3g} from the data; the estimate "
-                f"needs the first below {NOISE_LEAK_LIMIT:g} x the second); give noise_rel = the white noise as a "
-                f"fraction of the line's peak above background (valid {NOISE_RANGES['noise_rel'][0]:g}.."
+                f"needs the first below {NOISE_LEAK_LIMIT:g} x the second); give noise_rel = the RMS noise over the "
+                f"profile as a fraction of the line's peak above background (valid {NOISE_RANGES['noise_rel'][0]:g}.."
                 f"{NOISE_RANGES['noise_rel'][1]:g}) in its [[measurement]]{hint}")
         return sigma
 
