@@ -90,16 +90,8 @@ def read_sag_csv_points(path: str | Path, spacing_mm: float | None = None,
                         wavelength_um: float | None = None) -> tuple[SagMap, ScatteredPoints | None]:
     """:func:`read_sag_csv`'s map and, when the file holds scattered points, the points
     themselves (:class:`pipeline.io.gridding.ScatteredPoints`: what a fit should use, the
-    grid being their interpolation); None when the points lie on a grid.
-
-    Parameters
-    ----------
-    path : str or Path
-        The CSV file.
-    spacing_mm : float, optional
-        Grid spacing (mm) for scattered points; unused when the points form a grid.
-    wavelength_um : float, optional
-        Wavelength (µm) of one wave, for a sag column in waves.
+    grid being their interpolation); None when the points lie on a grid. Parameters as
+    :func:`read_sag_csv`'s.
     """
     path = Path(path)
     v, lines, (_, _, sag_name) = read_csv_choices(
