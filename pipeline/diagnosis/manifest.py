@@ -601,12 +601,17 @@ def unit_line_peak(intensity: np.ndarray, what: str, name: str, file: Path) -> n
 RECENTRE_BEYOND_UM = {"line_profile": 20.0, "psf_image": 10.0}
 
 
-def recentre(coords: np.ndarray, unit_peak: np.ndarray, beyond_um: float) -> float:
-    """Centre of the samples above half the peak (their intensity-weighted mean), rounded
-    to 0.1 µm, when it lies farther than ``beyond_um`` from 0; else 0. The position is a
-    fitted nuisance in every model, so moving the data changes no finding."""
+def half_max_centre(coords: np.ndarray, unit_peak: np.ndarray) -> float:
+    """Intensity-weighted mean position of the samples above half the (unit) peak."""
     hi = unit_peak >= 0.5
-    c = float(np.sum(unit_peak[hi] * coords[hi]) / np.sum(unit_peak[hi]))
+    return float(np.sum(unit_peak[hi] * coords[hi]) / np.sum(unit_peak[hi]))
+
+
+def recentre(coords: np.ndarray, unit_peak: np.ndarray, beyond_um: float) -> float:
+    """Centre of the samples above half the peak (:func:`half_max_centre`), rounded to
+    0.1 µm, when it lies farther than ``beyond_um`` from 0; else 0. The position is a
+    fitted nuisance in every model, so moving the data changes no finding."""
+    c = half_max_centre(coords, unit_peak)
     return round(c, 1) if abs(c) > beyond_um else 0.0
 
 
@@ -683,10 +688,9 @@ def read_summary(d) -> dict:
             out["centre_mm"] = f"({m.centre_mm[0]:g}, {m.centre_mm[1]:g}) subtracted"
     elif isinstance(d, ProfileData):
         u, v = d.offset_um, d.intensity
-        hi = v >= 0.5
         out.update({"samples": int(u.size), "step_um": _g(float(np.median(np.diff(u)))),
                     "offset_range_um": [_g(u[0] + d.origin_um), _g(u[-1] + d.origin_um)],
-                    "line_centre_um": _g(float(np.sum(v[hi] * u[hi]) / np.sum(v[hi])) + d.origin_um),
+                    "line_centre_um": _g(half_max_centre(u, v) + d.origin_um),
                     "shift_applied_um": _g(d.origin_um)})
     else:
         out.update({"samples": int(d.x_um.size),
