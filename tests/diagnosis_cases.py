@@ -37,17 +37,22 @@ def sag_function_of(nominal):
     return sag
 
 
-def abbe_profiles_manifest(tmp_path, pixel_scales, seed, distortion=None, line=("J", 1.25, -2), **abbe_kwargs):
+def abbe_profiles_manifest(tmp_path, pixel_scales, seed, distortion=None, line=("J", 1.25, -2), sag_scale=1.0,
+                           **abbe_kwargs):
     """Manifest of profiles of ``line`` (grating, wavelength µm, order; default J 1.25 µm
     order -2) of the nominal blank (:func:`nominal_map`) at
     ``pixel_scales`` (mas), made by the independent truth's 2-D Abbe sum with
     ``abbe_kwargs`` (collimator, camera, pupil shift, slit width) and measured with photon and read
     noise, background, coupling and sub-pixel phases, ``distortion`` on the detector
-    (:func:`pipeline.diagnosis.truth.detector.measure_profile`)."""
+    (:func:`pipeline.diagnosis.truth.detector.measure_profile`); the grating's sag is the
+    nominal's times ``sag_scale``."""
     from pipeline.diagnosis.truth.abbe import RELATIVE_NA, abbe_line_profile
     from pipeline.diagnosis.truth.detector import measure_profile
 
-    sag = sag_function_of(nominal_map(tmp_path))
+    nominal_sag = sag_function_of(nominal_map(tmp_path))
+
+    def sag(x, y):
+        return sag_scale * nominal_sag(x, y)
     rng = np.random.default_rng(seed)
     lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
     grating, wl, order = line

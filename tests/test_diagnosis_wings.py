@@ -6,12 +6,14 @@ check's kernels. Nominal: the analytic sum quilt (no FEA)."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.criteria import Criteria
-from pipeline.diagnosis.engine import build_problem
+from pipeline.diagnosis.engine import build_problem, explains
 from pipeline.diagnosis.manifest import load_data, load_manifest
 from pipeline.diagnosis.ranking import fit_effects
 from pipeline.diagnosis.finding import Finding
@@ -43,6 +45,11 @@ def test_check_applies_to_findings_on_line_profiles_only():
     ambiguous = WingsCheck(0.0, 1.0, {}, {}, True, "")
     assert with_check(with_check(f, ambiguous), ambiguous).degenerate_with == (WINGS_LABEL,)
     assert with_check(f, WingsCheck(30.0, 0.0, {}, {}, False, "")) is f
+    beside = WingsCheck(30.0, 0.0, {}, {}, False, "", 12.0, True)
+    g = with_check(with_check(f, beside), beside)
+    assert g.needs_outside == (WINGS_LABEL,) and g.degenerate_with == ()
+    sig = replace(f, significant=True, excess_explained=0.9)
+    assert explains(sig, Criteria()) and not explains(with_check(sig, beside), Criteria())
 
 
 def _halo(fraction, hwhm_um):
@@ -96,7 +103,36 @@ def test_a_pupil_shift_is_still_the_pupils(tmp_path):
                                                                           "slit_width", "quilt_shape"),
                  heldout=False)
     assert d.verdict == "explained" and "pupil_shift" in d.best.effects
-    assert WINGS_LABEL not in d.best.degenerate_with
-    assert "still needed beside light added on the detector side" in d.ranking_note
+    assert WINGS_LABEL not in d.best.degenerate_with and d.best.needs_outside == ()
+    assert "still needed beside the detector side" in d.ranking_note
     x, sx = d.best.parameters["pupil_x_mm"], d.best.uncertainties["pupil_x_mm"]
     assert abs(x - 6.0) <= sx and 2.0 < sx < 3.0
+
+
+@pytest.mark.slow
+def test_a_halo_beside_a_stronger_quilt_is_not_all_explained(tmp_path):
+    """Truth: the nominal quilt 8 % stronger *and* a Lorentzian halo of 5 % of the flux, half
+    width 30 µm (the independent campaign's stray-light cases on quilts with a stronger
+    fundamental, where the rescaling took up most of the excess and the halo was left out).
+    The amplitude scale is needed, and so are the wings beside it: the finding takes up part
+    of the gap, the verdict is not ``explained`` and the wings are named as what the data
+    need beside it."""
+    path = abbe_profiles_manifest(tmp_path, (250, 100, 25), 5, distortion=_halo(0.05, 30.0), sag_scale=1.08,
+                                  collimator_um=dict(COLLIMATOR_UM))
+    d = diagnose(path, effects=("amplitude_scale", "pupil_shift", "temperature", "slit_width", "quilt_shape"),
+                 heldout=False)
+    assert d.verdict == "unexplained"
+    assert WINGS_LABEL in d.best.needs_outside + d.best.degenerate_with
+
+
+@pytest.mark.slow
+def test_a_stronger_quilt_alone_needs_no_wings(tmp_path):
+    """The control of the test above: the same 8 % stronger quilt, no halo. The amplitude
+    scale explains, within 3 % of the truth, and nothing outside the library is asked for."""
+    path = abbe_profiles_manifest(tmp_path, (250, 100, 25), 5, sag_scale=1.08, collimator_um=dict(COLLIMATOR_UM))
+    d = diagnose(path, effects=("amplitude_scale", "pupil_shift", "temperature", "slit_width", "quilt_shape"),
+                 heldout=False)
+    assert d.verdict == "explained" and d.best.effect == "amplitude_scale"
+    assert d.best.needs_outside == () and WINGS_LABEL not in d.best.degenerate_with
+    scale = next(v for q, v in d.best.parameters.items() if q.startswith("scale_"))
+    assert scale == pytest.approx(1.08, rel=0.03)

@@ -66,3 +66,15 @@ def test_the_alternative_is_not_a_library_candidate():
     from pipeline.diagnosis.effects import ALTERNATIVES, LIBRARY
 
     assert INSTRUMENT_WINGS.name in ALTERNATIVES and INSTRUMENT_WINGS.name not in LIBRARY
+
+
+def test_non_linearity_loses_gain_in_proportion_to_the_signal():
+    """``P (1 - b P / max P)``: the peak loses the fraction b of its gain, a sample at half the
+    peak b/2, the wings nothing (written out by hand, not with the module's formula)."""
+    u = np.linspace(-100.0, 100.0, 201)
+    y = np.exp(-0.5 * (u / 20.0) ** 2)
+    out = wings_profile(u, y, {"nonlinearity": 0.06})
+    assert out[100] == pytest.approx(0.94)
+    half = int(np.argmin(np.abs(y - 0.5)))
+    assert out[half] / y[half] == pytest.approx(1.0 - 0.06 * y[half])
+    assert out[0] / y[0] == pytest.approx(1.0, abs=1e-6)

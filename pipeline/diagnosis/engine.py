@@ -142,10 +142,12 @@ def _with_heldout(prob: Problem, f: Finding, c: Criteria) -> Finding:
 def explains(f: Finding, c: Criteria) -> bool:
     """The verdict's test of a finding (``docs/diagnosis.md``, step 9). Also: not every one of
     its own parameters at a prior bound (then the prior, not the data, stopped the fit: a
-    map of zeros "explained" by an amplitude scale of 0.3)."""
+    map of zeros "explained" by an amplitude scale of 0.3); and nothing outside the library
+    needed beside it (``needs_outside``, :mod:`.wings`)."""
     own = own_parameters(f)
     pinned = bool(own) and own <= set(f.at_bound)
-    return f.significant and f.excess_explained >= c.min_variance_explained and not f.overfit and not pinned
+    return (f.significant and f.excess_explained >= c.min_variance_explained and not f.overfit and not pinned
+            and not f.needs_outside)
 
 
 def own_parameters(f: Finding) -> set:

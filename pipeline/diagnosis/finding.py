@@ -46,6 +46,9 @@ class Finding:
     at_bound: tuple = ()
     #: Measurements still beyond their noise after this finding (:func:`.gap.gaps`).
     remaining_gap: tuple = ()
+    #: What outside the library the data need *beside* this finding (light added on the
+    #: detector side, :mod:`.wings`): the finding takes up part of the gap, not all of it.
+    needs_outside: tuple = ()
 
 
 def all_effects(f: Finding) -> tuple:

@@ -129,6 +129,9 @@ def verdict_text(d) -> str:
     outside = [e for e in b.degenerate_with if e in (OTHER_ORDERS_LABEL, WINGS_LABEL)]
     if outside:
         why.append("something outside the library fits as well: " + "; ".join(outside))
+    if b.needs_outside:
+        why.append("it takes up part of the gap, and the data need something outside the library beside it: "
+                   + "; ".join(b.needs_outside))
     return ("No library effect explains the gap. The nearest candidate, " + b.effect + ", is not the explanation"
             + (": " + "; ".join(why) if why else "") + ".")
 

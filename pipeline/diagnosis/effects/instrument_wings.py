@@ -14,7 +14,13 @@ each keeping the flux (the flux scale is a nuisance anyway):
   exponential of length ``tau`` towards ``+u`` where ``t > 0`` (towards ``-u`` where
   ``t < 0``): charge trailing or persistence along the read-out direction.
 
-Both are convolutions of the profile the optics form, so they change every pixel scale's
+and one pointwise response:
+
+* a **non-linearity**, ``P (1 - b P / max P)``: the first-order loss of gain towards a pixel's
+  full well (infrared arrays lose a few per cent of their gain at the levels an arc line's peak
+  is exposed to), which flattens a line's peaks against its dip and wings.
+
+The kernels are convolutions of the profile the optics form, so they change every pixel scale's
 profile by the same kernel in detector µm, while a grating or pupil effect changes them
 through the pupil (its size and illumination differ per pixel scale). Each kernel spans
 twice the model's window (±150 µm) and is normalised there; what it scatters beyond the
@@ -23,7 +29,8 @@ window is lost, as it is off a detector row's cut-out.
 Prior ranges: a halo or tail of up to 15 % of the flux (a spectrograph with more than that
 outside its line core is broken, not subtly off), a halo half width of 10-150 µm (from
 about half the line's FWHM to its window) and a tail length of 5-60 µm (a fraction of a
-pixel to three pixels of 18 µm).
+pixel to three pixels of 18 µm); a non-linearity of 0-15 % at the line's peak (gain only
+lost towards the full well).
 """
 
 from __future__ import annotations
@@ -55,8 +62,9 @@ def _tail_kernel(step_um: float, n: int, decay_um: float, side: float) -> np.nda
 
 
 def wings_profile(offset_um: np.ndarray, intensity: np.ndarray, p: dict) -> np.ndarray:
-    """The profile ``intensity`` (on the uniform grid ``offset_um``, µm) with the halo and
-    tail of the parameters ``p`` (module docstring); unchanged where both fractions are 0.
+    """The profile ``intensity`` (on the uniform grid ``offset_um``, µm) with the halo, the
+    tail and the non-linearity of the parameters ``p`` (module docstring); unchanged where
+    all three are 0.
 
     Raises
     ------
@@ -65,8 +73,9 @@ def wings_profile(offset_um: np.ndarray, intensity: np.ndarray, p: dict) -> np.n
     """
     f = float(p.get("halo_fraction", 0.0))
     t = float(p.get("tail_fraction", 0.0))
+    b = float(p.get("nonlinearity", 0.0))
     y = np.asarray(intensity, float)
-    if f == 0.0 and t == 0.0:
+    if f == 0.0 and t == 0.0 and b == 0.0:
         return y
     u = np.asarray(offset_um, float)
     d = np.diff(u)
@@ -80,6 +89,9 @@ def wings_profile(offset_um: np.ndarray, intensity: np.ndarray, p: dict) -> np.n
     if t != 0.0:
         k = _tail_kernel(d[0], n, float(p.get("tail_decay_um", 20.0)), 1.0 if t > 0 else -1.0)
         out = (1.0 - abs(t)) * out + abs(t) * _kernel_convolve(out, k)
+    if b != 0.0:
+        peak = float(np.max(out))
+        out = out * (1.0 - b * out / peak) if peak > 0 else out
     return out
 
 
@@ -92,6 +104,9 @@ INSTRUMENT_WINGS = Effect(
      Parameter("tail_fraction", 0.0, -0.15, 0.15, floor=0.01, unit="1", kinds=("line_profile",),
                meaning="fraction of the flux trailed into a one-sided exponential tail (sign: towards +u or -u)"),
      Parameter("tail_decay_um", 20.0, 5.0, 60.0, floor=3.0, unit="µm", kinds=("line_profile",),
-               meaning="decay length of the tail on the detector")),
-    description="light added on the detector side: a scattered-light halo and a one-sided detector tail",
+               meaning="decay length of the tail on the detector"),
+     Parameter("nonlinearity", 0.0, 0.0, 0.15, floor=0.01, unit="1", kinds=("line_profile",),
+               meaning="fraction of the gain lost at the line's peak (detector non-linearity)")),
+    description="what the detector side does to a line: a scattered-light halo, a one-sided detector tail and a "
+                "non-linear response",
     detected=wings_profile)
