@@ -155,7 +155,11 @@ def test_the_verdict_is_said_in_words_with_the_reason():
     pinned = Finding("amplitude_scale", ("amplitude_scale",), {"scale_J": 0.3}, {}, 0.0, -400.0, 1.0, 0.4, 0.6, 0.8,
                      excess_explained=0.7, significant=True, at_bound=("scale_J",), degenerate_with=(WINGS_LABEL,))
     t = verdict_text(diag("unexplained", pinned))
-    assert "scale_J ended at the bound of its prior range" in t and "fits as well: light added on the detector" in t
+    assert "scale_J ended at the bound of its prior range" in t and "fits as well: the detector side" in t
+    beside = Finding("amplitude_scale", ("amplitude_scale",), {"scale_J": 1.08}, {}, 0.0, -220.0, 1.0, 0.4, 0.6, 0.8,
+                     excess_explained=0.85, significant=True, needs_outside=(WINGS_LABEL,))
+    assert "part of the gap, and the data need something outside the library beside it: the detector side" \
+        in verdict_text(diag("unexplained", beside))
     good = Finding("temperature", ("temperature",), {}, {}, 0.0, -250.0, 1.0, 0.3, 0.7, 0.9, excess_explained=0.92,
                    significant=True, heldout_shrink_fraction=0.61)
     assert verdict_text(diag("explained", good)) == ("temperature explains the gap: it lowers the BIC by 250 and takes "
