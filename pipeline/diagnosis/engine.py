@@ -4,8 +4,8 @@ whether that holds on withheld data (:func:`diagnose`).
 The decision logic, step by step, and its thresholds (:class:`Criteria`, passed
 explicitly) are described in ``docs/diagnosis.md``. The steps live in :mod:`.gap` (the gap
 and its noise), :mod:`.ranking` (fits and ranking, companions), :mod:`.identifiability`
-(degeneracies, signs, absorbed effects) and :mod:`.heldout`; this module builds the
-problem, runs the steps and gives the verdict.
+(degeneracies, signs, absorbed effects) and :mod:`.heldout`, a finding's tests in
+:mod:`.verdict`; this module builds the problem, runs the steps and gives the verdict.
 """
 
 from __future__ import annotations
@@ -17,8 +17,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from .criteria import N_EFF_SOURCES, Criteria
-from .effects import (LIBRARY, SummaryContext, applicable_effects, library_rows, parameter_spec, parameter_units,
-                      physical_summary)
+from .effects import SummaryContext, applicable_effects, library_rows, parameter_units, physical_summary
 from .amplitude_or_shape import amplitude_degeneracies
 from .error_model import error_source, errors_summary, measure_errors, model_for_kinds, two_part_problem, weights_settled
 from .finding import Finding, all_effects
@@ -31,6 +30,7 @@ from .manifest import Manifest, load_data, load_manifest, read_summary
 from .nominal import nominal_sag_map
 from .plausibility import at_prior_bound, check_measurements
 from .psf_image import PsfImageForward
+from .verdict import explains, own_parameters
 from .pupil_orders import checks, other_orders_check, with_check
 from .ranking import fit_effects, parameters_of, predictions, rank
 from . import wings as wings_alternative
@@ -137,24 +137,6 @@ def _with_heldout(prob: Problem, f: Finding, c: Criteria) -> Finding:
     h, note = heldout_check(prob, f, c)
     over = h is not None and f.shrink_fraction > 0.05 and h < c.heldout_ratio * f.shrink_fraction
     return replace(f, heldout_shrink_fraction=h, heldout_note=note, overfit=bool(over))
-
-
-def explains(f: Finding, c: Criteria) -> bool:
-    """The verdict's test of a finding (``docs/diagnosis.md``, step 9). Also: not every one of
-    its own parameters at a prior bound (then the prior, not the data, stopped the fit: a
-    map of zeros "explained" by an amplitude scale of 0.3); and nothing outside the library
-    needed beside it (``needs_outside``, :mod:`.wings`)."""
-    own = own_parameters(f)
-    pinned = bool(own) and own <= set(f.at_bound)
-    return (f.significant and f.excess_explained >= c.min_variance_explained and not f.overfit and not pinned
-            and not f.needs_outside)
-
-
-def own_parameters(f: Finding) -> set:
-    """Names of ``f``'s parameters that belong to its own effects, not to its companions
-    (per-blank copies resolved by :func:`.effects.parameter_spec`)."""
-    templates = {q for e in f.effects for q in LIBRARY[e].parameters}
-    return {q for q in f.parameters if parameter_spec(q) in templates}
 
 
 def member_explains(prob: Problem, findings: list, c: Criteria, heldout: bool) -> tuple[list, str]:

@@ -15,6 +15,7 @@ from pipeline.io.common import atomic_write
 
 from .effects import library_rows
 from .pupil_orders import OTHER_ORDERS_LABEL
+from .verdict import failed_tests
 from .wings import WINGS_LABEL
 
 __all__ = ["read_text", "verdict_text", "write_report"]
@@ -116,20 +117,21 @@ def verdict_text(d) -> str:
                 else f", and fitted on part of the data it shrinks the rest by {b.heldout_shrink_fraction:.0%}")
         return (f"{b.effect} explains the gap: it lowers the BIC by {-b.delta_bic:.0f} and takes up "
                 f"{b.excess_explained:.0%} of the residual beyond noise{held}.")
+    failed = failed_tests(b, c)
     why = []
-    if not b.significant:
+    if "significant" in failed:
         why.append(f"it is not significant (ΔBIC {b.delta_bic:+.1f}; a finding needs ≤ −{c.min_delta_bic:g})")
-    if not b.excess_explained >= c.min_variance_explained:
+    if "excess" in failed:
         why.append(f"it takes up only {b.excess_explained:.0%} of the residual beyond noise (needs "
                    f"{c.min_variance_explained:.0%})")
-    if b.overfit:
+    if "heldout" in failed:
         why.append("fitted on part of the data it does not predict the rest (held-out check)")
-    if b.at_bound:
+    if "prior" in failed:
         why.append(f"{', '.join(b.at_bound)} ended at the bound of its prior range, so the prior stopped the fit")
     outside = [e for e in b.degenerate_with if e in (OTHER_ORDERS_LABEL, WINGS_LABEL)]
     if outside:
         why.append("something outside the library fits as well: " + "; ".join(outside))
-    if b.needs_outside:
+    if "outside" in failed:
         why.append("it takes up part of the gap, and the data need something outside the library beside it: "
                    + "; ".join(b.needs_outside))
     return ("No library effect explains the gap. The nearest candidate, " + b.effect + ", is not the explanation"
