@@ -28,7 +28,8 @@ checked. Three fits, all with every profile's nuisances:
 * the **reference**: the finding's effects and companions with the background effects (the
   finding's own fit where it already holds them);
 * the **joint** fit: the reference's parameters and the detector terms, started from the
-  finding's values and the alternative's detector terms.
+  reference's optimum and the alternative's detector terms, with a budget of function
+  evaluations (:data:`_JOINT_NFEV_PER_PARAMETER`).
 
 If the finding's effects improve on the alternative by less than
 ``Criteria.min_delta_bic`` (the BIC margin any finding must clear against the nominal to be
