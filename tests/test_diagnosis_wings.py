@@ -18,6 +18,7 @@ from pipeline.diagnosis.manifest import load_data, load_manifest
 from pipeline.diagnosis.ranking import fit_effects
 from pipeline.diagnosis.finding import Finding
 from pipeline.diagnosis.fitting import FitOutcome
+from pipeline.diagnosis.verdict import failed_tests
 from pipeline.diagnosis.wings import WINGS_LABEL, WingsCheck, checks, wings_check, with_check
 from pipeline.diagnosis.truth.generate import COLLIMATOR_UM
 from pipeline.io.registry import read_sag_map
@@ -50,6 +51,8 @@ def test_check_applies_to_findings_on_line_profiles_only():
     assert g.needs_outside == (WINGS_LABEL,) and g.degenerate_with == ()
     sig = replace(f, significant=True, excess_explained=0.9)
     assert explains(sig, Criteria()) and not explains(with_check(sig, beside), Criteria())
+    assert failed_tests(with_check(sig, ambiguous), Criteria()) == ("alternative",)
+    assert failed_tests(with_check(sig, beside), Criteria()) == ("outside",)
 
 
 def _halo(fraction, hwhm_um):

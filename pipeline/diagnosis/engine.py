@@ -281,19 +281,17 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     if gap and findings and len(findings[0].effects) > 1 and not explains(findings[0], criteria):
         findings, note = member_explains(prob, findings, criteria, heldout)
     best = findings[0] if findings else None
-    pupil = None
     if gap and checks(best) and explains(best, criteria):  # is the pupil aberration the collimator's?
         pupil = other_orders_check(prob, best, fits[best.effect], criteria)
         best = findings[0] = with_check(best, pupil)
         note = "; ".join(n for n in (note, pupil.note if pupil.ambiguous else "") if n)
-    side = None
-    if gap and wings_alternative.checks(prob, best) and explains(best, criteria) and not (pupil and pupil.ambiguous):
+    if gap and wings_alternative.checks(prob, best) and explains(best, criteria):
         side = wings_alternative.wings_check(prob, best, fits[best.effect], criteria)  # detector side's light?
         best = findings[0] = wings_alternative.with_check(best, side)
         note = "; ".join(n for n in (note, side.note) if n)
     if not gap:
         verdict = "no_gap"
-    elif best and explains(best, criteria) and not (pupil and pupil.ambiguous) and not (side and side.ambiguous):
+    elif best and explains(best, criteria):  # the checks' outcomes are in best (verdict.failed_tests)
         verdict = "explained"
     else:
         verdict = "unexplained"

@@ -14,9 +14,7 @@ import numpy as np
 from pipeline.io.common import atomic_write
 
 from .effects import library_rows
-from .pupil_orders import OTHER_ORDERS_LABEL
-from .verdict import failed_tests
-from .wings import WINGS_LABEL
+from .verdict import OUTSIDE_ALTERNATIVES, failed_tests
 
 __all__ = ["read_text", "verdict_text", "write_report"]
 
@@ -128,9 +126,9 @@ def verdict_text(d) -> str:
         why.append("fitted on part of the data it does not predict the rest (held-out check)")
     if "prior" in failed:
         why.append(f"{', '.join(b.at_bound)} ended at the bound of its prior range, so the prior stopped the fit")
-    outside = [e for e in b.degenerate_with if e in (OTHER_ORDERS_LABEL, WINGS_LABEL)]
-    if outside:
-        why.append("something outside the library fits as well: " + "; ".join(outside))
+    if "alternative" in failed:
+        why.append("something outside the library fits as well: "
+                   + "; ".join(e for e in b.degenerate_with if e in OUTSIDE_ALTERNATIVES))
     if "outside" in failed:
         why.append("it takes up part of the gap, and the data need something outside the library beside it: "
                    + "; ".join(b.needs_outside))

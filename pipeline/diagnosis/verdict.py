@@ -6,11 +6,17 @@ from __future__ import annotations
 from .criteria import Criteria
 from .effects import LIBRARY, parameter_spec
 from .finding import Finding
+from .pupil_orders import OTHER_ORDERS_LABEL
+from .wings import WINGS_LABEL
 
-__all__ = ["TESTS", "failed_tests", "explains", "own_parameters"]
+__all__ = ["TESTS", "OUTSIDE_ALTERNATIVES", "failed_tests", "explains", "own_parameters"]
 
 #: The tests a finding must pass to explain the gap, by name.
-TESTS = ("significant", "excess", "heldout", "prior", "outside")
+TESTS = ("significant", "excess", "heldout", "prior", "alternative", "outside")
+
+#: What a check puts in ``degenerate_with`` when something outside the library fits the data
+#: as well as the finding (:mod:`.pupil_orders`, :mod:`.wings`).
+OUTSIDE_ALTERNATIVES = (OTHER_ORDERS_LABEL, WINGS_LABEL)
 
 
 def own_parameters(f: Finding) -> set:
@@ -29,6 +35,9 @@ def failed_tests(f: Finding, c: Criteria) -> tuple:
     * ``heldout``: fitted on part of the data it does not predict the rest (``overfit``);
     * ``prior``: every one of its own parameters ended at a bound of its prior range (the prior,
       not the data, stopped the fit: a map of zeros "explained" by an amplitude scale of 0.3);
+    * ``alternative``: something outside the library fits the data as well (an
+      :data:`OUTSIDE_ALTERNATIVES` label in ``degenerate_with``: pupil aberrations of other
+      orders, :mod:`.pupil_orders`; the detector side, :mod:`.wings`);
     * ``outside``: the data need something outside the library beside it (``needs_outside``,
       :mod:`.wings`).
     """
@@ -37,6 +46,7 @@ def failed_tests(f: Finding, c: Criteria) -> tuple:
               "excess": not f.excess_explained >= c.min_variance_explained,
               "heldout": bool(f.overfit),
               "prior": bool(own) and own <= set(f.at_bound),
+              "alternative": any(e in OUTSIDE_ALTERNATIVES for e in f.degenerate_with),
               "outside": bool(f.needs_outside)}
     return tuple(t for t in TESTS if failed[t])
 
