@@ -140,12 +140,16 @@ def wings_check(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria) ->
     # the finding beside the background effects, without wings: what the wings' own gain is
     # measured against (the finding may not have adopted the background as a companion)
     ref = fo if len(own) == len(fo.parameters) else fit(prob, own, start=start)
-    b_r = min(ref.bic(prob.weights), b_f)
-    if ref is not fo and ref.bic(prob.weights) <= b_f:
+    b_ref = ref.bic(prob.weights)
+    b_r = min(b_ref, b_f)
+    if ref is not fo and b_ref <= b_f:
         start.update(ref.parameters)  # the joint fit nests the reference: start it at its optimum
     start.update(_wings(alt))
     joint = fit(prob, own + wings, start=start, max_nfev=_JOINT_NFEV_PER_PARAMETER * (len(own) + len(wings) + 1))
-    b_j = min(joint.bic(prob.weights), b_f + _penalty(prob, finding, own, wings, fo))
+    # the joint fit can hold the detector terms at zero and the background at its null, where
+    # it is the finding with more parameters: its BIC is at most the finding's plus their penalty
+    extra = len(own) + len(wings) - len(fo.parameters)
+    b_j = min(joint.bic(prob.weights), b_f + extra * math.log(max(sum(fo.counts.values()), 2.0)))
     ambiguous = bool(b_a - b_j < c.min_delta_bic)
     gain = b_r - b_j
     beside = bool(not ambiguous and gain >= c.min_delta_bic)
@@ -165,14 +169,6 @@ def wings_check(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria) ->
                 f"detector terms alone); beside it the detector terms ({_text(_wings(joint))}) {change}, and would "
                 f"need to lower it by {c.min_delta_bic:g}")
     return WingsCheck(float(b_a), float(b_j), _wings(alt), _wings(joint), ambiguous, note, float(gain), beside)
-
-
-def _penalty(prob: Problem, finding: Finding, own: tuple, wings: tuple, fo: FitOutcome) -> float:
-    """BIC penalty of the joint fit's parameters beyond the finding's: the joint fit can hold
-    the wings at zero and the background at its null, so its BIC is at most the finding's
-    plus this (a local fit that ends above it is held at the bound)."""
-    extra = len(own) + len(wings) - len(parameters_of(all_effects(finding), prob.forwards))
-    return extra * math.log(max(sum(fo.counts.values()), 2.0))
 
 
 def with_check(finding: Finding, check: WingsCheck) -> Finding:
