@@ -9,9 +9,14 @@ import os
 # diagnosis fits (an SVD of a tall Jacobian per trust-region step) then spend most of their time
 # waiting. Measured with ``pytest -n 0`` on a loaded 2-core machine: the bow-beside-every-single
 # diagnosis 365 s -> 44 s, the fast tier of test_diagnosis_bow.py 41 s -> 12 s (CPU time 27 s ->
-# 8 s). MKL (the PARDISO FEA solver) is left alone: its second thread costs no extra CPU time.
-# An OPENBLAS_NUM_THREADS already set by the user is kept.
+# 8 s). An OPENBLAS_NUM_THREADS already set by the user is kept.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# MKL (the PARDISO FEA solver) likewise, but only in xdist workers (xdist names them before it
+# loads this file): run alone, its second thread shortens a solve; beside a second worker it
+# only adds CPU time. Measured with ``pytest -n 0`` on the FEA blank and layer modules (idle
+# 2-core machine): 2 threads 131 s wall, 161 s CPU; 1 thread 143 s wall, 142 s CPU.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import pytest  # noqa: E402
 

@@ -38,21 +38,23 @@ def sag_function_of(nominal):
 
 
 def abbe_profiles_manifest(tmp_path, pixel_scales, seed, distortion=None, line=("J", 1.25, -2), sag_scale=1.0,
-                           **abbe_kwargs):
+                           sag_factor=None, **abbe_kwargs):
     """Manifest of profiles of ``line`` (grating, wavelength µm, order; default J 1.25 µm
     order -2) of the nominal blank (:func:`nominal_map`) at
     ``pixel_scales`` (mas), made by the independent truth's 2-D Abbe sum with
     ``abbe_kwargs`` (collimator, camera, pupil shift, slit width) and measured with photon and read
     noise, background, coupling and sub-pixel phases, ``distortion`` on the detector
     (:func:`pipeline.diagnosis.truth.detector.measure_profile`); the grating's sag is the
-    nominal's times ``sag_scale``."""
+    nominal's times ``sag_scale`` (and times ``sag_factor(x_mm, y_mm)``, a field of factors,
+    if given)."""
     from pipeline.diagnosis.truth.abbe import RELATIVE_NA, abbe_line_profile
     from pipeline.diagnosis.truth.detector import measure_profile
 
     nominal_sag = sag_function_of(nominal_map(tmp_path))
 
     def sag(x, y):
-        return sag_scale * nominal_sag(x, y)
+        f = 1.0 if sag_factor is None else sag_factor(np.asarray(x, float), np.asarray(y, float))
+        return sag_scale * f * nominal_sag(x, y)
     rng = np.random.default_rng(seed)
     lines = ['[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n']
     grating, wl, order = line

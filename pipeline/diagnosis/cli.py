@@ -18,7 +18,9 @@ __all__ = ["HELP_DESCRIPTION", "register", "main"]
 def _criteria(args, base=None):
     from .engine import Criteria
 
-    return replace(Criteria() if base is None else base, n_eff_from=args.n_eff_from, error_model=args.error_model)
+    base = Criteria() if base is None else base
+    scale = base.weight_scale if args.weight_scale is None else args.weight_scale
+    return replace(base, n_eff_from=args.n_eff_from, error_model=args.error_model, weight_scale=scale)
 
 
 def _run(args) -> int:
@@ -89,6 +91,10 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
                    help="n_eff (default): effective-sample counts; two_part: white noise plus a smooth mismatch "
                         "measured from the post-fit residual (chi^2 score; pipeline/diagnosis/error_model.py); "
                         "by_kind: two_part when a line profile is among the measurements, n_eff otherwise")
+    p.add_argument("--weight-scale", default=None, choices=("measurement", "kind"),
+                   help="with n_eff: normalise each measurement's weight by its own nominal residual "
+                        "(measurement) or share one normalisation among the measurements of a kind (kind: "
+                        "within a kind, weights go as one over the noise); default: the criteria's")
     p.add_argument("--validate", action="store_true", help="run the injection-recovery campaign instead")
     p.add_argument("--cases", type=int, default=200, help="campaign cases (with --validate)")
     p.add_argument("--seed", type=int, default=1, help="campaign seed (with --validate)")

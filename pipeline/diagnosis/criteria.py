@@ -7,10 +7,12 @@ from dataclasses import dataclass
 
 from .error_model import ERROR_MODELS
 
-__all__ = ["Criteria", "N_EFF_SOURCES"]
+__all__ = ["Criteria", "N_EFF_SOURCES", "WEIGHT_SCALES"]
 
 
 N_EFF_SOURCES = ("nominal", "best_fit")
+#: What a measurement's weight is normalised by (``Criteria.weight_scale``).
+WEIGHT_SCALES = ("measurement", "kind")
 
 
 @dataclass(frozen=True)
@@ -43,10 +45,19 @@ class Criteria:
     #: ``n_eff_from`` is not used); "by_kind": "two_part" when a line profile is among the
     #: measurements, "n_eff" otherwise (:func:`.error_model.model_for_kinds`).
     error_model: str = "n_eff"
+    #: With ``error_model = "n_eff"``: "kind" (default) shares one normalisation among the
+    #: measurements of one kind (within a kind, weights go as one over the noise, so a profile
+    #: with a large gap weighs more than one with a small gap); "measurement" normalises each
+    #: measurement's weight by its own nominal residual (every measurement weighs ~its
+    #: effective samples, however large its gap). :func:`.fitting.nominal_weights`; measured on
+    #: independent truths in ``benchmarks/results_weight_scale.md``.
+    weight_scale: str = "kind"
 
     def __post_init__(self) -> None:
         if self.n_eff_from not in N_EFF_SOURCES:
             raise ValueError(f"Criteria: n_eff_from={self.n_eff_from!r} must be one of {N_EFF_SOURCES}")
+        if self.weight_scale not in WEIGHT_SCALES:
+            raise ValueError(f"Criteria: weight_scale={self.weight_scale!r} must be one of {WEIGHT_SCALES}")
         if self.error_model not in ERROR_MODELS:
             raise ValueError(f"Criteria: error_model={self.error_model!r} must be one of {ERROR_MODELS}")
         ranges = {"min_delta_bic": (0.0, math.inf), "min_variance_explained": (0.0, 1.0),

@@ -21,7 +21,7 @@ from .effects import SummaryContext, applicable_effects, library_rows, parameter
 from .amplitude_or_shape import amplitude_degeneracies
 from .error_model import error_source, errors_summary, measure_errors, model_for_kinds, two_part_problem, weights_settled
 from .finding import Finding, all_effects
-from .fitting import FitOutcome, Problem, fit
+from .fitting import FitOutcome, Problem, fit, nominal_weights
 from .forward import ProfileForward, SurfaceForward
 from .gap import acting_on, gap_statistics, gaps, has_gap, post_fit_n_eff, recount, recounted, residual_n_eff
 from .heldout import heldout_check
@@ -91,8 +91,9 @@ class Diagnosis:
                       "effect_library": library_rows()})
 
 
-def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, FitOutcome]:
-    """Forward models, the nominal (nuisance-only) fit, noise, n_eff and weights."""
+def build_problem(manifest: Manifest, data: tuple, nominal, weight_scale: str = "kind") -> tuple[Problem, FitOutcome]:
+    """Forward models, the nominal (nuisance-only) fit, noise, n_eff and weights
+    (``weight_scale``: :func:`.fitting.nominal_weights`)."""
     sim = manifest.simulation
     kinds = {"surface": SurfaceForward, "line_profile": ProfileForward, "psf_image": PsfImageForward}
     fws = [kinds[d.measurement.kind](d, nominal, sim.cold_K, sim.warm_K, materials=sim.materials) for d in data]
@@ -100,11 +101,10 @@ def build_problem(manifest: Manifest, data: tuple, nominal) -> tuple[Problem, Fi
     nom = fit(prob, ())
     for f in fws:
         r = f.residual({}, nom.deltas_um.get(f.name, f.delta0_um))
-        sigma = f.noise_known or f.estimate_noise(r)
         prob.n_eff[f.name] = residual_n_eff(f, r)
-        prob.noise[f.name] = float(sigma)
-        s = max(math.sqrt(nom.rss[f.name] / f.n), 1e-12)
-        prob.weights[f.name] = math.sqrt(prob.n_eff[f.name] / f.n) / s
+        prob.noise[f.name] = float(f.noise_known or f.estimate_noise(r))
+    prob.weights.update(nominal_weights({f.name: f.kind for f in fws}, {f.name: f.n for f in fws}, nom.rss,
+                                        prob.n_eff, prob.noise, weight_scale))
     return prob, fit(prob, ())
 
 
@@ -216,7 +216,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
         nominal = nominal_sag_map(manifest.simulation, cache_dir)
     check_measurements(manifest, data, nominal)
     t["load_s"] = time.perf_counter() - t["start"]
-    prob, nom = build_problem(manifest, data, nominal)
+    prob, nom = build_problem(manifest, data, nominal, criteria.weight_scale)
     base_forwards = tuple(prob.forwards)  # one per measurement, in the manifest's order
     kinds = {f.kind for f in prob.forwards}
     cands = applicable_effects(kinds, effects)
