@@ -45,13 +45,13 @@ class Criteria:
     #: ``n_eff_from`` is not used); "by_kind": "two_part" when a line profile is among the
     #: measurements, "n_eff" otherwise (:func:`.error_model.model_for_kinds`).
     error_model: str = "n_eff"
-    #: With ``error_model = "n_eff"``: "kind" (default) shares one normalisation among the
-    #: measurements of one kind (within a kind, weights go as one over the noise, so a profile
-    #: with a large gap weighs more than one with a small gap); "measurement" normalises each
-    #: measurement's weight by its own nominal residual (every measurement weighs ~its
-    #: effective samples, however large its gap). :func:`.fitting.nominal_weights`; measured on
-    #: independent truths in ``benchmarks/results_weight_scale.md``.
-    weight_scale: str = "kind"
+    #: With ``error_model = "n_eff"``: "measurement" (default) normalises each measurement's
+    #: weight by its own nominal residual (every measurement weighs ~its effective samples,
+    #: however large its gap); "kind" shares one normalisation among the measurements of one
+    #: kind (within a kind, weights go as one over the noise, so a profile with a large gap
+    #: weighs more than one with a small gap). :func:`.fitting.nominal_weights`; measured on
+    #: independent truths and the paper's J scenario in ``benchmarks/results_weight_scale.md``.
+    weight_scale: str = "measurement"
 
     def __post_init__(self) -> None:
         if self.n_eff_from not in N_EFF_SOURCES:

@@ -91,7 +91,7 @@ class Diagnosis:
                       "effect_library": library_rows()})
 
 
-def build_problem(manifest: Manifest, data: tuple, nominal, weight_scale: str = "kind") -> tuple[Problem, FitOutcome]:
+def build_problem(manifest: Manifest, data: tuple, nominal, weight_scale: str = "measurement") -> tuple[Problem, FitOutcome]:
     """Forward models, the nominal (nuisance-only) fit, noise, n_eff and weights
     (``weight_scale``: :func:`.fitting.nominal_weights`)."""
     sim = manifest.simulation

@@ -7,22 +7,21 @@ carry smooth model discrepancy. Each measurement ``i`` therefore gets
 * ``n_eff_i``: the number of effectively independent samples of the *nominal*
   residual, ``n / L`` with ``L`` the integral correlation length in samples (per axis
   for maps, :func:`.noise.effective_samples`);
-* weight ``w_i = c_K / sigma_i`` for the measurements ``i`` of one kind ``K`` (all line
-  profiles, all maps), with ``c_K`` such that the kind contributes ``sum_K n_eff_i`` to the
-  objective at the nominal whatever its units (:func:`nominal_weights`; the alternative
-  ``w_i = sqrt(n_eff_i / n_i) / s_i``, ``s_i`` the nominal residual RMS, normalises every
-  measurement by itself).
+* weight ``w_i = sqrt(n_eff_i / n_i) / s_i`` with ``s_i`` the nominal residual RMS, so
+  every measurement contributes ~``n_eff_i`` to the objective whatever its units
+  (:func:`nominal_weights`; ``Criteria.weight_scale = "kind"`` instead normalises the
+  measurements of one kind together, ``w_i = c_K / sigma_i``).
 
 Score: ``BIC = N_eff log(sum_i w_i^2 RSS_i / N_eff) + k log N_eff`` with
-``N_eff = sum_i n_eff_i``: a Gaussian likelihood whose variances are, per kind,
-proportional to the nominal residual variance (one common factor profiled out),
+``N_eff = sum_i n_eff_i``: a Gaussian likelihood whose per-measurement variances are
+proportional to the nominal residual variances (one common factor profiled out),
 counted over effective samples — the same weighted sum of squares the fit minimises,
 so the score ranks what the fit optimises (``Problem.n_count``, if set, replaces the
 ``n_eff_i`` the score counts, not the weights: see ``Criteria.n_eff_from``). Lower is
 better; ``delta_bic`` below -10 is "very strong" evidence (Kass & Raftery 1995).
 Uncertainties: ``s^2 (J^T J)^-1`` at the optimum with ``s^2`` the weighted residual per
-effective degree of freedom — i.e. inflated by the residual correlation. Because each
-kind's weights are normalised by its nominal residual, not by the noise, ``s^2`` is already the
+effective degree of freedom — i.e. inflated by the residual correlation. Because the
+weights are normalised by the nominal residual, not by the noise, ``s^2`` is already the
 reduced chi^2 of the fit (Birge-ratio scaling: errors grow with any misfit, noise or model
 mismatch) counted over the nominal residual's effective samples. Model mismatch left in
 the *post-fit* residual is correlated over its own length, which can exceed the
@@ -154,7 +153,7 @@ class FitOutcome:
         return float(neff * math.log(max(other_cost, 1e-300) / max(cost, 1e-300)))
 
 
-def nominal_weights(kinds: dict, n: dict, rss: dict, n_eff: dict, noise: dict, scale: str = "kind") -> dict:
+def nominal_weights(kinds: dict, n: dict, rss: dict, n_eff: dict, noise: dict, scale: str = "measurement") -> dict:
     """Each measurement's weight from its nominal residual.
 
     Parameters
