@@ -89,3 +89,20 @@ def test_a_weaker_jittered_quilt_is_named_a_rescaling(tmp_path):
     assert d.verdict == "explained"
     assert d.best.effect in ("amplitude_scale", "temperature")
     assert d.finding("amplitude_scale").parameters["scale_J"] == pytest.approx(0.89, rel=0.05)
+
+
+def test_cli_offers_every_weight_scale(capsys):
+    """The CLI's choices (a literal, to keep ``cryograting --help`` free of the diagnosis's
+    imports) are the engine's: each is accepted, none given leaves the criteria's default."""
+    import argparse
+
+    from pipeline.diagnosis.cli import register
+    from pipeline.diagnosis.criteria import WEIGHT_SCALES
+
+    p = register(argparse.ArgumentParser().add_subparsers())
+    for s in WEIGHT_SCALES:
+        assert p.parse_args(["m.toml", "--out", "o", "--weight-scale", s]).weight_scale == s
+    assert p.parse_args(["m.toml", "--out", "o"]).weight_scale is None
+    with pytest.raises(SystemExit):
+        p.parse_args(["m.toml", "--out", "o", "--weight-scale", "profile"])
+    assert "invalid choice: 'profile'" in capsys.readouterr().err
