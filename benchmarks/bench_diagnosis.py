@@ -7,7 +7,7 @@ injection-recovery campaign. Writes the per-case rows and the summary as JSON (`
         [--psf-image] [--types KIND:EFFECT,...] [--discrepancy unmodelled|companions]
         [--n-eff-from nominal|best_fit] [--truth independent|model] [--truth-families FAM,...]
         [--error-model by_kind|n_eff|two_part] [--pair-forward] [--pair-from N] [--diagnosis-criteria]
-        [--weight-scale measurement|kind]
+        [--weight-scale measurement|kind] [--pair-second significant|improving]
 
 ``--progress``: every finished case is appended there as a JSON line (partial results
 survive an interrupted run). ``--profiles``: the campaign's line-profile measurement set
@@ -20,7 +20,8 @@ diagnosis's own 3). ``--diagnosis-criteria``: the campaign diagnoses with the di
 ``Criteria()`` (pairs among 3 singles, held-out checks of the 3 best findings) instead of the
 campaign's narrower, faster ``CampaignConfig.criteria`` (2 and 1): the score of the product
 as a user runs it. ``--weight-scale``: what each measurement's weight is normalised by
-(``Criteria.weight_scale``).
+(``Criteria.weight_scale``). ``--pair-second``: with the forward pair step, which further
+singles are paired with the best one (``Criteria.pair_second``).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ import time
 from pathlib import Path
 
 from pipeline.diagnosis import diagnose
-from pipeline.diagnosis.criteria import WEIGHT_SCALES
+from pipeline.diagnosis.criteria import PAIR_SECONDS, WEIGHT_SCALES
 from pipeline.diagnosis.engine import N_EFF_SOURCES, Criteria
 from pipeline.diagnosis.error_model import ERROR_MODELS
 from pipeline.diagnosis.campaign import (DISCREPANCIES, PROFILE_SETS, PSF_IMAGE_SPEC, TRUTHS, CampaignConfig, parse_types,
@@ -73,13 +74,16 @@ def main(argv=None):
                          f"{CampaignConfig.criteria.pair_from}, the diagnosis's own {Criteria().pair_from})")
     ap.add_argument("--diagnosis-criteria", action="store_true",
                     help="diagnose with the diagnosis's own Criteria() (as a user runs it), not the campaign's")
+    ap.add_argument("--pair-second", default=None, choices=PAIR_SECONDS,
+                    help="with --pair-forward: which further singles pair with the best (Criteria.pair_second)")
     ap.add_argument("--weight-scale", default=None, choices=WEIGHT_SCALES,
                     help="what a measurement's weight is normalised by (Criteria.weight_scale; default: the criteria's)")
     a = ap.parse_args(argv)
     base = Criteria() if a.diagnosis_criteria else CampaignConfig.criteria
     try:
         criteria = dataclasses.replace(base, n_eff_from=a.n_eff_from, error_model=a.error_model,
-                                       pair_forward=a.pair_forward,
+                                       pair_forward=a.pair_forward or base.pair_forward,
+                                       pair_second=base.pair_second if a.pair_second is None else a.pair_second,
                                        pair_from=base.pair_from if a.pair_from is None else a.pair_from,
                                        weight_scale=base.weight_scale if a.weight_scale is None else a.weight_scale)
     except ValueError as exc:

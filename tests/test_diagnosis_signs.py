@@ -15,6 +15,7 @@ from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
 from optics.sagmap import quilt_sag_map
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.campaign import recovery_errors
+from pipeline.diagnosis.criteria import Criteria
 from pipeline.diagnosis.effects import parameter_spec
 from pipeline.diagnosis.finding import Finding
 from pipeline.diagnosis.forward import profile_curve
@@ -115,6 +116,27 @@ def test_pairs_are_formed_among_the_best_and_from_the_best_with_every_other():
     findings[0], findings[1] = _single("temperature", -20.0), _single("amplitude_scale", -60.0)
     assert [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2, forward=True)] == [
         ("pupil_shift", "slit_width"), ("pupil_shift", "collimator_wfe")]
+
+
+def test_the_forward_step_can_pair_the_best_with_every_single_that_lowers_the_bic():
+    """``pair_second = "improving"``: the best single is also paired with each further single
+    that lowers the BIC at all, significant or not (best first, each pair once); a single
+    that raises it, a rescaling and a background-only single still never pair."""
+    findings = [_single("amplitude_scale", -130.0), _single("slit_width", -90.0),
+                _single("pupil_shift", -4.6, significant=False), _single("collimator_wfe", -80.0),
+                _single("temperature", -129.0), _single("plating_gradient", 3.0, significant=False),
+                _single("quilt_shape", -7.0, significant=False), _single("registration", -2.0, significant=False)]
+    significant = [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2, forward=True)]
+    assert significant == [("amplitude_scale", "slit_width"), ("amplitude_scale", "collimator_wfe")]
+    improving = [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2, forward=True, second="improving")]
+    assert improving == significant + [("amplitude_scale", "pupil_shift"), ("amplitude_scale", "registration")]
+    assert [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2, second="improving")] == significant[:1]
+    assert pairs_to_fit(findings[2:3], 2, forward=True, second="improving") == []  # no significant best
+
+
+def test_pair_second_is_checked():
+    with pytest.raises(ValueError, match="pair_second='all'.*significant"):
+        Criteria(pair_second="all")
 
 
 def test_a_temperature_whose_mirror_has_no_physical_state_keeps_its_sign(tmp_path):

@@ -7,12 +7,14 @@ from dataclasses import dataclass
 
 from .error_model import ERROR_MODELS
 
-__all__ = ["Criteria", "N_EFF_SOURCES", "WEIGHT_SCALES"]
+__all__ = ["Criteria", "N_EFF_SOURCES", "PAIR_SECONDS", "WEIGHT_SCALES"]
 
 
 N_EFF_SOURCES = ("nominal", "best_fit")
 #: What a measurement's weight is normalised by (``Criteria.weight_scale``).
 WEIGHT_SCALES = ("measurement", "kind")
+#: Which further singles the forward pair step pairs with the best one (``Criteria.pair_second``).
+PAIR_SECONDS = ("significant", "improving")
 
 
 @dataclass(frozen=True)
@@ -31,6 +33,13 @@ class Criteria:
     #: rescaling beside the right effect; without rescalings, a pupil shift beside the
     #: amplitude on out-of-library profiles; ``benchmarks/results_pairs.md``).
     pair_forward: bool = False
+    #: With ``pair_forward``: the further singles the best one is paired with, "significant"
+    #: ones only, or every one that lowers the BIC at all ("improving") (a second effect whose
+    #: signature is small beside the first's may not be significant alone, yet the pair is:
+    #: the paper's J scenario under ``weight_scale = "kind"``, pupil shift alone delta BIC
+    #: -4.6, with the amplitude -41.7 beyond the amplitude alone;
+    #: ``benchmarks/results_weight_scale.md``).
+    pair_second: str = "significant"
     degenerate_bic: float = 2.0
     degenerate_prediction: float = 0.2
     no_gap_ratio: float = 1.3
@@ -58,6 +67,8 @@ class Criteria:
             raise ValueError(f"Criteria: n_eff_from={self.n_eff_from!r} must be one of {N_EFF_SOURCES}")
         if self.weight_scale not in WEIGHT_SCALES:
             raise ValueError(f"Criteria: weight_scale={self.weight_scale!r} must be one of {WEIGHT_SCALES}")
+        if self.pair_second not in PAIR_SECONDS:
+            raise ValueError(f"Criteria: pair_second={self.pair_second!r} must be one of {PAIR_SECONDS}")
         if self.error_model not in ERROR_MODELS:
             raise ValueError(f"Criteria: error_model={self.error_model!r} must be one of {ERROR_MODELS}")
         ranges = {"min_delta_bic": (0.0, math.inf), "min_variance_explained": (0.0, 1.0),

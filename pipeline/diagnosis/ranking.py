@@ -63,7 +63,7 @@ def rank(prob: Problem, nom: FitOutcome, cands, criteria: Criteria, memo: dict) 
         f, fo = fit_effects(prob, nom, (e.name,), criteria, memo=memo)
         findings.append(f)
         fits[f.effect] = fo
-    for a, b in pairs_to_fit(findings, criteria.pair_from, criteria.pair_forward):
+    for a, b in pairs_to_fit(findings, criteria.pair_from, criteria.pair_forward, criteria.pair_second):
         names = in_library_order(a.effects + b.effects)
         # With the forward step, b, the weaker single, is also grid-searched beside a's fit:
         # alone it may have taken up what a explains and sit in the wrong basin
@@ -100,10 +100,11 @@ def pair_singles(findings, n: int) -> list:
     return out[:n]
 
 
-def pairs_to_fit(findings, n: int, forward: bool = False) -> list:
+def pairs_to_fit(findings, n: int, forward: bool = False, second: str = "significant") -> list:
     """The pairs of singles to fit, better single first: every pair among the ``n`` best
     of :func:`pair_singles`, and with ``forward`` the best one with each further one (none
-    for ``n < 2``).
+    for ``n < 2``): each further significant one, or with ``second = "improving"`` each
+    further single that lowers the BIC at all (``Criteria.pair_second``), best first.
 
     Why the best with every other: a second effect whose signature is small beside the
     first's ranks low on its own (alone it can only take up part of what the first
@@ -123,9 +124,16 @@ def pairs_to_fit(findings, n: int, forward: bool = False) -> list:
         return []
     eligible = pair_singles(findings, len(findings))
     pairs = list(itertools.combinations(eligible[:n], 2))
-    if not forward:
+    if not forward or not eligible:
         return pairs
-    return pairs + [(eligible[0], b) for b in eligible[n:] if not _rescales(b)]
+    if second == "significant":
+        further = eligible[n:]
+    else:
+        best, formed = eligible[0], {frozenset(a.effects + b.effects) for a, b in pairs}
+        further = sorted((f for f in findings if len(f.effects) == 1 and f is not best and f.delta_bic < 0
+                          and not _background_only(f) and frozenset(best.effects + f.effects) not in formed),
+                         key=lambda f: f.score)
+    return pairs + [(eligible[0], b) for b in further if not _rescales(b)]
 
 
 def _rescales(f: Finding) -> bool:
