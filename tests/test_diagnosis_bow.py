@@ -103,7 +103,9 @@ def test_campaign_map_beside_profiles(tmp_path):
     assert t0 == t1 and p0 == p1
     assert [m["kind"] for m in m1["measurement"]] == ["line_profile", "surface"]
     assert m1["measurement"][1]["temperature_K"] == 128.0
-    parse_manifest(m1, tmp_path / "128.0")  # a valid manifest
+    # the map is said to be of the profiles' blank, so one amplitude scale covers both
+    blanks = {m.kind: m.blank for m in parse_manifest(m1, tmp_path / "128.0").measurements}
+    assert blanks == {"line_profile": "J", "surface": "J"}
 
 
 def test_campaign_map_temperature_checked():

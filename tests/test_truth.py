@@ -373,6 +373,24 @@ def test_a_pair_case_applies_both_effects(tmp_path, monkeypatch):
     assert all(c["slit_image_width_um"] is not None for c in calls)
 
 
+def test_a_map_beside_profiles_is_of_the_profiles_blank(tmp_path, monkeypatch):
+    """The independent truth's map beside the profiles (``profile_map_K``) is made of the same
+    grating, scaled alike; its manifest says so (``blank``), else the diagnosis would give the
+    map an amplitude scale of its own (a spare blank's) and an amplitude truth would cost one
+    parameter more than a temperature offset."""
+    from pipeline.diagnosis.campaign import PROFILE_SETS, CampaignConfig
+    from pipeline.diagnosis.manifest import parse_manifest
+    from pipeline.diagnosis.truth import generate
+
+    monkeypatch.setattr(generate, "abbe_line_profile",
+                        lambda *a, **kw: (np.linspace(-150.0, 150.0, 601), np.exp(-0.5 * (np.linspace(-150, 150, 601) / 20) ** 2)))
+    s = quilt_sag_map(0.6, "sum", spacing_mm=0.5)
+    cfg = CampaignConfig(profile_specs=PROFILE_SETS["minimal"][:1], profile_map_K=128.0)
+    man, truth = generate.make_case("line_profile", "amplitude_scale", np.random.default_rng(3), s, s, tmp_path, cfg)
+    blanks = {m.kind: m.blank for m in parse_manifest(man, tmp_path).measurements}
+    assert blanks == {"line_profile": "J", "surface": "J"} and set(truth) >= {"scale_J"}
+
+
 def test_a_rescaling_is_part_of_a_truth_whose_x_fundamental_differs():
     """In the diagnosis's amplitude convention (the rescalings measure the x fundamental),
     a truth whose x fundamental is 6 % above the nominal's carries an amplitude change;

@@ -347,8 +347,10 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         m = synthetic_surface(t.scaled(thermal_factor(true_temperature(cfg.profile_map_K, truth),
                                                       true_temperature(_COLD_K, truth))), rng, noise_um=cfg.noise_um)
         write_sag_map(m, out / "map.npz")
+        # The map is of the profiles' blank: said so, else the diagnosis reads it as a
+        # spare blank's, with an amplitude scale of its own.
         meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K,
-                     "aperture_diameter_mm": MAP_APERTURE_MM})
+                     "aperture_diameter_mm": MAP_APERTURE_MM, "blank": "J"})
     if cfg.psf_image is not None:
         # Drawn last: the profiles (and map) are those of the campaign without the image.
         g, wl, order, pix = cfg.psf_image

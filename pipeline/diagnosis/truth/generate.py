@@ -181,6 +181,8 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
         dT = truth.get("temperature_offset_K", 0.0)
         x, y, z = measured_map(g, scale * thermal_factor(cfg.profile_map_K + dT, _COLD_K + dT), rng, None, None, cfg.noise_um)
         np.savez(out / "map.npz", x_mm=x, y_mm=y, sag_um=z)
+        # The map is of the profiles' blank (the truth's scale is the J blank's): said so,
+        # else the diagnosis reads it as a spare blank's, with an amplitude scale of its own.
         meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K,
-                     "aperture_diameter_mm": APERTURE_MM})
+                     "aperture_diameter_mm": APERTURE_MM, "blank": "J"})
     return {"simulation": sim, "measurement": meas}, {**truth, "_present": ["quilt_shape"], "_truth": meta}
