@@ -140,6 +140,8 @@ that none does. MANIFEST is a TOML file listing the simulation and the measureme
   temperature_K = 128
   aperture_diameter_mm = 137
   # noise_um = 0.005          # optional: else estimated from the map
+  # blank = "J"               # the map is of the J grating's blank (default: a spare blank,
+                              #   with a deformation scale of its own)
   # spacing_mm = 0.5 | extent_mm = [x0, x1, y0, y1]   # a CODE V .int without its grid
   # centre_mm = [68.5, 60]    # map coordinates of the blank's centre (corner-origin exports)
   # sag_sign = -1             # heights along -z (the diagnosis takes the sag along +z)
