@@ -110,6 +110,9 @@ PROFILE_SETS = {
 #: order -2, imaged in the focal plane (no pixel: a microscope-relayed image resolves
 #: the ~4 µm diffraction core, which the 18 µm detector pixel would smooth away).
 PSF_IMAGE_SPEC = ("J", 1.25, -2, 0.0)
+#: The blank a line-profile case's truth is drawn for (the profile sets' grating): the map
+#: beside the profiles is of it too.
+_PROFILE_BLANK = "J"
 PROFILE_SPECS_MINIMAL = PROFILE_SETS["minimal"]
 PROFILE_SPECS = PROFILE_SETS["extended"]
 SURFACE_T_K = 128.0
@@ -328,9 +331,9 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
     if lib is None:
         truth, distortion = OUT_OF_LIBRARY[kind][effect](rng)
     else:
-        truth = _library_truth(effect, kind, rng, "J")
+        truth = _library_truth(effect, kind, rng, _PROFILE_BLANK)
     # The profiles are stated at the simulation's cold temperature.
-    k = deformation_factor(truth, "J", _COLD_K, _COLD_K)
+    k = deformation_factor(truth, _PROFILE_BLANK, _COLD_K, _COLD_K)
     # A library truth's spectrograph hooks act in the optics (its others ignore the optics).
     params = truth if lib is not None else {}
     t = DISCREPANCIES[cfg.discrepancy](blank_shape_map(base, truth).scaled(k), rng)
@@ -350,7 +353,7 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
         # The map is of the profiles' blank: said so, else the diagnosis reads it as a
         # spare blank's, with an amplitude scale of its own.
         meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K,
-                     "aperture_diameter_mm": MAP_APERTURE_MM, "blank": "J"})
+                     "aperture_diameter_mm": MAP_APERTURE_MM, "blank": _PROFILE_BLANK})
     if cfg.psf_image is not None:
         # Drawn last: the profiles (and map) are those of the campaign without the image.
         g, wl, order, pix = cfg.psf_image

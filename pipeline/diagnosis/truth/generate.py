@@ -54,6 +54,9 @@ FAMILIES = ("sum_mix", "product_mix")
 GRATING_FAMILIES = FAMILIES + ("pocket_jitter", "sharp_ribs")
 SURFACE_T_K = 128.0
 APERTURE_MM = 137.0
+#: The blank a line-profile case's truth is drawn for (the profiles' grating): the map beside
+#: the profiles is of it too.
+_PROFILE_BLANK = "J"
 #: The instrument's collimator wavefront (shared data: the model's default collimator).
 COLLIMATOR_UM = dict(DEFAULT_COLLIMATOR_ZERNIKE_UM)
 
@@ -154,8 +157,8 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
     if effect in PROFILE_OOL:
         truth, distortion, camera, artefact = draw_profile_ool(effect, rng)
     else:
-        truth = {k: v for e in effect.split("+") for k, v in DRAWS[e](rng, kind, "J").items()}
-        scale = truth.get("scale_J", 1.0)
+        truth = {k: v for e in effect.split("+") for k, v in DRAWS[e](rng, kind, _PROFILE_BLANK).items()}
+        scale = truth.get(f"scale_{_PROFILE_BLANK}", 1.0)
         if "temperature_offset_K" in truth:
             scale = thermal_factor(_COLD_K + truth["temperature_offset_K"], _COLD_K)
         if "pupil_x_mm" in truth:
@@ -181,8 +184,8 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
         dT = truth.get("temperature_offset_K", 0.0)
         x, y, z = measured_map(g, scale * thermal_factor(cfg.profile_map_K + dT, _COLD_K + dT), rng, None, None, cfg.noise_um)
         np.savez(out / "map.npz", x_mm=x, y_mm=y, sag_um=z)
-        # The map is of the profiles' blank (the truth's scale is the J blank's): said so,
-        # else the diagnosis reads it as a spare blank's, with an amplitude scale of its own.
+        # The map is of the profiles' blank: said so, else the diagnosis reads it as a spare
+        # blank's, with an amplitude scale of its own.
         meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K,
-                     "aperture_diameter_mm": APERTURE_MM, "blank": "J"})
+                     "aperture_diameter_mm": APERTURE_MM, "blank": _PROFILE_BLANK})
     return {"simulation": sim, "measurement": meas}, {**truth, "_present": ["quilt_shape"], "_truth": meta}
