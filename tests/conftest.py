@@ -40,6 +40,7 @@ SHARED_SCOPES = {
 HEAVY_FIRST = (
     "tests/test_paper_claims.py+tests/test_paper_tables.py",
     "tests/test_diagnosis_scenarios.py",
+    "tests/test_diagnosis_campaign_reduced.py",
     "tests/test_fea_blank.py",
     "tests/test_diagnosis_bow.py",
     "tests/test_fea_reduced.py",

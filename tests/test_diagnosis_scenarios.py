@@ -1,9 +1,7 @@
-"""Slow: the paper's three diagnoses on the bundled synthetic scenarios, and a reduced
-injection-recovery campaign. The scenario truths come from the refined FEA mesh
-(1.0/2.0 mm) + a random shape discrepancy; the diagnosed model is the default mesh (see
-pipeline/scenarios). The reduced campaign (19 cases, minimal profile set) draws its
-truths from the default-mesh map + the random discrepancy (a refined-mesh solve takes
-minutes; the full campaign in benchmarks/bench_diagnosis.py uses it)."""
+"""Slow: the paper's three diagnoses on the bundled synthetic scenarios. The scenario truths
+come from the refined FEA mesh (1.0/2.0 mm) + a random shape discrepancy; the diagnosed
+model is the default mesh (see pipeline/scenarios). The reduced injection-recovery
+campaign is in test_diagnosis_campaign_reduced.py."""
 
 from __future__ import annotations
 
@@ -13,7 +11,6 @@ import numpy as np
 import pytest
 
 from pipeline.diagnosis import diagnose
-from pipeline.diagnosis.campaign import PROFILE_SETS, CampaignConfig, run_campaign
 from pipeline.io.registry import read_sag_map
 from optics.zernike import zernike_xy
 
@@ -91,24 +88,3 @@ def test_hk_scenario_as_a_lab_delivers_it(hk_clean, cache, tmp_path):
     assert (lab.verdict, lab.best.effect) == (clean.verdict, clean.best.effect)
     for k, v in clean.best.parameters.items():
         assert lab.best.parameters[k] == pytest.approx(v, rel=0.02), k
-
-
-def test_reduced_campaign(cache):
-    """19 cases on the minimal line-profile set (J 1.25 um at 250/25 mas, 1.175 um at 25 mas): library
-    effects mostly recognised and recovered, out-of-library ones not attributed (full
-    campaign, 208 cases on the extended set: benchmarks/results_diagnosis.md). On the forward
-    model's own truth (``truth="model"``), on which these thresholds were set. Types cycle
-    surfaces first, so 19 cases = 2 per surface type (12 surface cases: fewer leave the
-    surface check to one or two maps; cases are seeded by (seed, index)) + 1 per profile type.
-    The minimal set, not the campaign's default extended one: three profiles per case halve
-    the profile cases' cost (CPU 200 -> 122 s on 2 workers), and the wavelengths the extended
-    set adds are tested by the independent-truth runs in ``benchmarks/``."""
-    cfg = CampaignConfig(n_cases=19, seed=7, workers=2, truth_mesh="default", truth="model",
-                         profile_specs=PROFILE_SETS["minimal"])
-    res = run_campaign(cfg, cache_dir=cache)
-    s = res["summary"]
-    assert s["correct_top_rate"] >= 0.75
-    assert s["recovered_20pct_rate"] >= 0.7
-    assert s["ool_unexplained_rate"] >= 0.8
-    surf = [r for r in res["cases"] if r["kind"] == "surface" and not r["effect"].startswith("ool")]
-    assert np.mean([r["correct"] for r in surf]) >= 0.75
