@@ -53,14 +53,19 @@ def temperature(rng: np.random.Generator, kind: str, blank: str) -> dict:
 
 
 def quilt_shape(rng: np.random.Generator, kind: str, blank: str) -> dict:
-    """``quilt_harmonics_ratio`` 0-0.4 or 1.6-2.5; on a map also ``quilt_fund_xy_ratio``
-    0.7-0.85 or 1.2-1.4 (drawn first). A line profile integrates along the rulings and does
-    not see the y fundamental, so it is not drawn there."""
+    """The quilt's higher harmonics times ``h``, 0-0.4 or 1.6-2.5: on a map all of them
+    (``quilt_harmonics_ratio`` and ``quilt_x_harmonics_ratio`` both ``h``) and
+    ``quilt_fund_xy_ratio`` 0.7-0.85 or 1.2-1.4 (drawn first); on a line profile the
+    harmonics along x (``quilt_x_harmonics_ratio``) alone: a profile integrates along the
+    rulings, so it does not see the y fundamental and sees the other harmonics only weakly."""
     _check_kind("quilt_shape", kind, ("surface", "line_profile"))
     out = {}
     if kind == "surface":
         out["quilt_fund_xy_ratio"] = float(rng.choice([rng.uniform(0.7, 0.85), rng.uniform(1.2, 1.4)]))
-    out["quilt_harmonics_ratio"] = float(rng.choice([rng.uniform(0.0, 0.4), rng.uniform(1.6, 2.5)]))
+    h = float(rng.choice([rng.uniform(0.0, 0.4), rng.uniform(1.6, 2.5)]))
+    if kind == "surface":
+        out["quilt_harmonics_ratio"] = h
+    out["quilt_x_harmonics_ratio"] = h
     return out
 
 

@@ -64,13 +64,14 @@ def _lstsq_residual(A: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 
 def quilt_parts(quilt: QuiltComponents | None, x_mm: np.ndarray, y_mm: np.ndarray) -> tuple | None:
-    """``(F_y, H, C, F)`` of the nominal's quilt (µm) at blank coordinates (:mod:`.quilt`):
-    the parts ``quilt_shape`` rescales and the whole fitted quilt ``F = F_x + F_y + H + C``
+    """``(F_y, H, C, H_x, F)`` of the nominal's quilt (µm) at blank coordinates (:mod:`.quilt`):
+    the parts ``quilt_shape`` rescales and the whole fitted quilt ``F = F_x + F_y + H + C + H_x``
     (what separates the smooth figure from the map); None without a quilt fit."""
     if quilt is None:
         return None
     fy, hh, cc = quilt.fundamental_y_um(x_mm, y_mm), quilt.harmonics_um(x_mm, y_mm), quilt.cross_um(x_mm, y_mm)
-    return fy, hh, cc, quilt.fundamental_x_um(x_mm, y_mm) + fy + hh + cc
+    hx = quilt.x_harmonics_um(x_mm, y_mm)
+    return fy, hh, cc, hx, quilt.fundamental_x_um(x_mm, y_mm) + fy + hh + cc + hx
 
 
 def true_temperature(temperature_K: float, p: dict) -> float:

@@ -18,12 +18,20 @@ up to the third harmonic with cross terms, phases referred to the blank's origin
 * ``F_y``: component (0, 1);
 * ``C``: the egg-crate cross terms (1, 1) and (1, -1), the product of the two
   fundamentals: a sum-form quilt has none, a product-form quilt is made of them;
-* ``H``: every other fitted component ((2, 0), (0, 2), (2, ±1), ...).
+* ``H_x``: the harmonics along the dispersion, (2, 0) and (3, 0): the rib profile across
+  the dispersion, sharper or blunter than a sinusoid;
+* ``H``: every other fitted component ((0, 2), (2, ±1), (1, ±2), ...).
 
 ``C`` is split from ``H`` because the two change the line shape differently: the cross
 terms scatter light into the satellites of the fundamental along the slit, the higher
 harmonics into the second and third satellites (``benchmarks/results_j_gap.md``: the J
-double peak depends mostly on the cross terms).
+double peak depends mostly on the cross terms). ``H_x`` is split from ``H`` because a line
+profile integrates along the rulings: of the higher harmonics it sees the ones along x
+most, and a real rib profile changes them independently of the rest. Measured on the
+campaign's independent truths (sharp ribs printing through, ``truth.lattice``): a rib
+profile ``|cos|^4.6`` mixed into the FEA quilt turns the (2, 0) component's sign
+(-0.39 of the nominal's) while (0, 3) grows 4.5-fold; one ratio for both made a 37 µm slit
+read 41 µm beside it, and on a sum-form mixture left a narrow slit to the detector terms.
 
 The components are periodic and evaluated wherever the nominal map is valid: the
 pockets' pitch is the same over the whole blank, and the model change is a statement
@@ -62,8 +70,9 @@ CROSS_TERMS = ((1, 1), (1, -1))
 
 @dataclass(frozen=True, eq=False)
 class QuiltComponents:
-    """The nominal map's quilt: fundamentals ``F_x``, ``F_y`` and the higher harmonics ``H``
-    (module docstring), evaluable at any blank coordinates (mm) in µm; ``weights``: each
+    """The nominal map's quilt: fundamentals ``F_x``, ``F_y``, cross terms ``C``, harmonics
+    along x ``H_x`` and the other harmonics ``H`` (module docstring), evaluable at any blank
+    coordinates (mm) in µm; ``weights``: each
     part's share of the nominal's least-squares amplitude over the centre
     (:func:`projection_weights`)."""
 
@@ -86,7 +95,15 @@ class QuiltComponents:
 
     @property
     def harmonic_terms(self) -> tuple:
-        return tuple(c for c in self.fourier.components if c not in ((1, 0), (0, 1)) + CROSS_TERMS)
+        return tuple(c for c in self.fourier.components
+                     if c not in ((1, 0), (0, 1)) + CROSS_TERMS and not (c[1] == 0 and c[0] >= 2))
+
+    @property
+    def x_harmonic_terms(self) -> tuple:
+        return tuple(c for c in self.fourier.components if c[1] == 0 and c[0] >= 2)
+
+    def x_harmonics_um(self, x_mm, y_mm) -> np.ndarray:
+        return self._sum(x_mm, y_mm, self.x_harmonic_terms)
 
     def fundamental_x_um(self, x_mm, y_mm) -> np.ndarray:
         return self._sum(x_mm, y_mm, ((1, 0),))
@@ -101,11 +118,12 @@ class QuiltComponents:
         return self._sum(x_mm, y_mm, self.harmonic_terms)
 
     def amplitudes_um(self) -> dict:
-        """RMS over a period (µm) of ``F_x``, ``F_y``, ``C`` and ``H``: what the effect scales."""
+        """RMS over a period (µm) of ``F_x``, ``F_y``, ``C``, ``H`` and ``H_x``: what the effect scales."""
         a = self.fourier.amplitude_um
         return {"fundamental_x": float(a[(1, 0)] / np.sqrt(2)), "fundamental_y": float(a[(0, 1)] / np.sqrt(2)),
                 "cross": float(np.sqrt(sum(a[c] ** 2 for c in self.cross_terms) / 2)),
-                "harmonics": float(np.sqrt(sum(a[c] ** 2 for c in self.harmonic_terms) / 2))}
+                "harmonics": float(np.sqrt(sum(a[c] ** 2 for c in self.harmonic_terms) / 2)),
+                "x_harmonics": float(np.sqrt(sum(a[c] ** 2 for c in self.x_harmonic_terms) / 2))}
 
 
 def quilt_components(nominal: SagMap) -> QuiltComponents | None:
@@ -121,8 +139,8 @@ def quilt_components(nominal: SagMap) -> QuiltComponents | None:
 
 
 def projection_weights(nominal: SagMap, q: QuiltComponents) -> dict:
-    """Each part ``P`` of the nominal ``S`` (``F_x``, ``F_y``, ``C``, ``H`` and the smooth
-    figure ``R = S - F_x - F_y - C - H``) as its share ``<P, S> / <S, S>`` of the nominal's
+    """Each part ``P`` of the nominal ``S`` (``F_x``, ``F_y``, ``C``, ``H``, ``H_x`` and the
+    smooth figure ``R = S - F_x - F_y - C - H - H_x``) as its share ``<P, S> / <S, S>`` of the nominal's
     least-squares amplitude over the ``center`` aperture (piston removed from both).
 
     The shares add up to 1 exactly (the parts add up to ``S``); where the parts are
@@ -135,9 +153,9 @@ def projection_weights(nominal: SagMap, q: QuiltComponents) -> dict:
     m = nominal.region_mask(QUILT_APERTURE)
     s = nominal.sag_um[m] - nominal.sag_um[m].mean()
     fx, fy = q.fundamental_x_um(X[m], Y[m]), q.fundamental_y_um(X[m], Y[m])
-    cc, hh = q.cross_um(X[m], Y[m]), q.harmonics_um(X[m], Y[m])
-    parts = {"fundamental_x": fx, "fundamental_y": fy, "cross": cc, "harmonics": hh,
-             "figure": nominal.sag_um[m] - fx - fy - cc - hh}
+    cc, hh, hx = q.cross_um(X[m], Y[m]), q.harmonics_um(X[m], Y[m]), q.x_harmonics_um(X[m], Y[m])
+    parts = {"fundamental_x": fx, "fundamental_y": fy, "cross": cc, "harmonics": hh, "x_harmonics": hx,
+             "figure": nominal.sag_um[m] - fx - fy - cc - hh - hx}
     ss = float(s @ s)
     return {k: float((v - v.mean()) @ s / ss) for k, v in parts.items()} if ss > 0 else {}
 
@@ -145,7 +163,7 @@ def projection_weights(nominal: SagMap, q: QuiltComponents) -> dict:
 def projection_factor(weights: dict, part_ratios: dict) -> float:
     """Least-squares projection on the nominal of the nominal with each part scaled by its
     ratio in ``part_ratios`` (part name -> ratio; a part missing there keeps ratio 1),
-    relative to the nominal: ``w_Fx + rho w_Fy + c w_C + h w_H + g w_R`` (``weights`` from
+    relative to the nominal: ``w_Fx + rho w_Fy + c w_C + h w_H + k w_Hx + g w_R`` (``weights`` from
     :func:`projection_weights`; which effect parameter scales which part is the
     ``quilt_shape`` effect's :func:`~pipeline.diagnosis.effects.quilt_shape.part_ratios`).
 

@@ -28,19 +28,21 @@ __all__ = ["blank_shape_map", "quilt_shape_map", "shape_discrepancy", "unmodelle
 
 
 def quilt_shape_map(sag: SagMap, fund_xy_ratio: float = 1.0, harmonics_ratio: float = 1.0,
-                    cross_ratio: float = 1.0) -> SagMap:
+                    cross_ratio: float = 1.0, x_harmonics_ratio: float = 1.0) -> SagMap:
     """``sag`` with its own quilt reshaped (the ``quilt_shape`` effect, :mod:`.quilt`): the y
     fundamental times ``fund_xy_ratio`` (x held), the (1, ±1) cross terms times
-    ``cross_ratio`` and the other harmonics times ``harmonics_ratio``, decomposed from ``sag`` itself (a truth map from another mesh has
-    its own harmonic content)."""
+    ``cross_ratio``, the harmonics along x ((2, 0), (3, 0)) times ``x_harmonics_ratio`` and
+    the other harmonics times ``harmonics_ratio``, decomposed from ``sag`` itself (a truth
+    map from another mesh has its own harmonic content)."""
     for name, v in (("fund_xy_ratio", fund_xy_ratio), ("harmonics_ratio", harmonics_ratio),
-                    ("cross_ratio", cross_ratio)):
+                    ("cross_ratio", cross_ratio), ("x_harmonics_ratio", x_harmonics_ratio)):
         if not math.isfinite(v):
             raise ValueError(f"quilt_shape_map: {name}={v} must be finite")
     q = quilt_components(sag)
     if q is None:
         raise ValueError(f"quilt_shape_map: map {sag.label!r} does not cover the 82 x 72 mm centre the quilt is fitted on")
-    p = {"quilt_fund_xy_ratio": fund_xy_ratio, "quilt_harmonics_ratio": harmonics_ratio, "quilt_cross_ratio": cross_ratio}
+    p = {"quilt_fund_xy_ratio": fund_xy_ratio, "quilt_harmonics_ratio": harmonics_ratio, "quilt_cross_ratio": cross_ratio,
+         "quilt_x_harmonics_ratio": x_harmonics_ratio}
     return blank_shape_map(sag, p, q)
 
 

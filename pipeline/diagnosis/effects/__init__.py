@@ -46,17 +46,19 @@ blank_bow           bow_defocus_um Z(2,0), bow_spherical_um      rotationally sy
                     deformation (companion, below)               bimetal; mount)
 quilt_shape         quilt_fund_xy_ratio (1; 0.3…3; maps and      the quilt's harmonic content
                     PSF images only), quilt_harmonics_ratio,     differs from the FEA's
-                    quilt_cross_ratio (1; -1…3; both 0 = pure    (:mod:`pipeline.diagnosis.quilt`, below;
-                    sinusoid), quilt_figure_ratio (1; -1…3)      background companion)
+                    quilt_x_harmonics_ratio, quilt_cross_ratio   (:mod:`pipeline.diagnosis.quilt`, below;
+                    (1; -1…3; all 0 = pure sinusoid),            background companion)
+                    quilt_figure_ratio (1; -1…3)
 ==================  ===========================================  ============================
 
 ``quilt_shape`` changes the nominal map ``S`` into
-``S + (rho - 1) F_y + (h - 1) H + (c - 1) C + (g - 1) R`` with ``F_x``, ``F_y`` the quilt's
-fundamentals (21 mm along x, 18 mm along y), ``C`` its (1, ±1) egg-crate cross terms, ``H``
-its other harmonics, from a Fourier fit of the nominal over the 82 x 72 mm centre
-(:mod:`pipeline.diagnosis.quilt`), and ``R = S - F_x - F_y - H - C`` the smooth figure the fit leaves;
-``rho = quilt_fund_xy_ratio``, ``h = quilt_harmonics_ratio``, ``c = quilt_cross_ratio``,
-``g = quilt_figure_ratio``. The
+``S + (rho - 1) F_y + (h - 1) H + (c - 1) C + (k - 1) H_x + (g - 1) R`` with ``F_x``, ``F_y``
+the quilt's fundamentals (21 mm along x, 18 mm along y), ``C`` its (1, ±1) egg-crate cross
+terms, ``H_x`` its harmonics along x ((2, 0), (3, 0)), ``H`` its other harmonics, from a
+Fourier fit of the nominal over the 82 x 72 mm centre (:mod:`pipeline.diagnosis.quilt`), and
+``R = S - F_x - F_y - H - C - H_x`` the smooth figure the fit leaves; ``rho =
+quilt_fund_xy_ratio``, ``h = quilt_harmonics_ratio``, ``k = quilt_x_harmonics_ratio``, ``c =
+quilt_cross_ratio``, ``g = quilt_figure_ratio``. The
 fundamentals' amplitude is not a parameter of it: separate scales of ``F_x``, ``F_y`` and
 ``H`` would be degenerate with ``amplitude_scale`` on line profiles (measured, FEA map
 200 µm / 75 % at 80 K, J 1.25 µm at 250/100/25 mas jointly: correlation -0.999 between

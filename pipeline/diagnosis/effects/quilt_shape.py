@@ -16,7 +16,8 @@ _MAP_AND_IMAGE = ("surface", "psf_image")
 #: The parts of the nominal's deformation (:mod:`pipeline.diagnosis.quilt`) and the ratio
 #: that scales each; the x fundamental has none (its amplitude is the rescalings').
 PART_RATIOS = {"fundamental_y": "quilt_fund_xy_ratio", "cross": "quilt_cross_ratio",
-               "harmonics": "quilt_harmonics_ratio", "figure": "quilt_figure_ratio"}
+               "harmonics": "quilt_harmonics_ratio", "figure": "quilt_figure_ratio",
+               "x_harmonics": "quilt_x_harmonics_ratio"}
 
 
 def part_ratios(p: dict) -> dict:
@@ -26,24 +27,28 @@ def part_ratios(p: dict) -> dict:
 
 
 def _reshape(sag_um, x_mm, y_mm, p: dict, quilt):
-    """``S + (rho - 1) F_y + (h - 1) H + (c - 1) C + (g - 1) R`` (:mod:`pipeline.diagnosis.effects`),
-    ``quilt = (F_y, H, C, F)`` and ``R = S - F``; unchanged without a quilt fit."""
+    """``S + (rho - 1) F_y + (h - 1) H + (c - 1) C + (k - 1) H_x + (g - 1) R``
+    (:mod:`pipeline.diagnosis.effects`), ``quilt = (F_y, H, C, H_x, F)`` and ``R = S - F``;
+    unchanged without a quilt fit."""
     r = part_ratios(p)
-    rho, h, c, g = r["fundamental_y"], r["harmonics"], r["cross"], r["figure"]
-    if quilt is None or (rho == 1.0 and h == 1.0 and c == 1.0 and g == 1.0):
+    rho, h, c, g, hxr = r["fundamental_y"], r["harmonics"], r["cross"], r["figure"], r["x_harmonics"]
+    if quilt is None or (rho == 1.0 and h == 1.0 and c == 1.0 and g == 1.0 and hxr == 1.0):
         return sag_um
-    fy, hh, cc, whole = quilt
-    return sag_um + (rho - 1.0) * fy + (h - 1.0) * hh + (c - 1.0) * cc + (g - 1.0) * (sag_um - whole)
+    fy, hh, cc, hx, whole = quilt
+    return (sag_um + (rho - 1.0) * fy + (h - 1.0) * hh + (c - 1.0) * cc + (hxr - 1.0) * hx
+            + (g - 1.0) * (sag_um - whole))
 
 
 def _summary(p: dict, ctx: SummaryContext) -> dict:
     out = {"quilt_fund_xy_ratio": p.get("quilt_fund_xy_ratio", 1.0), "quilt_harmonics_ratio": p["quilt_harmonics_ratio"],
+           "quilt_x_harmonics_ratio": p.get("quilt_x_harmonics_ratio", 1.0),
            "quilt_cross_ratio": p.get("quilt_cross_ratio", 1.0), "quilt_figure_ratio": p.get("quilt_figure_ratio", 1.0)}
     if ctx.quilt_rms_um:
         q = ctx.quilt_rms_um
         out.update({"fundamental_x_rms_um": q["fundamental_x"],
                     "fundamental_y_rms_um": q["fundamental_y"] * p.get("quilt_fund_xy_ratio", 1.0),
                     "harmonics_rms_um": q["harmonics"] * abs(p["quilt_harmonics_ratio"]),
+                    "x_harmonics_rms_um": q["x_harmonics"] * abs(p.get("quilt_x_harmonics_ratio", 1.0)),
                     "cross_rms_um": q["cross"] * abs(p.get("quilt_cross_ratio", 1.0)),
                     "quilt_note": f"RMS over a period at the simulation's {ctx.cold_K:g} K, before amplitude_scale "
                                   "and temperature; fitted over the 82 x 72 mm centre"})
@@ -56,8 +61,12 @@ QUILT_SHAPE = Effect(
                meaning="y fundamental (18 mm) relative to the x fundamental (21 mm), over the nominal's "
                        "ratio (x fundamental held)", kinds=_MAP_AND_IMAGE),
      Parameter("quilt_harmonics_ratio", 1.0, -1.0, 3.0, (0.0, 1.0, 2.0), floor=0.2, unit="1",
-               meaning="quilt harmonics other than the (1, ±1) cross terms relative to the fundamentals, "
-                       "over the nominal's ratio (0: none)"),
+               meaning="quilt harmonics other than the (1, ±1) cross terms and the harmonics along x "
+                       "relative to the fundamentals, over the nominal's ratio (0: none)"),
+     Parameter("quilt_x_harmonics_ratio", 1.0, -1.0, 3.0, floor=0.2, unit="1",
+               meaning="the quilt's harmonics along the dispersion, (2, 0) and (3, 0) (the rib profile "
+                       "across x), relative to the fundamentals, over the nominal's ratio (negative: "
+                       "their sign turned)"),
      Parameter("quilt_cross_ratio", 1.0, -1.0, 3.0, floor=0.2, unit="1",
                meaning="the quilt's (1, ±1) egg-crate cross terms relative to the fundamentals, over the "
                        "nominal's ratio (0: a sum-form quilt)"),
@@ -65,7 +74,7 @@ QUILT_SHAPE = Effect(
                meaning="the smooth figure that is not quilt (edge roll-off, bending) relative to the "
                        "fundamentals, over the nominal's ratio")),
     description="the quilt's harmonic content differs from the simulation's: the y fundamental relative "
-                "to the x fundamental and the higher harmonics relative to both (the fundamentals' "
-                "amplitude stays amplitude_scale's)",
+                "to the x fundamental, the cross terms, the harmonics along x and the other higher "
+                "harmonics relative to both (the fundamentals' amplitude stays amplitude_scale's)",
     companion=True, background=True, draw_truth=effect_draws.quilt_shape, summary=_summary,
     shape=_reshape, shape_stage="reshape")
