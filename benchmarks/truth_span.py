@@ -3,8 +3,9 @@
 For ``--draws`` truths per family (:data:`pipeline.diagnosis.truth.generate.GRATING_FAMILIES`,
 the truth generator only, no diagnosis), the truth map ``t`` is fitted by least squares over
 the central 82 x 72 mm with the parts ``quilt_shape`` rescales (:mod:`pipeline.diagnosis.quilt`:
-``F_x``, ``F_y``, the (1, ±1) cross terms ``C``, the other harmonics ``H`` and the smooth
-figure ``R = nominal - F_x - F_y - C - H``; their sum is the nominal) plus piston and tilt
+``F_x``, ``F_y``, the (1, ±1) cross terms ``C``, the harmonics along x ``H_x``, the other
+harmonics ``H`` and the smooth figure ``R = nominal - F_x - F_y - C - H_x - H``; their sum is
+the nominal) plus piston and tilt
 (the map's nuisances). Reported per family (median and range over the draws):
 
 * ``outside``: ``||t - fit|| / ||t - k n||``, the share of the truth's departure from the
@@ -17,7 +18,7 @@ The first row is the truth's FEA map alone (refined against the default mesh): t
 every family sits on.
 
 With ``--ratios`` it prints instead the truths' own ``quilt_shape`` ratios: the same
-least-squares coefficients of ``F_y``, ``C``, ``H`` and ``R`` over that of ``F_x`` (the
+least-squares coefficients of ``F_y``, ``C``, ``H``, ``H_x`` and ``R`` over that of ``F_x`` (the
 nominal's are 1), i.e. what a ``quilt_shape`` fit of a noiseless map of the truth returns;
 they say which ranges of the ratios real-looking quilts need.
 
@@ -38,14 +39,14 @@ from pipeline.diagnosis.truth.gratings import central, harmonic_distance
 
 
 def span_columns(nominal) -> tuple[np.ndarray, np.ndarray]:
-    """(columns over the central region, mask): piston, tilt x, tilt y, F_x, F_y, C, H, R."""
+    """(columns over the central region, mask): piston, tilt x, tilt y, F_x, F_y, C, H, H_x, R."""
     X, Y = np.meshgrid(nominal.x_mm, nominal.y_mm)
     q = quilt_components(nominal)
     fx, fy = q.fundamental_x_um(X, Y), q.fundamental_y_um(X, Y)
-    cc, hh = q.cross_um(X, Y), q.harmonics_um(X, Y)
-    r = nominal.sag_um - fx - fy - cc - hh
+    cc, hh, hx = q.cross_um(X, Y), q.harmonics_um(X, Y), q.x_harmonics_um(X, Y)
+    r = nominal.sag_um - fx - fy - cc - hh - hx
     mask = central(nominal.x_mm, nominal.y_mm) & np.isfinite(nominal.sag_um)
-    cols = [np.ones_like(X), X, Y, fx, fy, cc, hh, r]
+    cols = [np.ones_like(X), X, Y, fx, fy, cc, hh, hx, r]
     return np.column_stack([c[mask] for c in cols]), mask
 
 
@@ -63,13 +64,14 @@ def outside_span(t_um: np.ndarray, nominal_um: np.ndarray, A: np.ndarray, mask: 
 
 
 def quilt_ratios(t_um: np.ndarray, A: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """``(F_y, C, H, R)`` coefficients of the truth map over its ``F_x`` coefficient."""
+    """``(F_y, C, H, H_x, R)`` coefficients of the truth map over its ``F_x`` coefficient."""
     c, *_ = np.linalg.lstsq(A, t_um[mask], rcond=None)
     return c[4:] / c[3]
 
 
 def print_ratios(nominal, fea, A, mask, draws: int, seed: int) -> None:
-    names = ("quilt_fund_xy_ratio", "quilt_cross_ratio", "quilt_harmonics_ratio", "quilt_figure_ratio")
+    names = ("quilt_fund_xy_ratio", "quilt_cross_ratio", "quilt_harmonics_ratio", "quilt_x_harmonics_ratio",
+             "quilt_figure_ratio")
     print("| family | draws | " + " | ".join(f"`{n}`" for n in names) + " |")
     print("|---|---|" + "---|" * len(names))
     rows = {"FEA map alone (refined mesh)": [quilt_ratios(np.where(np.isfinite(fea.sag_um), fea.sag_um, 0.0), A, mask)]}
