@@ -33,10 +33,10 @@ SHARED_SCOPES = {
 # own order is by number of tests, which puts these few-test modules last). The first two start
 # together on the two workers; the others are ranked by CPU time (user + sys of
 # ``pytest -n 0 tests/<module>``, which counts the reduced campaign's worker processes too;
-# measured with one BLAS thread, above: scenarios 358 s, paper 130, fea_blank 112, bow 74,
-# fea_reduced 59, surrogate_sweep 46, quilt 43, fea_layer 31, mesh_convergence 24,
-# diagnosis 24, study_dataset 24, plating 10, optics_on_fea 8). Re-rank when a heavy module
-# is added.
+# measured with one BLAS thread, above: scenarios and reduced campaign together 358 s, paper
+# 130, fea_blank 112, bow 74, fea_reduced 59, surrogate_sweep 46, quilt 43, fea_layer 31,
+# mesh_convergence 24, diagnosis 24, study_dataset 24, plating 10, optics_on_fea 8). Re-rank
+# when a heavy module is added.
 HEAVY_FIRST = (
     "tests/test_paper_claims.py+tests/test_paper_tables.py",
     "tests/test_diagnosis_scenarios.py",
