@@ -202,6 +202,20 @@ def test_campaign_recovery_rules():
     assert r["vector"] == r["per_parameter"] == pytest.approx(0.2 / 0.5)
 
 
+def test_campaign_scores_the_named_finding_beside_the_effects_own_fit():
+    """A slit named in a pair beside a rescaling: scored by the named pair's own slit width
+    (36.99 µm for 36.98: 0.03 % off) where the slit's single fit reads 40.9 µm (10.6 % off)."""
+    from pipeline.diagnosis.campaign import recovery_errors
+
+    truth = {"slit_image_width_um": 36.98}
+    single = FakeFinding({"slit_image_width_um": 40.9}, {"slit_image_width_um": 1.2})
+    pair = FakeFinding({"slit_image_width_um": 36.99, "scale_J": 1.17}, {"slit_image_width_um": 0.5, "scale_J": 0.02})
+    d = FakeDiagnosis("slit_width", single)
+    assert recovery_errors(d, "slit_width", truth)["per_parameter"] == pytest.approx(3.92 / 36.98)
+    named = recovery_errors(d, "slit_width", truth, finding=pair)
+    assert named["per_parameter"] == pytest.approx(0.01 / 36.98) and named["within_2sigma"]
+
+
 @pytest.mark.parametrize("kw, fragment", [
     ({"min_variance_explained": 1.5}, "min_variance_explained=1.5 must be a number in [0.0, 1.0]"),
     ({"no_gap_ratio": 0.9}, "no_gap_ratio=0.9 must be a number in [1.0, inf]"),
