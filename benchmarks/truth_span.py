@@ -42,11 +42,11 @@ def span_columns(nominal) -> tuple[np.ndarray, np.ndarray]:
     """(columns over the central region, mask): piston, tilt x, tilt y, F_x, F_y, C, H, H_x, R."""
     X, Y = np.meshgrid(nominal.x_mm, nominal.y_mm)
     q = quilt_components(nominal)
-    fx, fy = q.fundamental_x_um(X, Y), q.fundamental_y_um(X, Y)
-    cc, hh, hx = q.cross_um(X, Y), q.harmonics_um(X, Y), q.x_harmonics_um(X, Y)
-    r = nominal.sag_um - fx - fy - cc - hh - hx
+    parts = q.parts_um(X, Y)
+    r = nominal.sag_um - sum(parts.values())
     mask = central(nominal.x_mm, nominal.y_mm) & np.isfinite(nominal.sag_um)
-    cols = [np.ones_like(X), X, Y, fx, fy, cc, hh, hx, r]
+    cols = [np.ones_like(X), X, Y, *(parts[k] for k in ("fundamental_x", "fundamental_y", "cross", "harmonics",
+                                                        "x_harmonics")), r]
     return np.column_stack([c[mask] for c in cols]), mask
 
 

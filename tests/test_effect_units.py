@@ -221,7 +221,8 @@ def test_the_quilt_shape_rescales_the_parts_of_the_quilt_and_the_figure():
     whole = 0.2 * np.cos(x) + fy + hh + cc + hx
     p = {"quilt_fund_xy_ratio": 1.5, "quilt_harmonics_ratio": 0.0, "quilt_cross_ratio": 2.0, "quilt_figure_ratio": 0.5,
          "quilt_x_harmonics_ratio": -0.5}
-    out = LIBRARY["quilt_shape"].shape(s, x, y, p, (fy, hh, cc, hx, whole))
+    parts = {"fundamental_y": fy, "harmonics": hh, "cross": cc, "x_harmonics": hx, "whole": whole}
+    out = LIBRARY["quilt_shape"].shape(s, x, y, p, parts)
     np.testing.assert_allclose(out, s + 0.5 * fy - hh + cc - 1.5 * hx - 0.5 * (s - whole), rtol=1e-14)
     assert LIBRARY["quilt_shape"].shape(s, x, y, p, None) is s  # no quilt fit: nothing to reshape
 
@@ -238,7 +239,8 @@ def test_the_shape_stages_reshape_then_multiply_then_add():
     p = {"quilt_harmonics_ratio": 3.0, "plating_grad_x": 0.07, "bow_defocus_um": 0.02}
     r2 = (x**2 + y**2) / 70.0**2
     want = (s + 2.0 * hh) * (1.0 + 0.07 * x / 70.0) + 0.02 * math.sqrt(3) * (2 * r2 - 1)
-    np.testing.assert_allclose(blank_shape_um(s, x, y, p, (fy, hh, cc, hx, whole)), want, rtol=1e-13)
+    parts = {"fundamental_y": fy, "harmonics": hh, "cross": cc, "x_harmonics": hx, "whole": whole}
+    np.testing.assert_allclose(blank_shape_um(s, x, y, p, parts), want, rtol=1e-13)
 
 
 def test_astigmatism_adds_rms_normalised_zernike_2_2_over_the_map_aperture():

@@ -63,15 +63,17 @@ def _lstsq_residual(A: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return d - A @ c, c
 
 
-def quilt_parts(quilt: QuiltComponents | None, x_mm: np.ndarray, y_mm: np.ndarray) -> tuple | None:
-    """``(F_y, H, C, H_x, F)`` of the nominal's quilt (µm) at blank coordinates (:mod:`.quilt`):
-    the parts ``quilt_shape`` rescales and the whole fitted quilt ``F = F_x + F_y + H + C + H_x``
-    (what separates the smooth figure from the map); None without a quilt fit."""
+def quilt_parts(quilt: QuiltComponents | None, x_mm: np.ndarray, y_mm: np.ndarray) -> dict | None:
+    """The nominal's quilt (µm) at blank coordinates (:mod:`.quilt`): the parts ``quilt_shape``
+    rescales, by part name (``fundamental_y``, ``cross``, ``harmonics``, ``x_harmonics``), and
+    ``whole``, the whole fitted quilt ``F`` (those and ``F_x``: what separates the smooth
+    figure from the map); None without a quilt fit."""
     if quilt is None:
         return None
-    fy, hh, cc = quilt.fundamental_y_um(x_mm, y_mm), quilt.harmonics_um(x_mm, y_mm), quilt.cross_um(x_mm, y_mm)
-    hx = quilt.x_harmonics_um(x_mm, y_mm)
-    return fy, hh, cc, hx, quilt.fundamental_x_um(x_mm, y_mm) + fy + hh + cc + hx
+    parts = quilt.parts_um(x_mm, y_mm)
+    whole = sum(parts.values())
+    del parts["fundamental_x"]  # its amplitude is the rescalings', not the shape's
+    return {**parts, "whole": whole}
 
 
 def true_temperature(temperature_K: float, p: dict) -> float:
@@ -195,7 +197,7 @@ class SurfaceForward:
             off = ~np.isfinite(base)
             base = np.where(off, 0.0, base)  # points moved off the map: no deformation there
             quilt = quilt_parts(self.quilt, qx, qy)
-            quilt = None if quilt is None else tuple(np.where(off, 0.0, c) for c in quilt)
+            quilt = None if quilt is None else {k: np.where(off, 0.0, c) for k, c in quilt.items()}
         else:
             base, qx, qy, quilt = self.base, self.x, self.y, self._quilt_at
         out = self.factor(p) * blank_shape_um(base, qx, qy, p, quilt)

@@ -117,6 +117,13 @@ class QuiltComponents:
     def harmonics_um(self, x_mm, y_mm) -> np.ndarray:
         return self._sum(x_mm, y_mm, self.harmonic_terms)
 
+    def parts_um(self, x_mm, y_mm) -> dict:
+        """Every part at blank coordinates (mm), µm: ``fundamental_x``, ``fundamental_y``,
+        ``cross``, ``harmonics``, ``x_harmonics`` (they add up to the fitted quilt)."""
+        return {"fundamental_x": self.fundamental_x_um(x_mm, y_mm), "fundamental_y": self.fundamental_y_um(x_mm, y_mm),
+                "cross": self.cross_um(x_mm, y_mm), "harmonics": self.harmonics_um(x_mm, y_mm),
+                "x_harmonics": self.x_harmonics_um(x_mm, y_mm)}
+
     def amplitudes_um(self) -> dict:
         """RMS over a period (µm) of ``F_x``, ``F_y``, ``C``, ``H`` and ``H_x``: what the effect scales."""
         a = self.fourier.amplitude_um
@@ -152,10 +159,8 @@ def projection_weights(nominal: SagMap, q: QuiltComponents) -> dict:
     X, Y = nominal.grid()
     m = nominal.region_mask(QUILT_APERTURE)
     s = nominal.sag_um[m] - nominal.sag_um[m].mean()
-    fx, fy = q.fundamental_x_um(X[m], Y[m]), q.fundamental_y_um(X[m], Y[m])
-    cc, hh, hx = q.cross_um(X[m], Y[m]), q.harmonics_um(X[m], Y[m]), q.x_harmonics_um(X[m], Y[m])
-    parts = {"fundamental_x": fx, "fundamental_y": fy, "cross": cc, "harmonics": hh, "x_harmonics": hx,
-             "figure": nominal.sag_um[m] - fx - fy - cc - hh - hx}
+    parts = q.parts_um(X[m], Y[m])
+    parts["figure"] = nominal.sag_um[m] - sum(parts.values())
     ss = float(s @ s)
     return {k: float((v - v.mean()) @ s / ss) for k, v in parts.items()} if ss > 0 else {}
 

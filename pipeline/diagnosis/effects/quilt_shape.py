@@ -28,15 +28,14 @@ def part_ratios(p: dict) -> dict:
 
 def _reshape(sag_um, x_mm, y_mm, p: dict, quilt):
     """``S + (rho - 1) F_y + (h - 1) H + (c - 1) C + (k - 1) H_x + (g - 1) R``
-    (:mod:`pipeline.diagnosis.effects`), ``quilt = (F_y, H, C, H_x, F)`` and ``R = S - F``;
-    unchanged without a quilt fit."""
+    (:mod:`pipeline.diagnosis.effects`), ``quilt`` the parts by name and ``whole = F``
+    (:func:`pipeline.diagnosis.forward.quilt_parts`), ``R = S - F``; unchanged without a
+    quilt fit."""
     r = part_ratios(p)
-    rho, h, c, g, hxr = r["fundamental_y"], r["harmonics"], r["cross"], r["figure"], r["x_harmonics"]
-    if quilt is None or (rho == 1.0 and h == 1.0 and c == 1.0 and g == 1.0 and hxr == 1.0):
+    if quilt is None or all(v == 1.0 for v in r.values()):
         return sag_um
-    fy, hh, cc, hx, whole = quilt
-    return (sag_um + (rho - 1.0) * fy + (h - 1.0) * hh + (c - 1.0) * cc + (hxr - 1.0) * hx
-            + (g - 1.0) * (sag_um - whole))
+    figure = sag_um - quilt["whole"]
+    return sag_um + sum((v - 1.0) * (figure if part == "figure" else quilt[part]) for part, v in r.items())
 
 
 def _summary(p: dict, ctx: SummaryContext) -> dict:
