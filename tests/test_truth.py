@@ -417,6 +417,60 @@ def test_a_rescaling_is_part_of_a_truth_whose_x_fundamental_differs():
                                   "amplitude_scale", q, 1.0)
 
 
+def test_rescalings_named_beside_the_effect_are_judged_by_their_value():
+    """With the rescalings judged by their value: a rescaling named beside the injected
+    effect is part of the truth when its factor lies within the amplitude's 5 % floor of the
+    truth's x-fundamental ratio (a 4 % amplitude for a 2.3 % stronger x fundamental, or the
+    temperature offset that gives exactly that ratio), also below the floor-based convention's
+    threshold; a rescaling read wrong is not, even where that convention allows one. Rescaled
+    truths' parameters are compared in the same convention (the amplitude times the ratio, the
+    offset whose thermal factor is the ratio times the injected one's)."""
+    from pipeline.diagnosis.campaign import (measured_rescaling, measured_truth, rescaling_factor,
+                                             score_case_fundamental, score_case_measured)
+    from pipeline.diagnosis.effects import SummaryContext
+    from pipeline.diagnosis.effects.rescaling import offset_for_factor
+    from pipeline.diagnosis.engine import Finding
+    from pipeline.diagnosis.nominal import thermal_factor
+
+    def best(effects, parameters, companions=("quilt_shape",)):
+        return Finding("+".join(effects), effects, parameters, {}, 0.0, -50.0, 1.0, 0.5, 0.5, 0.5,
+                       companions=companions)
+
+    q, kind, truth = ["quilt_shape"], "line_profile", {"pupil_x_mm": 3.1, "pupil_y_mm": -0.9}
+    k = measured_rescaling(kind, "pupil_shift", truth, 1.023)
+    assert k == 1.023 and measured_rescaling(kind, "pupil_shift", truth, None) == 1.0
+    shift = {"pupil_x_mm": 2.8, "pupil_y_mm": -1.6}
+    pair = best(("amplitude_scale", "pupil_shift"), {**shift, "scale_J": 1.04})
+    assert score_case_measured("explained", pair, "pupil_shift", q, kind, k)
+    assert not score_case_fundamental("explained", pair, "pupil_shift", q, 1.023)  # below the floor there
+    dT = offset_for_factor(0.0, 1.023, SummaryContext(cold_K=80.0))
+    assert dT < 0  # colder: more contraction mismatch
+    warm = best(("temperature", "pupil_shift"), {**shift, "temperature_offset_K": dT})
+    assert rescaling_factor(warm.parameters, kind) == pytest.approx(1.023, abs=1e-6)
+    assert score_case_measured("explained", warm, "pupil_shift", q, kind, k)
+    wrong = best(("amplitude_scale", "pupil_shift"), {**shift, "scale_J": 1.10})
+    assert not score_case_measured("explained", wrong, "pupil_shift", q, kind, k)
+    assert score_case_fundamental("explained", wrong, "pupil_shift", q, 1.20)
+    assert not score_case_measured("explained", wrong, "pupil_shift", q, kind, 1.20)
+    assert not score_case_measured("explained", best(("pupil_shift",), shift, ("quilt_shape", "blank_bow")),
+                                   "pupil_shift", q, kind, k)
+    assert not score_case_measured("unexplained", pair, "pupil_shift", q, kind, k)
+    assert not score_case_measured("explained", best(("amplitude_scale",), {"scale_J": 1.02}), "pupil_shift", q,
+                                   kind, k)
+    assert score_case_measured("explained", best(("pupil_shift",), shift), "pupil_shift", q, kind, k)
+
+    assert measured_truth(kind, "amplitude_scale", {"scale_J": 0.775}, 1.203) == {"scale_J": pytest.approx(0.9323, abs=1e-4)}
+    assert measured_truth(kind, "pupil_shift", truth, 1.203) == truth
+    assert measured_truth(kind, "amplitude_scale", {"scale_J": 0.775}, None) == {"scale_J": 0.775}
+    off = measured_truth(kind, "temperature", {"temperature_offset_K": 53.4}, 1.1)["temperature_offset_K"]
+    assert thermal_factor(80.0 + off, 80.0) == pytest.approx(1.1 * thermal_factor(133.4, 80.0), rel=1e-6)
+    assert measured_rescaling(kind, "temperature", {"temperature_offset_K": 53.4}, 1.1) == pytest.approx(
+        1.1 * thermal_factor(133.4, 80.0))
+    # a map-only case: the spare blank at the map's 128 K
+    assert measured_truth("surface", "amplitude_scale", {"scale_spare": 0.8}, 1.1) == {"scale_spare": pytest.approx(0.88)}
+    assert rescaling_factor({"temperature_offset_K": 10.0}, "surface") == pytest.approx(thermal_factor(138.0, 128.0))
+
+
 def test_the_x_fundamental_ratio_of_a_truth_is_its_21_mm_amplitude_over_the_nominals():
     """Hand-made maps: a nominal quilt and a truth whose x fundamental is 1.15x the
     nominal's, whose y fundamental and harmonics differ, and that carries a tilt and a

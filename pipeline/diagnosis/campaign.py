@@ -36,7 +36,13 @@ the diagnosis's own amplitude convention (``correct_top_fundamental``,
 :func:`score_case_fundamental`): an independent truth is normalised to the nominal as a
 whole, so its x fundamental, which the rescalings measure, may differ from the nominal's;
 where it does by more than the amplitude's floor, a rescaling named beside the injected
-effect is part of the truth, not a false attribution.
+effect is part of the truth, not a false attribution. The same convention with the
+rescalings judged by their value (``correct_top_measured``, :func:`score_case_measured`):
+a rescaling named beside the injected effect is part of the truth when its factor lies
+within that floor of the truth's x-fundamental ratio (times the injected rescaling's
+factor), whatever the ratio; and ``recovered_20pct_measured`` compares a rescaled truth's
+parameters in that convention (:func:`measured_truth`), the other effects' as the named
+finding reads them.
 
 The model discrepancy (``CampaignConfig.discrepancy``): ``"unmodelled"`` (default) is a
 0.01 µm RMS trefoil/tetrafoil/pentafoil surface error (:func:`~.synth.unmodelled_shape`),
@@ -68,7 +74,8 @@ from pipeline.io.measured import write_line_profile_csv, write_psf_image_csv
 from pipeline.io.registry import write_sag_map
 
 from .effect_draws import signed_uniform
-from .effects import LIBRARY, Effect, draw_campaign_truth, parameter_spec
+from .effects import LIBRARY, Effect, SummaryContext, draw_campaign_truth, parameter_spec
+from .effects.rescaling import offset_for_factor
 from .engine import Criteria, diagnose
 from .forward import blank_coordinates, deformation_factor, map_terms_um, true_temperature
 from .manifest import NOMINAL_SIMULATION, Simulation
@@ -436,6 +443,71 @@ def score_case_fundamental(verdict: str, best, effect: str, present=(), fundamen
     return bool(names and set(best.effects) <= allowed and not false)
 
 
+def _reference(kind: str) -> tuple[str, float]:
+    """The blank and the stated temperature (K) of a case's rescaled measurements: a map-only
+    case's spare blank at :data:`SURFACE_T_K`, a profile case's grating at the simulation's
+    cold temperature."""
+    return ("spare", SURFACE_T_K) if kind == "surface" else (_PROFILE_BLANK, _COLD_K)
+
+
+def rescaling_factor(parameters: dict, kind: str) -> float:
+    """The deformation factor that the rescaling parameters among ``parameters`` (a
+    finding's or a truth's) give a case's measurements of ``kind`` against the nominal at
+    their stated temperature (1: none): the thermal factor of a temperature offset times the
+    blank's amplitude scale (:func:`~.forward.deformation_factor`)."""
+    blank, T = _reference(kind)
+    return float(deformation_factor(parameters, blank, T, T))
+
+
+def measured_rescaling(kind: str, effect: str, truth: dict, fundamental_x_ratio: float | None) -> float:
+    """The deformation factor a truth carries in the diagnosis's amplitude convention: the
+    rescalings measure the quilt's x fundamental, so an independent truth's x-fundamental
+    ratio (1 without one) times the injected rescaling's factor, if the injected effect is
+    a rescaling."""
+    k = 1.0 if fundamental_x_ratio is None else float(fundamental_x_ratio)
+    return k * rescaling_factor(truth, kind) if in_library(effect) and LIBRARY[effect].rescales else k
+
+
+def measured_truth(kind: str, effect: str, truth: dict, fundamental_x_ratio: float | None) -> dict:
+    """The injected parameters in the diagnosis's amplitude convention: a rescaling's value
+    that gives :func:`measured_rescaling` (the amplitude times the x-fundamental ratio; the
+    temperature offset whose thermal factor is that ratio times the injected one's); other
+    effects' parameters unchanged."""
+    if fundamental_x_ratio is None or not (in_library(effect) and LIBRARY[effect].rescales):
+        return dict(truth)
+    blank, T = _reference(kind)
+    out = {}
+    for k, v in truth.items():
+        if k == "temperature_offset_K":
+            out[k] = offset_for_factor(v, float(fundamental_x_ratio), SummaryContext(cold_K=T))
+        elif k.startswith("scale_"):
+            out[k] = v * float(fundamental_x_ratio)
+        else:
+            out[k] = v
+    return out
+
+
+def score_case_measured(verdict: str, best, effect: str, present, kind: str, true_factor: float) -> bool:
+    """Correct with the rescalings judged by their value: as :func:`score_case`, and also a
+    top finding that names the injected effect beside rescalings (as effects of the finding
+    or companions; nothing else the truth does not carry) whose factor
+    (:func:`rescaling_factor`) lies within the amplitude's floor (0.05) of the factor the
+    truth carries in the diagnosis's amplitude convention (``true_factor``,
+    :func:`measured_rescaling`). Unlike :func:`score_case_fundamental` this also holds for a
+    truth whose x fundamental differs by less than the floor, and not for a rescaling the
+    diagnosis reads wrong."""
+    if score_case(verdict, best, effect, present)[0]:
+        return True
+    if verdict != "explained" or best is None or not in_library(effect):
+        return False
+    rescalings = {name for name, e in LIBRARY.items() if e.rescales}
+    extra = (set(best.effects) | set(best.companions)) - {*injected(effect), *present}
+    names = set(injected(effect)) <= set(best.effects) or effect in best.degenerate_with
+    floor = LIBRARY["amplitude_scale"].parameters[0].floor
+    return bool(names and extra and extra <= rescalings
+                and abs(rescaling_factor(best.parameters, kind) - true_factor) <= floor)
+
+
 def _false_companions(best, allowed) -> list[str]:
     """The companions of the top finding ``best`` that are not among the ``allowed`` effects."""
     return [c for c in best.companions if c not in allowed]
@@ -481,6 +553,7 @@ def run_case(args) -> dict:
                     "false_companions": [], "verdict": "refused", "refusal": str(exc), "top": None,
                     "correct": False, "correct_fundamental": False, "recovery_error": None,
                     "recovery_error_vector": None, "recovery_error_named": None,
+                    "correct_measured": False, "recovery_error_measured": None,
                     "within_2sigma": None, "seconds": time.perf_counter() - t0}
     best = d.best
     own = d.finding(effect) if in_library(effect) else None  # the injected effect's own fit
@@ -490,6 +563,12 @@ def run_case(args) -> dict:
     correct, false_companions = score_case(d.verdict, best, effect, present)
     fx = (truth_info or {}).get("fundamental_x_ratio")
     correct_fundamental = score_case_fundamental(d.verdict, best, effect, present, fx)
+    # the rescalings judged by their value against what the truth carries in the amplitude
+    # convention; parameters by the named finding where it holds the effect, else its own fit
+    true_factor = measured_rescaling(kind, effect, truth, fx)
+    correct_measured = score_case_measured(d.verdict, best, effect, present, kind, true_factor)
+    rec_measured = recovery_errors(d, effect, measured_truth(kind, effect, truth, fx),
+                                   finding=best if best and effect in best.effects else None)
     return {"index": index, "kind": kind, "effect": effect, "truth": truth, "truth_info": truth_info,
             "truth_present": list(present), "measurement": _measurement_kind(kind, cfg),
             "false_companions": false_companions, "verdict": d.verdict,
@@ -501,6 +580,11 @@ def run_case(args) -> dict:
             "recovery_error": rec["per_parameter"] if rec else None,
             "recovery_error_vector": rec["vector"] if rec else None,
             "recovery_error_named": rec_named["per_parameter"] if rec_named else None,
+            "correct_measured": correct_measured, "rescaling_true": true_factor,
+            "rescaling_named": rescaling_factor(best.parameters, kind) if best else None,
+            "recovery_error_measured": rec_measured["per_parameter"] if rec_measured else None,
+            "top_parameters": best.parameters if best else None,
+            "top_uncertainties": best.uncertainties if best else None,
             "within_2sigma": rec["within_2sigma"] if rec else None,
             "uncertainties": own.uncertainties if own else None,
             "fitted": own.parameters if own else None,
@@ -528,7 +612,10 @@ def _scores(rows: list[dict]) -> dict:
     """The three headline scores of ``rows`` (correct top, within 20 %, out-of-library unexplained).
     ``recovered_20pct`` reads the injected effect's own fit; ``recovered_20pct_named`` the named
     (top) finding's where it holds the injected effect (a pair named beside a rescaling has its
-    own value of the effect's parameters)."""
+    own value of the effect's parameters). ``correct_top_measured`` and
+    ``recovered_20pct_measured`` score in the diagnosis's amplitude convention with the
+    rescalings judged by their value (:func:`score_case_measured`, :func:`measured_truth`;
+    parameters of the named finding where it holds the effect, else of its own fit)."""
     lib = [r for r in rows if in_library(r["effect"])]
     ool = [r for r in rows if not in_library(r["effect"])]
     return {"n_library": len(lib), "n_ool": len(ool),
@@ -537,6 +624,9 @@ def _scores(rows: list[dict]) -> dict:
             "recovered_20pct": sum(r["recovery_error"] is not None and r["recovery_error"] <= 0.2 for r in lib),
             "recovered_20pct_named": sum(r.get("recovery_error_named") is not None
                                          and r["recovery_error_named"] <= 0.2 for r in lib),
+            "correct_top_measured": sum(bool(r.get("correct_measured")) for r in lib),
+            "recovered_20pct_measured": sum(r.get("recovery_error_measured") is not None
+                                            and r["recovery_error_measured"] <= 0.2 for r in lib),
             "ool_unexplained": sum(r["verdict"] != "explained" for r in ool),
             "false_companion_cases": sum(bool(r.get("false_companions")) for r in rows)}
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 from .. import effect_draws
 from .base import Effect, Parameter, SummaryContext
 
-__all__ = ["AMPLITUDE_SCALE", "TEMPERATURE"]
+__all__ = ["AMPLITUDE_SCALE", "TEMPERATURE", "offset_for_factor"]
 
 
 def _scale(p: dict, blank: str) -> float:
@@ -39,10 +39,10 @@ def _summary_temperature(p: dict, ctx: SummaryContext) -> dict:
 def _projection_temperature(parameters: dict, k: float, ctx: SummaryContext) -> dict:
     if "temperature_offset_K" not in parameters:
         return {}
-    return {"temperature_offset_K_projection": _offset_for_factor(parameters["temperature_offset_K"], k, ctx)}
+    return {"temperature_offset_K_projection": offset_for_factor(parameters["temperature_offset_K"], k, ctx)}
 
 
-def _offset_for_factor(offset_K: float, k: float, ctx: SummaryContext) -> float:
+def offset_for_factor(offset_K: float, k: float, ctx: SummaryContext) -> float:
     """The cold-temperature offset whose thermal factor at ``ctx.cold_K`` is ``k`` times that
     of ``offset_K`` (NaN where no temperature within both materials' data range, below the
     warm one, gives it)."""
