@@ -204,13 +204,40 @@ def test_psf_image_intensity_alias(tmp_path):
 
 
 # ------------------------------------------------------------------ decimal commas
-def test_decimal_comma_is_refused_naming_the_value(tmp_path):
+def test_decimal_commas_are_read_where_the_delimiter_leaves_no_doubt(tmp_path):
+    """A European locale's export (semicolon or tab delimited, decimal commas) reads as the
+    same numbers as the decimal-point table; a map too. What is refused names why: a comma
+    that could be a thousands separator in every number (1,250 is 1.25 or 1250), a table mixing
+    both separators, a comma-delimited table whose decimal commas split its numbers."""
     f = tmp_path / "eu.csv"
     f.write_text("offset_um;intensity\n" + "".join(f"{o:.1f};{c:.3f}\n".replace(".", ",")
                                                    for o, c in zip(OFFSET_UM, COUNTS)))
-    with pytest.raises(ValueError, match=r"eu\.csv, line 2: decimal comma in '-60,0' .*export the table with '\.' "
-                                         r"as the decimal separator"):
-        ic.read_measured("line profile", f)
+    ref = tmp_path / "ref.csv"
+    ref.write_text("offset_um,intensity\n" + "".join(f"{o:.1f},{c:.3f}\n" for o, c in zip(OFFSET_UM, COUNTS)))
+    u, v = ic.read_measured("line profile", f)
+    u0, v0 = ic.read_measured("line profile", ref)
+    np.testing.assert_array_equal(u, u0)
+    np.testing.assert_array_equal(v, v0)
+    x = np.repeat(np.arange(-4.0, 4.01, 2.0), 5)
+    y = np.tile(np.arange(-4.0, 4.01, 2.0), 5)
+    sag = 0.0125 * x - 0.003 * y**2
+    m = tmp_path / "map.csv"
+    m.write_text("x [mm]\ty [mm]\tsag [um]\n" + "".join(f"{a:.2f}\t{b:.2f}\t{c:.5f}\n".replace(".", ",")
+                                                      for a, b, c in zip(x, y, sag)))
+    sm = ic.read_sag_map(m)
+    X, Y = sm.grid()
+    np.testing.assert_allclose(sm.sag_um, 0.0125 * X - 0.003 * Y**2, atol=1e-12)
+    amb = tmp_path / "thousands.csv"
+    amb.write_text("offset_um;intensity\n" + "".join(f"{o};{c}\n" for o, c in (("-1,250", "2,125"), ("1,250", "3,500"))))
+    with pytest.raises(ValueError, match=r"thousands\.csv, line 2: decimal comma in '-1,250' .*every comma-number could "
+                                         r"hold a thousands separator; export the table with '\.' as the decimal "
+                                         r"separator"):
+        ic.read_measured("line profile", amb)
+    mixed = tmp_path / "mixed.csv"
+    mixed.write_text("offset_um;intensity\n-60,5;150.0\n-57,5;151.0\n")
+    with pytest.raises(ValueError, match=r"mixed\.csv, line 2: decimal comma in '-60,5' .*the table also has decimal "
+                                         r"points"):
+        ic.read_measured("line profile", mixed)
     g = tmp_path / "eu_comma.csv"
     g.write_text("offset_um,intensity\n" + "".join(f"{o:.1f},{c:.3f}\n".replace(".", ",")
                                                    for o, c in zip(OFFSET_UM, COUNTS)))

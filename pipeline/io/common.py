@@ -11,8 +11,11 @@
   a byte-order mark) and the numeric columns of a delimited table with a header, errors by
   line; lines before the header (an export's title, date, exposure) are skipped. Tables other code writes are taken as they come: comma, semicolon, tab or
   whitespace delimited (told from the header line), and a column in another length unit
-  than the one asked for (``x [m]``, ``sag_nm``, ``Offset (mm)``) converted to it. A number
-  with a decimal comma is refused by name (``1,250`` is 1.25 or 1250 by the writer's locale).
+  than the one asked for (``x [m]``, ``sag_nm``, ``Offset (mm)``) converted to it. Decimal
+  commas (a European locale's export: ``-60,5;0,013``) are read where the delimiter is not a
+  comma and the table says which separator it uses (:func:`decimal_commas`); a table where a
+  comma could be a thousands separator (``1,250`` is 1.25 or 1250 by the writer's locale) is
+  refused by name.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ from fea.atomic import atomic_path, atomic_write
 from pipeline.io.gridding import SAG_UNITS_TO_UM
 
 __all__ = ["atomic_write", "atomic_path", "parse_error", "numbered_lines", "read_text",
-           "decode_text", "read_csv_columns", "read_csv_choices", "PREAMBLE_LINES"]
+           "decode_text", "read_csv_columns", "read_csv_choices", "decimal_commas", "PREAMBLE_LINES"]
 
 
 def parse_error(path: str | Path, line: int | None, message: str) -> ValueError:
@@ -113,6 +116,21 @@ def _column(header: list[str], name: str) -> tuple[int, float] | None:
 
 #: A number written with a decimal comma (``1,25``, ``-0,5e-3``).
 _DECIMAL_COMMA = re.compile(r"^[+-]?\d*,\d+([eE][+-]?\d+)?$")
+#: A decimal-comma number that cannot be one with a thousands separator: not three digits
+#: after the comma, a zero or empty integer part, or an exponent.
+_SURELY_DECIMAL = re.compile(r"^[+-]?(\d*,(\d{1,2}|\d{4,})|0?,\d+|\d*,\d+[eE][+-]?\d+)$")
+
+
+def decimal_commas(fields: list[str]) -> bool | None:
+    """Whether a table's numeric ``fields`` use decimal commas: True where some field can only
+    be a decimal-comma number (``0,5``, ``12,25``, ``1,5e-3``) and no field has a decimal
+    point; None where they could (every comma-number has three digits after the comma and a
+    non-zero integer part: ``1,250`` is 1.25 or 1250 by the writer's locale); False without
+    comma-numbers. A table with both separators is not a decimal-comma table."""
+    commas = [f for f in fields if _DECIMAL_COMMA.match(f)]
+    if not commas or any("." in f for f in fields):
+        return False
+    return True if any(_SURELY_DECIMAL.match(f) for f in commas) else None
 
 #: Lines of preamble (before the header line) a table may have.
 PREAMBLE_LINES = 50
@@ -218,9 +236,14 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
         return (*fast, chosen)
     idx = [i for _, (i, _) in found]
     factor = np.array([f for _, (_, f) in found])
+    rows = [(n, t, _split(t, delim)) for n, t in lines_[1:]]
+    # A comma cannot split the numbers of a table delimited otherwise: there a comma is the
+    # decimal separator when the table shows it can be nothing else.
+    comma_decimal = delim != "," and decimal_commas([r[i].strip() for _, _, r in rows for i in idx if i < len(r)])
     vals, lines = [], []
-    for n, t in lines_[1:]:
-        r = _split(t, delim)
+    for n, t, r in rows:
+        if comma_decimal:
+            r = [f.replace(",", ".") for f in r]
         if len(r) != len(header):
             extra = delim == "," and len(r) > len(header)
             comma = "; if the table uses decimal commas, they split its numbers: export with decimal points" if extra else ""
@@ -231,9 +254,10 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
             comma = next((f for f in r if _DECIMAL_COMMA.match(f.strip())), None)
             if comma is not None:
                 # "1,250" is 1.25 or 1250 depending on the writer's locale: not guessed
-                raise parse_error(path, n, f"decimal comma in {comma.strip()!r} ({t.strip()!r}): numbers are read "
-                                           "with a decimal point; export the table with '.' as the decimal "
-                                           "separator") from None
+                why = ("every comma-number could hold a thousands separator" if comma_decimal is None
+                       else "the table also has decimal points" if delim != "," else "the comma is the delimiter")
+                raise parse_error(path, n, f"decimal comma in {comma.strip()!r} ({t.strip()!r}): {why}; export the "
+                                           "table with '.' as the decimal separator") from None
             raise parse_error(path, n, f"non-numeric value in {t.strip()!r}") from None
         lines.append(n)
     return np.array(vals, dtype=float).reshape(-1, len(choices)) * factor, np.array(lines, dtype=int), chosen
