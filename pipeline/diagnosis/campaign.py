@@ -414,6 +414,12 @@ def recovery_errors(d, effect: str, truth: dict, finding=None) -> dict | None:
     return {"per_parameter": per, "vector": vec, "within_2sigma": bool(sig_ok)}
 
 
+#: The library's rescaling effects (``Effect.rescales``) and the amplitude's floor: the
+#: amplitude conventions' unit of "no distinguishable change" of the deformation factor.
+_RESCALINGS = tuple(name for name, e in LIBRARY.items() if e.rescales)
+_AMPLITUDE_FLOOR = LIBRARY["amplitude_scale"].parameters[0].floor
+
+
 def rescalings_present(fundamental_x_ratio: float | None) -> tuple[str, ...]:
     """The rescaling effects an independent truth carries in the diagnosis's own amplitude
     convention: the rescalings measure the quilt's x fundamental (what a line profile
@@ -422,10 +428,9 @@ def rescalings_present(fundamental_x_ratio: float | None) -> tuple[str, ...]:
     the nominal (``k = 1``, :mod:`.truth.gratings`). Empty without a ratio."""
     if fundamental_x_ratio is None:
         return ()
-    floor = LIBRARY["amplitude_scale"].parameters[0].floor
-    if abs(float(fundamental_x_ratio) - 1.0) <= floor:
+    if abs(float(fundamental_x_ratio) - 1.0) <= _AMPLITUDE_FLOOR:
         return ()
-    return tuple(name for name, e in LIBRARY.items() if e.rescales)
+    return _RESCALINGS
 
 
 def score_case_fundamental(verdict: str, best, effect: str, present=(), fundamental_x_ratio=None) -> bool:
@@ -480,7 +485,7 @@ def measured_truth(kind: str, effect: str, truth: dict, fundamental_x_ratio: flo
     for k, v in truth.items():
         if k == "temperature_offset_K":
             out[k] = offset_for_factor(v, float(fundamental_x_ratio), SummaryContext(cold_K=T))
-        elif k.startswith("scale_"):
+        elif k == f"scale_{blank}":
             out[k] = v * float(fundamental_x_ratio)
         else:
             out[k] = v
@@ -500,12 +505,10 @@ def score_case_measured(verdict: str, best, effect: str, present, kind: str, tru
         return True
     if verdict != "explained" or best is None or not in_library(effect):
         return False
-    rescalings = {name for name, e in LIBRARY.items() if e.rescales}
     extra = (set(best.effects) | set(best.companions)) - {*injected(effect), *present}
     names = set(injected(effect)) <= set(best.effects) or effect in best.degenerate_with
-    floor = LIBRARY["amplitude_scale"].parameters[0].floor
-    return bool(names and extra and extra <= rescalings
-                and abs(rescaling_factor(best.parameters, kind) - true_factor) <= floor)
+    return bool(names and extra and extra <= set(_RESCALINGS)
+                and abs(rescaling_factor(best.parameters, kind) - true_factor) <= _AMPLITUDE_FLOOR)
 
 
 def _false_companions(best, allowed) -> list[str]:
@@ -559,7 +562,8 @@ def run_case(args) -> dict:
     own = d.finding(effect) if in_library(effect) else None  # the injected effect's own fit
     rec = recovery_errors(d, effect, truth)
     # what a user reads: the parameters of the named finding, where it holds the injected effect
-    rec_named = recovery_errors(d, effect, truth, finding=best) if best and effect in best.effects else None
+    named = best if best and effect in best.effects else None
+    rec_named = recovery_errors(d, effect, truth, finding=named) if named else None
     correct, false_companions = score_case(d.verdict, best, effect, present)
     fx = (truth_info or {}).get("fundamental_x_ratio")
     correct_fundamental = score_case_fundamental(d.verdict, best, effect, present, fx)
@@ -567,8 +571,7 @@ def run_case(args) -> dict:
     # convention; parameters by the named finding where it holds the effect, else its own fit
     true_factor = measured_rescaling(kind, effect, truth, fx)
     correct_measured = score_case_measured(d.verdict, best, effect, present, kind, true_factor)
-    rec_measured = recovery_errors(d, effect, measured_truth(kind, effect, truth, fx),
-                                   finding=best if best and effect in best.effects else None)
+    rec_measured = recovery_errors(d, effect, measured_truth(kind, effect, truth, fx), finding=named)
     return {"index": index, "kind": kind, "effect": effect, "truth": truth, "truth_info": truth_info,
             "truth_present": list(present), "measurement": _measurement_kind(kind, cfg),
             "false_companions": false_companions, "verdict": d.verdict,
