@@ -61,6 +61,10 @@ class Criteria:
     #: weighs more than one with a small gap). :func:`.fitting.nominal_weights`; measured on
     #: independent truths and the paper's J scenario in ``benchmarks/results_weight_scale.md``.
     weight_scale: str = "measurement"
+    #: Where a map of a blank is measured beside its line profiles or PSF images, the image
+    #: models carry the map's departure from the model's blank shape (the quilt the library
+    #: cannot fit: :mod:`.map_departure`); False: they use the model's shape alone.
+    map_in_optics: bool = True
 
     def __post_init__(self) -> None:
         if self.n_eff_from not in N_EFF_SOURCES:
@@ -76,6 +80,8 @@ class Criteria:
                   "degenerate_bic": (0.0, math.inf), "degenerate_prediction": (0.0, 1.0),
                   "no_gap_ratio": (1.0, math.inf), "no_gap_z": (0.0, math.inf), "heldout_top": (0, 20),
                   "companion_top": (0, 20), "companion_bic": (0.0, math.inf), "absorb_test_bic": (0.0, math.inf)}
+        if not isinstance(self.map_in_optics, bool):
+            raise ValueError(f"Criteria: map_in_optics={self.map_in_optics!r} must be True or False")
         if not isinstance(self.pair_forward, bool):
             raise ValueError(f"Criteria: pair_forward={self.pair_forward!r} must be True or False")
         for name, (lo, hi) in ranges.items():

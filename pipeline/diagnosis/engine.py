@@ -27,6 +27,7 @@ from .gap import acting_on, gap_statistics, gaps, has_gap, post_fit_n_eff, recou
 from .heldout import heldout_check
 from .identifiability import absorbed, degeneracies, sign_degeneracies, unconstrained
 from .manifest import Manifest, load_data, load_manifest, read_summary
+from .map_departure import map_departure
 from .nominal import nominal_sag_map
 from .plausibility import at_prior_bound, check_measurements
 from .psf_image import PsfImageForward
@@ -91,12 +92,16 @@ class Diagnosis:
                       "effect_library": library_rows()})
 
 
-def build_problem(manifest: Manifest, data: tuple, nominal, weight_scale: str = "measurement") -> tuple[Problem, FitOutcome]:
+def build_problem(manifest: Manifest, data: tuple, nominal, weight_scale: str = "measurement",
+                  map_in_optics: bool = False) -> tuple[Problem, FitOutcome]:
     """Forward models, the nominal (nuisance-only) fit, noise, n_eff and weights
-    (``weight_scale``: :func:`.fitting.nominal_weights`)."""
+    (``weight_scale``: :func:`.fitting.nominal_weights`); with ``map_in_optics`` the image
+    models of a blank whose map is measured carry its departure (:func:`carry_map_departures`)."""
     sim = manifest.simulation
     kinds = {"surface": SurfaceForward, "line_profile": ProfileForward, "psf_image": PsfImageForward}
     fws = [kinds[d.measurement.kind](d, nominal, sim.cold_K, sim.warm_K, materials=sim.materials) for d in data]
+    if map_in_optics:
+        carry_map_departures(fws, nominal)
     prob = Problem(fws, {f.name: 1.0 for f in fws}, {f.name: float(f.n) for f in fws})
     nom = fit(prob, ())
     for f in fws:
@@ -106,6 +111,24 @@ def build_problem(manifest: Manifest, data: tuple, nominal, weight_scale: str = 
     prob.weights.update(nominal_weights({f.name: f.kind for f in fws}, {f.name: f.n for f in fws}, nom.rss,
                                         prob.n_eff, prob.noise, weight_scale))
     return prob, fit(prob, ())
+
+
+def carry_map_departures(forwards: list, nominal) -> tuple:
+    """Give each spectrograph-image model the departure (:mod:`.map_departure`) of the map
+    measured of its blank; returns the departures carried. With two maps of one blank the
+    one with more points is used (they measure the same grating)."""
+    maps = {}
+    for f in forwards:
+        if f.kind == "surface" and (f.blank not in maps or f.n > maps[f.blank].n):
+            maps[f.blank] = f
+    images = [f for f in forwards if f.kind != "surface" and f.blank in maps]
+    carried = {}
+    for f in images:
+        if f.blank not in carried:
+            carried[f.blank] = map_departure(maps[f.blank], nominal)
+        if carried[f.blank] is not None:
+            f.carry_departure(carried[f.blank])
+    return tuple(d for d in carried.values() if d is not None)
 
 
 def _data_notes(data, forward) -> dict:
@@ -216,7 +239,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
         nominal = nominal_sag_map(manifest.simulation, cache_dir)
     check_measurements(manifest, data, nominal)
     t["load_s"] = time.perf_counter() - t["start"]
-    prob, nom = build_problem(manifest, data, nominal, criteria.weight_scale)
+    prob, nom = build_problem(manifest, data, nominal, criteria.weight_scale, criteria.map_in_optics)
     base_forwards = tuple(prob.forwards)  # one per measurement, in the manifest's order
     kinds = {f.kind for f in prob.forwards}
     cands = applicable_effects(kinds, effects)
@@ -303,7 +326,9 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
                 "noise": dict(prob.noise), "n": dict(nom.n), "n_eff": dict(prob.n_eff),
                 "n_count": dict(prob.n_count or prob.n_eff), "n_eff_from": criteria.n_eff_from,
                 "error_model": criteria.error_model, "error_model_used": model, "errors": errors_summary(errors),
-                "weights": dict(prob.weights), "nominal_map": nominal.label}
+                "weights": dict(prob.weights), "nominal_map": nominal.label,
+                "map_departures": list({f.departure.measurement: f.departure.summary() for f in base_forwards
+                                        if f.kind != "surface" and f.departure is not None}.values())}
     ms = tuple({"name": m.name, "kind": m.kind, "file": str(m.file), "blank": m.blank, "grating": m.grating,
                 "wavelength_um": m.wavelength_um, "pixel_scale_mas": m.pixel_scale_mas,
                 "temperature_K": m.temperature_K, "read": read_summary(d), **_data_notes(d, f)}

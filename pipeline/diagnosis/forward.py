@@ -332,6 +332,14 @@ class SpectrographImageModel:
         self._cache: OrderedDict = OrderedDict()
         self._cache_size = cache_size
         self.noise_known = m.noise_rel
+        self.departure = None
+
+    def carry_departure(self, departure) -> None:
+        """Add a measured map's departure from the model's blank shape
+        (:class:`.map_departure.MapDeparture`, per unit deformation factor on the nominal's
+        grid) to the shape every image of this model is formed with."""
+        self.departure = departure
+        self._cache.clear()
 
     def factor(self, p: dict) -> float:
         # taken at the simulation's cold_K: spectrograph data are stated at it
@@ -349,7 +357,10 @@ class SpectrographImageModel:
         if hit is not None:
             self._cache.move_to_end(key)
             return hit
-        out = build(self.nominal.with_sag(k * blank_shape_um(self.nominal.sag_um, *self._grid, p, self._quilt_at)), p)
+        shape = blank_shape_um(self.nominal.sag_um, *self._grid, p, self._quilt_at)
+        if self.departure is not None:
+            shape = shape + self.departure.shape_um
+        out = build(self.nominal.with_sag(k * shape), p)
         self._cache[key] = out
         if len(self._cache) > self._cache_size:
             self._cache.popitem(last=False)
