@@ -44,9 +44,10 @@ class _Map:
 
     kind = "surface"
 
-    def __init__(self, x, y, sag, nominal, blank="J", name="map"):
+    def __init__(self, x, y, sag, nominal, blank="J", name="map", noise_um=NOISE_UM):
         self.x, self.y, self.data, self.n = x, y, sag, x.size
         self.quilt, self.radius_mm, self.blank, self.name = quilt_components(nominal), RADIUS_MM, blank, name
+        self.noise_known = noise_um  # as a manifest's noise_um gives it
 
 
 def _sum_quilt(x, y, ratio_y=1.0):
@@ -67,22 +68,34 @@ def test_what_the_library_reaches_leaves_no_departure(nominal):
     assert np.sqrt(np.mean(d.shape_um**2)) < 1.5 * NOISE_UM
 
 
+def _cell(x, y, x0, y0):
+    """1 over the lattice cell centred at ``(x0, y0)`` (21 x 18 mm), 0 outside, the edges
+    blended over ~1.5 mm."""
+    from scipy.special import erf
+
+    def edge(u, half):
+        return 0.5 * (erf((u + half) / (1.5 * np.sqrt(2))) - erf((u - half) / (1.5 * np.sqrt(2))))
+    return edge(x - x0, 10.5) * edge(y - y0, 9.0)
+
+
 def test_one_pocket_printing_through_is_carried_per_unit_factor(nominal):
+    """One cell's quilt 10 % stronger (its own wall thickness): per unit factor the
+    departure is ``0.1 w q`` (``q`` the quilt, ``w`` the cell), 0.1 x 2A = 30 nm at the cell's
+    hole crossing; its projection on the nominal (one cell of ~40 in the map: 0.26 % of
+    ``q``) is within the tolerance."""
     x, y = _points(3)
     rng = np.random.default_rng(4)
-    bump_um, x0, y0, sigma_mm = 0.03, 21.0, -18.0, 4.0  # a hole crossing 3 % of PV stronger
-    bump = bump_um * np.exp(-((x - x0) ** 2 + (y - y0) ** 2) / (2 * sigma_mm**2))
-    sag = 1.3 * _sum_quilt(x, y) + bump + 0.2 - 1e-3 * y + rng.normal(0.0, NOISE_UM, x.size)
-    d = map_departure(_Map(x, y, sag, nominal), nominal)
-    # the bump's projection on cos(2 pi x / 21) over the disc: 2 * bump volume * 0.49 / area
-    # = 2e-4 of the amplitude; the scale is the deformation factor
+    x0, y0 = 21.0, -18.0  # a hole crossing: the quilt's maximum 2A
+    sag = 1.3 * _sum_quilt(x, y) * (1 + 0.1 * _cell(x, y, x0, y0)) + 0.2 - 1e-3 * y
+    d = map_departure(_Map(x, y, sag + rng.normal(0.0, NOISE_UM, x.size), nominal), nominal)
     assert d.scale == pytest.approx(1.3, rel=0.01)
     X, Y = nominal.grid()
     at = (np.abs(X - x0) < 0.01) & (np.abs(Y - y0) < 0.01)
-    assert d.shape_um[at].item() == pytest.approx(bump_um / 1.3, rel=0.1)
-    far = (np.hypot(X - x0, Y - y0) > 20.0) & (np.hypot(X, Y) < RADIUS_MM - 2.0)
-    assert np.sqrt(np.mean(d.shape_um[far] ** 2)) < NOISE_UM / 1.3 * 1.5
-    assert np.all(d.shape_um[np.hypot(X, Y) > RADIUS_MM + 1.0] == 0.0)  # off the map: the model's shape
+    assert d.shape_um[at].item() == pytest.approx(0.1 * 2 * A_UM, rel=0.1)
+    far = (np.hypot(X - x0, Y - y0) > 30.0) & (np.hypot(X, Y) < RADIUS_MM - 2.0)
+    assert np.sqrt(np.mean(d.shape_um[far] ** 2)) < NOISE_UM / 1.3
+    # off the map the model's shape (the filter spreads the map's edge by a few mm)
+    assert np.max(np.abs(d.shape_um[np.hypot(X, Y) > RADIUS_MM + 10.0])) < 0.25 * NOISE_UM
 
 
 def test_no_departure_from_a_map_that_does_not_see_the_quilt(nominal):
@@ -118,12 +131,15 @@ def test_map_noise_carried_into_the_optics_is_below_a_profile_noise(nominal):
     """A 10 nm white noise on the 1 mm map scatters ``(4 pi sigma / lambda)^2`` ~ 1 % of the
     light (reflection, J at 1.25 µm) over the detector period (~384 µm at the fit's
     settings), i.e. ~4e-5 of the flux per 1.5 µm sample against the J line's peak of
-    ~1.6e-2 of the flux per sample: a change of ~3e-3 of its peak, below the 0.3-1 % noise
-    of the campaign's profiles."""
+    ~1.6e-2 of the flux per sample: ~3e-3 of the peak carried as it is (measured 2.7e-3;
+    band-limited 2.3e-3: the light the noise scatters near the line, inside the band, is what
+    changes the profile), as much as the campaign's profiles' noise (0.3-1 % of the peak). The
+    Wiener gain finds no power above the noise's and keeps a fraction of it."""
     x, y = _points(9)
     noise = np.random.default_rng(10).normal(0.0, 0.010, x.size)
-    d = map_departure(_Map(x, y, _sum_quilt(x, y) + noise, nominal), nominal)
+    d = map_departure(_Map(x, y, _sum_quilt(x, y) + noise, nominal, noise_um=0.010), nominal)
+    assert d.carried_rms_um < 0.2 * 0.010
     u, base = profile_curve("J", 1.25, -2, 250, nominal, {}, detected=False)
     u2, noisy = profile_curve("J", 1.25, -2, 250, nominal.with_sag(nominal.sag_um + d.shape_um), {}, detected=False)
     assert np.allclose(u, u2)
-    assert np.max(np.abs(noisy - base)) < 5e-3 * base.max()
+    assert np.max(np.abs(noisy - base)) < 1e-3 * base.max()
