@@ -93,7 +93,7 @@ class Diagnosis:
 
 
 def build_problem(manifest: Manifest, data: tuple, nominal, weight_scale: str = "measurement",
-                  map_in_optics: bool = False) -> tuple[Problem, FitOutcome]:
+                  map_in_optics: bool = Criteria.map_in_optics) -> tuple[Problem, FitOutcome]:
     """Forward models, the nominal (nuisance-only) fit, noise, n_eff and weights
     (``weight_scale``: :func:`.fitting.nominal_weights`); with ``map_in_optics`` the image
     models of a blank whose map is measured carry its departure (:func:`carry_map_departures`)."""
