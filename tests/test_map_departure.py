@@ -16,7 +16,7 @@ import pytest
 from optics.sagmap import quilt_sag_map
 from pipeline.diagnosis.engine import carry_map_departures
 from pipeline.diagnosis.forward import profile_curve
-from pipeline.diagnosis.map_departure import map_departure
+from pipeline.diagnosis.map_departure import filtered, map_departure
 from pipeline.diagnosis.quilt import quilt_components
 
 PV_UM = 0.6
@@ -125,6 +125,19 @@ def test_each_image_carries_the_map_of_its_own_blank(nominal):
     assert j.departure.measurement == "big"  # of two maps of one blank, the one with more points
     assert h.departure is None  # no map of the H blank
     assert [c.measurement for c in carried] == ["big"]
+
+
+def test_filter_keeps_the_lattice_band(nominal):
+    """Without noise the filter passes lattice harmonics 0.75 to 4 (radially from 0.75, along
+    each axis up to 4) and stops what lies above 5 and below 0.25: a figure over 100 mm
+    (0.21 of the 21 mm pitch along x)."""
+    X, Y = nominal.grid()
+    inner = (np.abs(X) < 50) & (np.abs(Y) < 40)  # away from the grid's edge
+    kept = np.cos(2 * np.pi * 3 * X / 21.0) * np.cos(2 * np.pi * 2 * Y / 18.0) + np.cos(2 * np.pi * Y / 18.0)
+    cut = np.cos(2 * np.pi * 6 * X / 21.0) + np.cos(2 * np.pi * 5.5 * Y / 18.0) + np.cos(2 * np.pi * X / 100.0)
+    # 3 %: the finite map's own leakage (a cosine cut off at the map's edge is not one frequency)
+    assert np.max(np.abs(filtered(kept, None, nominal.x_mm, nominal.y_mm) - kept)[inner]) < 0.03
+    assert np.max(np.abs(filtered(cut, None, nominal.x_mm, nominal.y_mm))[inner]) < 0.03
 
 
 def test_map_noise_carried_into_the_optics_is_below_a_profile_noise(nominal):
