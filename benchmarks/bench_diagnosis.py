@@ -7,7 +7,7 @@ injection-recovery campaign. Writes the per-case rows and the summary as JSON (`
         [--psf-image] [--types KIND:EFFECT,...] [--discrepancy unmodelled|companions]
         [--n-eff-from nominal|best_fit] [--truth independent|model] [--truth-families FAM,...]
         [--error-model by_kind|n_eff|two_part] [--pair-forward] [--pair-from N] [--diagnosis-criteria]
-        [--weight-scale measurement|kind] [--pair-second significant|improving]
+        [--weight-scale measurement|kind] [--pair-second significant|improving] [--no-map-in-optics]
 
 ``--progress``: every finished case is appended there as a JSON line (partial results
 survive an interrupted run). ``--profiles``: the campaign's line-profile measurement set
@@ -78,6 +78,9 @@ def main(argv=None):
                     help="with --pair-forward: which further singles pair with the best (Criteria.pair_second)")
     ap.add_argument("--weight-scale", default=None, choices=WEIGHT_SCALES,
                     help="what a measurement's weight is normalised by (Criteria.weight_scale; default: the criteria's)")
+    ap.add_argument("--no-map-in-optics", action="store_true",
+                    help="form the profiles on the nominal alone, not on the nominal plus the map's departure "
+                         "(Criteria.map_in_optics)")
     a = ap.parse_args(argv)
     base = Criteria() if a.diagnosis_criteria else CampaignConfig.criteria
     try:
@@ -85,7 +88,8 @@ def main(argv=None):
                                        pair_forward=a.pair_forward or base.pair_forward,
                                        pair_second=base.pair_second if a.pair_second is None else a.pair_second,
                                        pair_from=base.pair_from if a.pair_from is None else a.pair_from,
-                                       weight_scale=base.weight_scale if a.weight_scale is None else a.weight_scale)
+                                       weight_scale=base.weight_scale if a.weight_scale is None else a.weight_scale,
+                                       map_in_optics=base.map_in_optics and not a.no_map_in_optics)
     except ValueError as exc:
         ap.error(str(exc))
     out = {"scenarios": {}}
