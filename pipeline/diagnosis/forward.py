@@ -41,7 +41,7 @@ from .quilt import QuiltComponents, quilt_components
 
 __all__ = ["FIT_LSF_SETTINGS", "NOISE_LEAK_LIMIT", "PROFILE_KEYS", "SurfaceForward", "SpectrographImageModel", "ProfileForward", "profile_curve",
            "true_temperature", "deformation_factor", "blank_coordinates", "blank_shape_um", "map_terms_um",
-           "collimator_terms", "spectrograph_optics", "quilt_parts"]
+           "collimator_terms", "spectrograph_optics", "quilt_parts", "lstsq_residual"]
 
 #: A profile's noise estimate is refused when the noise-free nominal line, sampled like
 #: the data, reads as at least this fraction of it (:meth:`ProfileForward.estimate_noise`).
@@ -58,7 +58,8 @@ FIT_LSF_SETTINGS = LsfSettings(detector_step_um=1.5, n_fft=256, source_step_mm=2
                                window_um=150.0, workers=1)
 
 
-def _lstsq_residual(A: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def lstsq_residual(A: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(d - A c, c)`` for the least-squares coefficients ``c`` of ``A c = d``."""
     c, *_ = np.linalg.lstsq(A, d, rcond=None)
     return d - A @ c, c
 
@@ -208,7 +209,7 @@ class SurfaceForward:
     def residual(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
         """Data minus model with piston and tilt fitted on ``mask`` (µm); ``delta_um`` unused."""
         sel = slice(None) if mask is None else mask
-        r, _ = _lstsq_residual(self.nuisance[sel], self.data[sel] - self.predict(p)[sel])
+        r, _ = lstsq_residual(self.nuisance[sel], self.data[sel] - self.predict(p)[sel])
         return r
 
     def estimate_noise(self, nominal_residual: np.ndarray) -> float:
@@ -252,7 +253,7 @@ class SurfaceForward:
         """Full model (with the fitted piston/tilt) at all points (µm)."""
         sel = slice(None) if mask is None else mask
         m = self.predict(p)
-        _, c = _lstsq_residual(self.nuisance[sel], self.data[sel] - m[sel])
+        _, c = lstsq_residual(self.nuisance[sel], self.data[sel] - m[sel])
         return m + self.nuisance @ c
 
 
@@ -460,13 +461,13 @@ class ProfileForward(SpectrographImageModel):
     def residual(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
         """Data minus model with flux and background fitted on ``mask`` (fraction of the data peak)."""
         sel = slice(None) if mask is None else mask
-        r, _ = _lstsq_residual(self._design(p, delta_um)[sel], self.data[sel])
+        r, _ = lstsq_residual(self._design(p, delta_um)[sel], self.data[sel])
         return r
 
     def fitted(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
         sel = slice(None) if mask is None else mask
         A = self._design(p, delta_um)
-        _, c = _lstsq_residual(A[sel], self.data[sel])
+        _, c = lstsq_residual(A[sel], self.data[sel])
         return A @ c
 
     def _initial_shift(self) -> float:

@@ -70,7 +70,7 @@ from scipy.ndimage import uniform_filter
 from optics.sagmap import SagMap
 from optics.triangulation import linear_on_grid
 
-from .forward import quilt_parts
+from .forward import lstsq_residual, quilt_parts
 from .quilt import QUILT_PERIOD_X_MM, QUILT_PERIOD_Y_MM
 
 __all__ = ["POLYNOMIAL_DEGREE", "DEPARTURE_HARMONICS", "LOW_CUT_HARMONICS", "SMOOTHING_BINS", "NOISE_SEED", "MapDeparture",
@@ -188,11 +188,6 @@ def filtered(sag_um: np.ndarray, noise_um: np.ndarray | None, x_mm: np.ndarray, 
     return np.fft.irfft2(spectrum * gain, s=pad)[:ny, :nx]
 
 
-def _lstsq_residual(A: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    c, *_ = np.linalg.lstsq(A, d, rcond=None)
-    return d - A @ c, c
-
-
 def map_departure(surface, nominal: SagMap) -> MapDeparture | None:
     """The departure of a map measurement from the model's blank shape (module docstring).
 
@@ -217,11 +212,11 @@ def map_departure(surface, nominal: SagMap) -> MapDeparture | None:
     x, y, d, S, Q = surface.x[good], surface.y[good], surface.data[good], S[good], Q[good]
     # The scale: the nominal's least-squares amplitude in the map beside the smooth terms
     # (what the rescalings read); the departure is divided by it to be a shape.
-    scale = float(_lstsq_residual(np.column_stack([S[:, :1], Q]), d)[1][0])
+    scale = float(lstsq_residual(np.column_stack([S[:, :1], Q]), d)[1][0])
     if not scale > 0.0:
         return None
-    r, _ = _lstsq_residual(np.column_stack([S, Q]), d)
-    total = float(np.sqrt(np.mean(_lstsq_residual(Q[:, :3], d)[0] ** 2)))
+    r, _ = lstsq_residual(np.column_stack([S, Q]), d)
+    total = float(np.sqrt(np.mean(lstsq_residual(Q[:, :3], d)[0] ** 2)))
     rms = float(np.sqrt(np.mean(r**2)))
     sigma = float(surface.noise_known or surface.estimate_noise(r))
     on_map = np.isfinite(linear_on_grid(x, y, np.zeros_like(x), nominal.x_mm, nominal.y_mm))
