@@ -159,8 +159,9 @@ def departure_columns(nominal: SagMap, quilt, x_mm: np.ndarray, y_mm: np.ndarray
     return np.column_stack(cols), np.column_stack(smooth)
 
 
-def _taper(h: np.ndarray, harmonics: float) -> np.ndarray:
-    t = np.clip(np.abs(h) - harmonics, 0.0, 1.0)
+def _falling(h: np.ndarray, start: float, width: float) -> np.ndarray:
+    """1 up to ``|h| = start``, a cos² ramp to 0 at ``start + width``, 0 beyond."""
+    t = np.clip((np.abs(h) - start) / width, 0.0, 1.0)
     return np.cos(0.5 * np.pi * t) ** 2
 
 
@@ -168,17 +169,16 @@ def filtered(sag_um: np.ndarray, noise_um: np.ndarray | None, x_mm: np.ndarray, 
              harmonics: float = DEPARTURE_HARMONICS) -> np.ndarray:
     """``sag_um`` (on the uniform grid ``x_mm``, ``y_mm``, mm; no NaN) band-limited to
     ``harmonics`` of the lattice pitch along each axis, cut below :data:`LOW_CUT_HARMONICS`
-    and, given ``noise_um`` (a realisation
-    of the noise on the same grid), weighted by the Wiener gain ``max(0, 1 - N/P)`` of the
-    smoothed power spectra (module docstring). Zero-padded to twice the grid: nothing wraps."""
+    and, given ``noise_um`` (a realisation of the noise on the same grid), weighted by the
+    Wiener gain ``max(0, 1 - N/P)`` of the smoothed power spectra (module docstring).
+    Zero-padded to twice the grid: nothing wraps."""
     ny, nx = sag_um.shape
     pad = (2 * ny, 2 * nx)
     fx = np.fft.rfftfreq(pad[1], float(x_mm[1] - x_mm[0])) * QUILT_PERIOD_X_MM
     fy = np.fft.fftfreq(pad[0], float(y_mm[1] - y_mm[0])) * QUILT_PERIOD_Y_MM
     spectrum = np.fft.rfft2(sag_um, s=pad)
-    gain = np.outer(_taper(fy, harmonics), _taper(fx, harmonics))
-    radial = np.hypot(*np.meshgrid(fx, fy))
-    gain = gain * np.sin(0.5 * np.pi * np.clip((radial - LOW_CUT_HARMONICS) / 0.5 + 0.5, 0.0, 1.0)) ** 2
+    gain = np.outer(_falling(fy, harmonics, 1.0), _falling(fx, harmonics, 1.0))
+    gain = gain * (1.0 - _falling(np.hypot(*np.meshgrid(fx, fy)), LOW_CUT_HARMONICS - 0.25, 0.5))
     if noise_um is not None:
         def smooth(a):  # over neighbouring frequencies, the y axis made contiguous first
             return np.fft.ifftshift(uniform_filter(np.fft.fftshift(a, axes=0), SMOOTHING_BINS, mode="nearest"), axes=0)
