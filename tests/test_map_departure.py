@@ -157,3 +157,33 @@ def test_map_noise_carried_into_the_optics_is_below_a_profile_noise(nominal):
     assert np.allclose(u, u2)
     assert np.max(np.abs(noisy - base)) < 1e-3 * base.max()
 
+
+
+def test_a_carried_departure_reaches_every_memoised_profile(nominal, tmp_path):
+    """A profile model that formed curves before a departure was carried (with and without
+    the detector side's terms, memoised apart) forms them again with it: neither memo hands
+    back a curve of the shape without it."""
+    from pipeline.diagnosis.forward import ProfileForward
+    from pipeline.diagnosis.manifest import load_data, load_manifest
+    from pipeline.io.measured import write_line_profile_csv
+    from pipeline.io.registry import write_sag_map
+
+    write_sag_map(nominal, tmp_path / "nominal.npz")
+    u = np.linspace(-120.0, 120.0, 161)
+    write_line_profile_csv(tmp_path / "p.csv", u, np.exp(-0.5 * (u / 15.0) ** 2))
+    (tmp_path / "m.toml").write_text('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\n'
+                                     'kind = "line_profile"\nfile = "p.csv"\ngrating = "J"\norder = -2\n'
+                                     'wavelength_um = 1.25\npixel_scale_mas = 250\nnoise_rel = 0.01\n')
+    man = load_manifest(tmp_path / "m.toml")
+    f = ProfileForward(load_data(man)[0], nominal, 80.0)
+    halo = {"halo_fraction": 0.02}
+    before = [f.predict({}), f.predict(halo)]
+    x, y = _points(17)
+    sag = 1.3 * _sum_quilt(x, y) * (1 + 0.3 * _cell(x, y, 0.0, 0.0))  # the pocket under the beam's centre
+    f.carry_departure(map_departure(_Map(x, y, sag, nominal), nominal))
+    after = [f.predict({}), f.predict(halo)]
+    fresh = ProfileForward(load_data(man)[0], nominal, 80.0)
+    fresh.carry_departure(f.departure)
+    for b, a, p in zip(before, after, ({}, halo)):
+        assert np.max(np.abs(a - b)) > 1e-3 * b.max()  # the departure changes the line
+        assert np.allclose(a, fresh.predict(p))

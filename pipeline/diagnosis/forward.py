@@ -404,6 +404,10 @@ class ProfileForward(SpectrographImageModel):
             self._splines.move_to_end(key)
         return hit
 
+    def carry_departure(self, departure) -> None:
+        super().carry_departure(departure)
+        self._splines.clear()  # the detected curves too: memoised on the parameters only
+
     def _build(self, sag, p):
         """((offset_um, intensity) the optics form, its spline) for the deformed ``sag``."""
         u, y = profile_curve(self.m.grating, self.m.wavelength_um, self.m.order, self.m.pixel_scale_mas, sag, p,
