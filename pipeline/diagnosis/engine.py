@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from .criteria import N_EFF_SOURCES, Criteria
+from .departure_choice import departure_choice
 from .effects import SummaryContext, applicable_effects, library_rows, parameter_units, physical_summary
 from .amplitude_or_shape import amplitude_degeneracies
 from .error_model import error_source, errors_summary, measure_errors, model_for_kinds, two_part_problem, weights_settled
@@ -209,6 +210,57 @@ def _where(prob: Problem, fo: FitOutcome) -> list[dict]:
     return out
 
 
+@dataclass(frozen=True, eq=False)
+class _Ranking:
+    """The problem and the ranked fits of one pass of :func:`diagnose` (the error model's and
+    the counts' re-rankings done)."""
+
+    prob: Problem
+    nom: FitOutcome
+    findings: list
+    fits: dict
+    joint_fits: dict
+    errors: dict
+    model: str
+    base_forwards: tuple  # one per measurement, in the manifest's order
+
+
+def _ranked(manifest: Manifest, data: tuple, nominal, criteria: Criteria, cands, map_in_optics: bool) -> _Ranking:
+    """Build the problem (the image models carrying a measured map's departure where
+    ``map_in_optics``), fit and rank the candidate effects ``cands``, re-ranking under the
+    error model (``docs/diagnosis.md``, steps 1-5)."""
+    prob, nom = build_problem(manifest, data, nominal, criteria.weight_scale, map_in_optics)
+    base_forwards = tuple(prob.forwards)  # one per measurement, in the manifest's order
+    kinds = {f.kind for f in prob.forwards}
+    memo, errors = {}, {}
+    model = model_for_kinds(criteria.error_model, kinds)
+    if model == "two_part":
+        base_prob = prob
+        errors = measure_errors(base_prob, nom)  # first pass: the nominal residual (signal counts as mismatch)
+        prob = two_part_problem(base_prob, errors)
+        nom = fit(prob, ())
+    findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo)
+    if model == "two_part":
+        for _ in range(_N_EFF_PASSES):
+            errs = measure_errors(base_prob, fits[error_source(findings).effect])
+            new = two_part_problem(base_prob, errs)
+            if weights_settled(prob, new, _N_EFF_RTOL):
+                break
+            prob, errors, memo = new, errs, {}  # new weights: every fit is redone
+            nom = fit(prob, ())
+            findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo)
+    elif criteria.n_eff_from == "best_fit":
+        for _ in range(_N_EFF_PASSES):
+            count = post_fit_n_eff(prob, fits[findings[0].effect])
+            old = prob.n_count or prob.n_eff
+            if all(abs(count[m] / old[m] - 1.0) <= _N_EFF_RTOL for m in count):
+                break
+            prob = recounted(prob, count)
+            nom = recount(prob, nom)
+            findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo)
+    return _Ranking(prob, nom, findings, fits, joint_fits, errors, model, base_forwards)
+
+
 def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Criteria = Criteria(),
              cache_dir=None, heldout: bool = True, nominal=None, keep_curves: bool = True) -> Diagnosis:
     """Diagnose the sim-to-real gap of a manifest's measurements.
@@ -239,36 +291,19 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
         nominal = nominal_sag_map(manifest.simulation, cache_dir)
     check_measurements(manifest, data, nominal)
     t["load_s"] = time.perf_counter() - t["start"]
-    prob, nom = build_problem(manifest, data, nominal, criteria.weight_scale, criteria.map_in_optics)
-    base_forwards = tuple(prob.forwards)  # one per measurement, in the manifest's order
-    kinds = {f.kind for f in prob.forwards}
+    kinds = {m.kind for m in manifest.measurements}
     cands = applicable_effects(kinds, effects)
-    memo, errors = {}, {}
-    model = model_for_kinds(criteria.error_model, kinds)
-    if model == "two_part":
-        base_prob = prob
-        errors = measure_errors(base_prob, nom)  # first pass: the nominal residual (signal counts as mismatch)
-        prob = two_part_problem(base_prob, errors)
-        nom = fit(prob, ())
-    findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo)
-    if model == "two_part":
-        for _ in range(_N_EFF_PASSES):
-            errs = measure_errors(base_prob, fits[error_source(findings).effect])
-            new = two_part_problem(base_prob, errs)
-            if weights_settled(prob, new, _N_EFF_RTOL):
-                break
-            prob, errors, memo = new, errs, {}  # new weights: every fit is redone
-            nom = fit(prob, ())
-            findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo)
-    elif criteria.n_eff_from == "best_fit":
-        for _ in range(_N_EFF_PASSES):
-            count = post_fit_n_eff(prob, fits[findings[0].effect])
-            old = prob.n_count or prob.n_eff
-            if all(abs(count[m] / old[m] - 1.0) <= _N_EFF_RTOL for m in count):
-                break
-            prob = recounted(prob, count)
-            nom = recount(prob, nom)
-            findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo)
+    r = _ranked(manifest, data, nominal, criteria, cands, criteria.map_in_optics)
+    departures = {f.departure.measurement: f.departure.summary() for f in r.base_forwards
+                  if f.kind != "surface" and f.departure is not None}
+    choice = None
+    if departures and r.findings:  # do the images hold the map's departure?
+        choice = departure_choice(r.prob, r.findings[0], r.fits[r.findings[0].effect], criteria)
+        if not choice.carried:
+            r = _ranked(manifest, data, nominal, criteria, cands, False)
+    prob, nom, findings, fits, joint_fits, errors, model = (r.prob, r.nom, r.findings, r.fits, r.joint_fits,
+                                                            r.errors, r.model)
+    base_forwards = r.base_forwards
     t["fit_s"] = time.perf_counter() - t["start"] - t["load_s"]
     priors = parameters_of(tuple(e.name for e in cands), prob.forwards)
     half = {q.name: 0.5 * q.width for q in priors}
@@ -327,8 +362,8 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
                 "n_count": dict(prob.n_count or prob.n_eff), "n_eff_from": criteria.n_eff_from,
                 "error_model": criteria.error_model, "error_model_used": model, "errors": errors_summary(errors),
                 "weights": dict(prob.weights), "nominal_map": nominal.label,
-                "map_departures": list({f.departure.measurement: f.departure.summary() for f in base_forwards
-                                        if f.kind != "surface" and f.departure is not None}.values())}
+                "map_departures": list(departures.values()),
+                "map_departure_choice": choice.summary() if choice is not None else None}
     ms = tuple({"name": m.name, "kind": m.kind, "file": str(m.file), "blank": m.blank, "grating": m.grating,
                 "wavelength_um": m.wavelength_um, "pixel_scale_mas": m.pixel_scale_mas,
                 "temperature_K": m.temperature_K, "read": read_summary(d), **_data_notes(d, f)}
