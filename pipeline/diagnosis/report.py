@@ -201,6 +201,9 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
                          + ". A measurement that can (e.g. a surface map for a blank bow) separates them.</p>")
     if d.ranking_note:
         parts.append(f"<p>{html.escape(d.ranking_note)}.</p>")
+    choice = d.baseline.get("map_departure_choice")
+    if choice:  # a map beside the images of its blank: was its departure part of their optics?
+        parts.append(f"<p>{html.escape(choice['note'][0].upper() + choice['note'][1:])}.</p>")
     if d.unexplained_in:
         parts.append("<p>Residual still beyond noise (unexplained) in: " + "; ".join(
             html.escape(f"{g['measurement']} (RMS {g['rms_ratio']:.2f} × noise, χ² excess {g['z']:.1f} σ)")
