@@ -54,6 +54,18 @@ def _with_map(tmp_path, sag_um_at):
     return p
 
 
+def _map_error_case(tmp_path):
+    """(manifest path, nominal): Abbe-sum profiles of the nominal quilt, and a map of it with a
+    correlated error (white noise smoothed over 3 mm, 15 nm RMS) on its 1 mm grid."""
+    nominal = nominal_map(tmp_path)
+    abbe_profiles_manifest(tmp_path, (250, 25), 5)
+    sag = sag_function_of(nominal)
+    ax = np.arange(-68.0, 68.5, 1.0)
+    err = gaussian_filter(np.random.default_rng(11).normal(size=(ax.size, ax.size)), 3.0)
+    err *= 0.015 / err.std()
+    return _with_map(tmp_path, lambda x, y: sag(x, y) + err), nominal  # x, y: the map's own grid
+
+
 def _choice(path, nominal):
     manifest = load_manifest(path)
     prob, nom = build_problem(manifest, load_data(manifest), nominal, map_in_optics=True)
@@ -66,7 +78,7 @@ def test_a_map_of_the_gratings_own_quilt_is_carried(tmp_path):
     lattice's; the map measures them. The profiles fit the slit-width finding better with
     the departure than without it by more than the choice's margin."""
     nominal = nominal_map(tmp_path)
-    path = abbe_profiles_manifest(tmp_path, (250, 25), 5, sag_factor=_stronger_pockets)
+    abbe_profiles_manifest(tmp_path, (250, 25), 5, sag_factor=_stronger_pockets)
     sag = sag_function_of(nominal)
     c = _choice(_with_map(tmp_path, lambda x, y: _stronger_pockets(x, y) * sag(x, y)), nominal)
     assert c.carried
@@ -79,17 +91,8 @@ def test_a_maps_own_error_is_not_carried(tmp_path):
     The profiles fit better without the departure by more than the margin. Measured: at 3-8 nm
     the same error is rejected for one of two noise draws (by 3-13 in BIC); for the other the
     profiles fit with and without it within 1.5, where carrying it costs nothing."""
-    nominal = nominal_map(tmp_path)
-    path = abbe_profiles_manifest(tmp_path, (250, 25), 5)
-    sag = sag_function_of(nominal)
-    ax = np.arange(-68.0, 68.5, 1.0)
-    err = gaussian_filter(np.random.default_rng(11).normal(size=(ax.size, ax.size)), 3.0)
-    err *= 0.015 / err.std()
-
-    def measured(x, y):
-        return sag(x, y) + err  # x, y are the map's own 1 mm grid
-
-    c = _choice(_with_map(tmp_path, measured), nominal)
+    path, nominal = _map_error_case(tmp_path)
+    c = _choice(path, nominal)
     assert not c.carried
     assert c.bic_with - c.bic_without > Criteria().degenerate_bic
 
@@ -102,13 +105,7 @@ def test_the_diagnosis_says_whether_it_carried_the_departure(tmp_path):
     from pipeline.diagnosis import diagnose
     from pipeline.diagnosis.report import write_report
 
-    nominal = nominal_map(tmp_path)
-    path = abbe_profiles_manifest(tmp_path, (250, 25), 5)
-    sag = sag_function_of(nominal)
-    ax = np.arange(-68.0, 68.5, 1.0)
-    err = gaussian_filter(np.random.default_rng(11).normal(size=(ax.size, ax.size)), 3.0)
-    err *= 0.015 / err.std()
-    path = _with_map(tmp_path, lambda x, y: sag(x, y) + err)
+    path, _ = _map_error_case(tmp_path)
     d = diagnose(path, effects=("slit_width",), heldout=False, keep_curves=False)
     choice = d.baseline["map_departure_choice"]
     assert choice["carried"] is False and choice["bic_without"] < choice["bic_with"] - 2.0
