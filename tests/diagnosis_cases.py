@@ -13,8 +13,8 @@ from pipeline.diagnosis.synth import synthetic_profile, synthetic_psf_image, syn
 from pipeline.io.measured import write_line_profile_csv, write_psf_image_csv
 from pipeline.io.registry import write_sag_map
 
-__all__ = ["nominal_map", "sag_function_of", "abbe_profiles_manifest", "other_quilt_truth", "surface_manifest", "surface_case", "profile_image_case",
-           "FakeFinding", "FakeDiagnosis"]
+__all__ = ["nominal_map", "sag_function_of", "abbe_profiles_manifest", "gaussian_profile_data", "other_quilt_truth",
+           "surface_manifest", "surface_case", "profile_image_case", "FakeFinding", "FakeDiagnosis"]
 
 
 def nominal_map(tmp_path):
@@ -67,6 +67,24 @@ def abbe_profiles_manifest(tmp_path, pixel_scales, seed, distortion=None, line=(
     p = tmp_path / "m.toml"
     p.write_text("\n".join(lines))
     return p
+
+
+def gaussian_profile_data(tmp_path, nominal, offset_um, sigma_um, noise_rel=None):
+    """The data of one J 1.25 µm order -2 profile at 250 mas, read through a manifest whose
+    nominal is ``nominal`` (written beside it): a Gaussian of ``sigma_um`` sampled at
+    ``offset_um``, its noise ``noise_rel`` where given. For tests of the profile model's
+    machinery (memos, carried shapes), not of a line's physics."""
+    from pipeline.diagnosis.manifest import load_data, load_manifest
+
+    write_sag_map(nominal, tmp_path / "nominal.npz")
+    u = np.asarray(offset_um, float)
+    write_line_profile_csv(tmp_path / "p.csv", u, np.exp(-0.5 * (u / sigma_um) ** 2))
+    noise = "" if noise_rel is None else f"noise_rel = {noise_rel}\n"
+    (tmp_path / "m.toml").write_text('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\n'
+                                     'kind = "line_profile"\nfile = "p.csv"\ngrating = "J"\norder = -2\n'
+                                     'wavelength_um = 1.25\npixel_scale_mas = 250\n' + noise)
+    (data,) = load_data(load_manifest(tmp_path / "m.toml"))
+    return data
 
 
 def other_quilt_truth(nominal):

@@ -17,7 +17,7 @@ from pipeline.diagnosis.criteria import Criteria
 from pipeline.diagnosis.departure_choice import departure_choice
 from pipeline.diagnosis.engine import build_problem, fit_effects
 from pipeline.diagnosis.manifest import load_data, load_manifest
-from tests.diagnosis_cases import abbe_profiles_manifest, nominal_map, sag_function_of
+from diagnosis_cases import abbe_profiles_manifest, nominal_map, sag_function_of
 
 RADIUS_MM = 68.5
 MAP_NOISE_UM = 0.002

@@ -378,18 +378,10 @@ def test_a_wing_parameter_changes_the_profile_and_its_null_gives_the_memoised_no
     prediction is the nominal's bit for bit (no stale curve either way)."""
     from optics.sagmap import quilt_sag_map
     from pipeline.diagnosis.forward import ProfileForward
-    from pipeline.diagnosis.manifest import load_data, load_manifest
-    from pipeline.io.measured import write_line_profile_csv
-    from pipeline.io.registry import write_sag_map
+    from diagnosis_cases import gaussian_profile_data
 
     nominal = quilt_sag_map(0.6, "sum", spacing_mm=0.5)
-    write_sag_map(nominal, tmp_path / "nominal.npz")
-    u = np.arange(-100.0, 100.1, 2.0)
-    write_line_profile_csv(tmp_path / "p.csv", u, np.exp(-0.5 * (u / 20.0) ** 2))
-    (tmp_path / "m.toml").write_text('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\n'
-                                     'kind = "line_profile"\nfile = "p.csv"\ngrating = "J"\norder = -2\n'
-                                     'wavelength_um = 1.25\npixel_scale_mas = 250\n')
-    (data,) = load_data(load_manifest(tmp_path / "m.toml"))
+    data = gaussian_profile_data(tmp_path, nominal, np.arange(-100.0, 100.1, 2.0), 20.0)
     fw = ProfileForward(data, nominal, 80.0)
     nom = fw.predict({})
     halo = fw.predict({"halo_fraction": 0.1, "halo_hwhm_um": 30.0})

@@ -19,6 +19,8 @@ from pipeline.diagnosis.forward import profile_curve
 from pipeline.diagnosis.map_departure import filtered, map_departure
 from pipeline.diagnosis.quilt import quilt_components
 
+from diagnosis_cases import gaussian_profile_data
+
 PV_UM = 0.6
 A_UM = PV_UM / 4  # the sum form's amplitude per direction
 RADIUS_MM = 68.5
@@ -164,25 +166,16 @@ def test_a_carried_departure_reaches_every_memoised_profile(nominal, tmp_path):
     the detector side's terms, memoised apart) forms them again with it: neither memo hands
     back a curve of the shape without it."""
     from pipeline.diagnosis.forward import ProfileForward
-    from pipeline.diagnosis.manifest import load_data, load_manifest
-    from pipeline.io.measured import write_line_profile_csv
-    from pipeline.io.registry import write_sag_map
 
-    write_sag_map(nominal, tmp_path / "nominal.npz")
-    u = np.linspace(-120.0, 120.0, 161)
-    write_line_profile_csv(tmp_path / "p.csv", u, np.exp(-0.5 * (u / 15.0) ** 2))
-    (tmp_path / "m.toml").write_text('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\n'
-                                     'kind = "line_profile"\nfile = "p.csv"\ngrating = "J"\norder = -2\n'
-                                     'wavelength_um = 1.25\npixel_scale_mas = 250\nnoise_rel = 0.01\n')
-    man = load_manifest(tmp_path / "m.toml")
-    f = ProfileForward(load_data(man)[0], nominal, 80.0)
+    data = gaussian_profile_data(tmp_path, nominal, np.linspace(-120.0, 120.0, 161), 15.0, noise_rel=0.01)
+    f = ProfileForward(data, nominal, 80.0)
     halo = {"halo_fraction": 0.02}
     before = [f.predict({}), f.predict(halo)]
     x, y = _points(17)
     sag = 1.3 * _sum_quilt(x, y) * (1 + 0.3 * _cell(x, y, 0.0, 0.0))  # the pocket under the beam's centre
     f.carry_departure(map_departure(_Map(x, y, sag, nominal), nominal))
     after = [f.predict({}), f.predict(halo)]
-    fresh = ProfileForward(load_data(man)[0], nominal, 80.0)
+    fresh = ProfileForward(data, nominal, 80.0)
     fresh.carry_departure(f.departure)
     for b, a, p in zip(before, after, ({}, halo)):
         assert np.max(np.abs(a - b)) > 1e-3 * b.max()  # the departure changes the line
