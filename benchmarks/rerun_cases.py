@@ -16,7 +16,7 @@ import dataclasses
 import json
 from pathlib import Path
 
-from pipeline.diagnosis.campaign import CampaignConfig, campaign_maps, one_blas_thread, run_case
+from pipeline.diagnosis.campaign import CampaignConfig, campaign_maps, case_type, one_blas_thread, run_case
 from pipeline.diagnosis.criteria import Criteria
 
 #: configuration fields that a raw file stores as lists and the config holds as tuples
@@ -53,9 +53,8 @@ def main(argv=None) -> int:
         ap.error(f"index {bad}: the recorded campaign has cases 0..{cfg.n_cases - 1}")
     one_blas_thread()
     nominal, base = campaign_maps(cfg, cache_dir=a.cache_dir)
-    types = cfg.case_types + tuple(t for t in cfg.only_types or () if t not in cfg.case_types)
     for i in a.index:
-        row = run_case((i, types[i % len(types)], cfg, nominal, base))
+        row = run_case((i, case_type(cfg, i), cfg, nominal, base))
         with a.out.open("a") as fh:
             fh.write(json.dumps(row, default=float) + "\n")
         print(i, row["effect"], row["top"], row["verdict"], flush=True)

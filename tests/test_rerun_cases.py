@@ -36,3 +36,12 @@ def test_an_index_outside_the_campaign_is_refused(tmp_path, capsys):
     with pytest.raises(SystemExit):
         _module().main([str(RAW), "45", "--out", str(tmp_path / "rows.jsonl")])
     assert "index [45]: the recorded campaign has cases 0..44" in capsys.readouterr().err
+
+
+def test_case_indices_map_to_the_recorded_types():
+    """Each recorded row's (kind, effect) is the type the rebuilt configuration gives its index."""
+    from pipeline.diagnosis.campaign import case_type
+
+    raw = json.loads(RAW.read_text())["campaign"]
+    cfg = _module().recorded_config(raw)
+    assert all(case_type(cfg, r["index"]) == (r["kind"], r["effect"]) for r in raw["cases"])

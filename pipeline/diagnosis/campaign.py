@@ -84,7 +84,8 @@ from .synth import (blank_shape_map, shape_discrepancy, synthetic_profile, synth
                     unmodelled_shape)
 
 __all__ = ["CASE_TYPES", "EXTRA_CASE_TYPES", "DISCREPANCIES", "DISCREPANCY_PRESENT", "TRUTHS", "PROFILE_SETS", "PSF_IMAGE_SPEC",
-           "OUT_OF_LIBRARY", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "run_case", "run_campaign",
+           "OUT_OF_LIBRARY", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "case_type",
+           "run_case", "run_campaign",
            "one_blas_thread", "write_campaign"]
 
 CASE_TYPES = (
@@ -691,6 +692,13 @@ def campaign_maps(cfg: CampaignConfig, cache_dir=None) -> tuple[SagMap, SagMap]:
     return nominal, base
 
 
+def case_type(cfg: CampaignConfig, index: int) -> tuple[str, str]:
+    """``(kind, effect)`` of case ``index``: the configured types cycled, with the
+    ``only_types`` not among them appended to the cycle."""
+    types = cfg.case_types + tuple(t for t in cfg.only_types or () if t not in cfg.case_types)
+    return types[index % len(types)]
+
+
 def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None, progress=None) -> dict:
     """Run ``cfg.n_cases`` cases (types cycled) in ``cfg.workers`` processes.
 
@@ -701,9 +709,8 @@ def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None, progres
                          "point-source images)")
     t0 = time.perf_counter()
     nominal, base = campaign_maps(cfg, cache_dir)
-    types = cfg.case_types + tuple(t for t in cfg.only_types or () if t not in cfg.case_types)
-    tasks = [(i, types[i % len(types)], cfg, nominal, base) for i in range(cfg.n_cases)
-             if cfg.only_types is None or types[i % len(types)] in cfg.only_types]
+    tasks = [(i, case_type(cfg, i), cfg, nominal, base) for i in range(cfg.n_cases)
+             if cfg.only_types is None or case_type(cfg, i) in cfg.only_types]
     t_maps = time.perf_counter() - t0
     if cfg.workers > 1:
         with ProcessPoolExecutor(cfg.workers, initializer=one_blas_thread) as ex:

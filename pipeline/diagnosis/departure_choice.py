@@ -69,7 +69,7 @@ def departure_choice(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteri
     if not any(d is not None for d in departures.values()):
         raise ValueError("departure_choice: no image model of the problem carries a map's departure")
     params = parameters_of(tuple(dict.fromkeys(all_effects(finding))), prob.forwards)
-    models = [f for f in prob.forwards if f.name in departures]
+    models = [f for f in prob.forwards if departures.get(f.name) is not None]  # others keep their memos
     try:
         for f in models:
             f.carry_departure(None)
