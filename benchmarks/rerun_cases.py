@@ -46,7 +46,10 @@ def main(argv=None) -> int:
     ap.add_argument("--cache-dir", type=Path, default=None, help="disk cache of the nominal FEA maps")
     ap.add_argument("--map-in-optics", choices=("on", "off", "as-recorded"), default="as-recorded")
     a = ap.parse_args(argv)
-    raw = json.loads(a.raw.read_text())["campaign"]
+    raw = json.loads(a.raw.read_text()).get("campaign")
+    if not isinstance(raw, dict) or not {"config", "criteria", "cases"} <= set(raw):
+        ap.error(f"raw={str(a.raw)!r}: not a campaign's raw JSON (needs 'campaign' with 'config', 'criteria', 'cases', "
+                 "as bench_diagnosis.py --out writes it)")
     cfg = recorded_config(raw, a.map_in_optics)
     bad = [i for i in a.index if not 0 <= i < cfg.n_cases]
     if bad:

@@ -45,3 +45,11 @@ def test_case_indices_map_to_the_recorded_types():
     raw = json.loads(RAW.read_text())["campaign"]
     cfg = _module().recorded_config(raw)
     assert all(case_type(cfg, r["index"]) == (r["kind"], r["effect"]) for r in raw["cases"])
+
+
+def test_a_file_that_is_not_a_campaign_is_refused(tmp_path, capsys):
+    bad = tmp_path / "other.json"
+    bad.write_text('{"summary": {}}')
+    with pytest.raises(SystemExit):
+        _module().main([str(bad), "0", "--out", str(tmp_path / "rows.jsonl")])
+    assert "not a campaign's raw JSON" in capsys.readouterr().err
