@@ -31,23 +31,21 @@ SHARED_SCOPES = {
 # table solves), handed out first and longest first, so that the many short modules fill the
 # other worker meanwhile instead of leaving one long module running alone at the end (xdist's
 # own order is by number of tests, which puts these few-test modules last). The first two start
-# together on the two workers; the others are ranked by CPU time (user + sys of
-# ``pytest -n 0 tests/<module>``, which counts the reduced campaign's worker processes too;
-# measured with one BLAS thread, above: scenarios and reduced campaign together 358 s, paper
-# 130, fea_blank 112, fea_reduced 59, surrogate_sweep 46, quilt 43, fea_layer 31,
-# mesh_convergence 24, diagnosis 24, study_dataset 24, plating 10, optics_on_fea 8); the bow
-# module, its two profiles + map + PSF image diagnoses now formed on the map's departure too,
-# is ~290 s of wall time on one worker (169 s and 101 s for the two) and goes first. Re-rank
-# when a heavy module is added.
+# together on the two workers; the others follow by their time on one worker (``pytest
+# --durations=0 -n 2``, one BLAS thread: scenarios ~200 s, paper claims and tables ~165 s,
+# reduced campaign ~135 s with its own two worker processes, fea_blank ~130 s, bow ~125 s,
+# fea_reduced ~100 s, surrogate_sweep ~70 s, quilt ~55 s, psf ~50 s, fea_layer ~40 s,
+# mesh_convergence ~40 s). Re-rank when a heavy module is added.
 HEAVY_FIRST = (
-    "tests/test_diagnosis_bow.py",
-    "tests/test_paper_claims.py+tests/test_paper_tables.py",
     "tests/test_diagnosis_scenarios.py",
+    "tests/test_paper_claims.py+tests/test_paper_tables.py",
     "tests/test_diagnosis_campaign_reduced.py",
     "tests/test_fea_blank.py",
+    "tests/test_diagnosis_bow.py",
     "tests/test_fea_reduced.py",
     "tests/test_surrogate_sweep.py",
     "tests/test_diagnosis_quilt.py",
+    "tests/test_diagnosis_psf.py",
     "tests/test_fea_layer.py",
     "tests/test_fea_mesh_convergence.py",
     "tests/test_diagnosis.py",

@@ -153,25 +153,28 @@ def test_bow_absorbed_by_collimator_defocus_on_profiles(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [0, 1])
-def test_seen_bow_refitted_beside_every_significant_single(tmp_path, seed):
+def test_seen_bow_refitted_beside_every_significant_single(tmp_path):
     """Profiles + 128 K map + focal-plane PSF image of a blank with a bow and plating
-    gradient (the campaign's ``discrepancy="companions"``), and a slit 21 or 35 µm wide. The data see the bow on its own (delta BIC
-    about -300), and pupil_shift and collimator_wfe each mimic part of it, so on the first
-    ranking they sit above slit_width; refitting only the two best singles with the
-    companions left blank_bow on top for both seeds (measured before the rule). Every
-    significant single is now refitted: slit_width with the bow is the finding."""
+    gradient (the campaign's ``discrepancy="companions"``), and a slit 21 µm wide. The data
+    see the bow on its own (delta BIC about -360), and pupil_shift and collimator_wfe each
+    mimic part of it, so on the first ranking they sit above slit_width; refitting only the
+    two best singles with the companions left blank_bow on top for this draw and for a
+    35 µm slit (measured before the rule). Every significant single is now refitted:
+    slit_width with the bow is the finding. The effects tried are the ones that compete
+    here (the map-only effects and the rescalings, which take up none of the bow, are left
+    out: with them the same finding, measured 126 s against 92 s)."""
     from pipeline.diagnosis.campaign import PROFILE_SETS, PSF_IMAGE_SPEC, CampaignConfig, make_case
     from pipeline.diagnosis.manifest import parse_manifest
 
     base = nominal_map(tmp_path)
     cfg = CampaignConfig(profile_specs=PROFILE_SETS["minimal"], psf_image=PSF_IMAGE_SPEC, profile_map_K=128.0,
                          discrepancy="companions")
-    man, truth = make_case("line_profile", "slit_width", np.random.default_rng([1, seed]), base, tmp_path, cfg)
+    man, truth = make_case("line_profile", "slit_width", np.random.default_rng([1, 0]), base, tmp_path, cfg)
     d = diagnose(parse_manifest(man, tmp_path), criteria=cfg.criteria, nominal=base, keep_curves=False,
-                 heldout=False)
+                 heldout=False, effects=("slit_width", "pupil_shift", "collimator_wfe", "plating_gradient",
+                                         "blank_bow"))
     assert d.verdict == "explained" and d.best.effect == "slit_width" and "blank_bow" in d.best.companions
-    # measured: 20.92 for 21.05 and 35.50 for 35.28 µm
+    # measured: 20.92 for 21.05 µm
     assert d.best.parameters["slit_image_width_um"] == pytest.approx(truth["slit_image_width_um"], rel=0.02)
 
 
