@@ -47,8 +47,8 @@ def test_loadscope_runs_the_paper_modules_on_one_worker_and_heavy_units_first():
         sched.add_node_collection(n, collection)
     sched.schedule()
     first = [{collection[i].split("::")[0] for i in n.sent} for n in nodes]
-    assert first[0] == {"tests/test_paper_claims.py", "tests/test_paper_tables.py"}
-    assert first[1] == {"tests/test_diagnosis_scenarios.py"}
+    assert first[0] == {"tests/test_diagnosis_scenarios.py"}
+    assert first[1] == {"tests/test_paper_claims.py", "tests/test_paper_tables.py"}
     assert sorted(i for n in nodes for i in n.sent) == sorted({i for n in nodes for i in n.sent})
 
 
