@@ -240,10 +240,12 @@ def test_campaign_discrepancy_checked():
 @pytest.mark.slow
 def test_slit_explained_beside_an_unexplained_map(tmp_path):
     """A map carrying only an unmodelled 0.03 µm RMS shape and two J profiles of a 35 µm
-    slit: slit_width explains the profiles (excess where it acts: measured 0.95), the
+    slit: slit_width explains the profiles (excess where it acts: measured 0.83; 0.95 without
+    the profiles' inter-pixel coupling nuisance, which takes part of a wider slit's
+    broadening from the nominal's gap while the unmodelled shape's stays), the
     verdict is ``explained``, and the map, which a slit width does not change, is named in
     ``unexplained_in`` (chi^2 excess ~130 sd) instead of lowering the explained fraction
-    (over all data: measured 0.64; in a slit-width campaign case the map and a PSF image took it to
+    (over all data: measured 0.61; in a slit-width campaign case the map and a PSF image took it to
     0.31 and the verdict to ``unexplained``)."""
     from pipeline.diagnosis.synth import synthetic_profile, unmodelled_shape
 
@@ -263,6 +265,6 @@ def test_slit_explained_beside_an_unexplained_map(tmp_path):
     b = d.best
     assert d.verdict == "explained" and b.effect == "slit_width"
     assert b.parameters["slit_image_width_um"] == pytest.approx(35.0, rel=0.02)
-    assert b.excess_explained > 0.9 and b.excess_explained_overall < b.excess_explained - 0.2
+    assert b.excess_explained > 0.8 and b.excess_explained_overall < b.excess_explained - 0.2
     assert [g["measurement"] for g in d.unexplained_in] == ["map"] and d.unexplained_in[0]["z"] > 50
     assert d.to_dict()["unexplained_in"][0]["measurement"] == "map"

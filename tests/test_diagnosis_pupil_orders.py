@@ -56,13 +56,16 @@ def test_camera_spherical_is_not_blamed_on_the_collimator(tmp_path):
     """Truth: only primary spherical Z(4,0), 0.3 µm RMS, in the pupil (beyond the
     instrument's collimator). The three collimator terms take up part of it (without the
     check: collimator_wfe, delta BIC about -31, "explained"); the other-order basis fits
-    the spherical itself, so the data cannot say the aberration is the collimator's."""
+    the spherical itself, so the data cannot say the aberration is the collimator's. Beside
+    the detector's inter-pixel coupling (a nuisance of every profile model, which takes up
+    part of the spherical's broadening) the collimator terms are not even significant
+    (measured: delta BIC +2.4, verdict ``unexplained``); where they are, the check must
+    flag them."""
     d = diagnose(_profiles(tmp_path, camera_um={(4, 0): 0.3}), effects=("collimator_wfe", "slit_width"),
                  heldout=False)
-    assert not (d.verdict == "explained" and "collimator_wfe" in d.best.effects)
+    assert d.verdict != "explained"
     f = d.finding("collimator_wfe")
-    assert OTHER_ORDERS_LABEL in f.degenerate_with
-    assert "collimator" in d.ranking_note
+    assert not f.significant or OTHER_ORDERS_LABEL in f.degenerate_with
 
 
 @pytest.mark.slow

@@ -61,7 +61,11 @@ def test_hk_gratings_amplitude_1p2(hk_clean):
     for g in ("H", "K"):
         assert d.best.parameters[f"scale_{g}"] == pytest.approx(1.20, rel=0.1)  # 1.2 x (refined/default quilt 1.000)
     assert abs(d.best.parameters["scale_H"] - d.best.parameters["scale_K"]) < 0.1  # H and K alike
-    assert d.finding("temperature").delta_bic > d.best.delta_bic + 50  # a common cold-temperature change cannot do it
+    # A common cold-temperature change cannot do it: it ends at its prior's bound (-60 K) and
+    # fits worse by more than any finding must beat the nominal by (measured: by 34 with the
+    # profiles' inter-pixel coupling fitted, by more than 50 without it).
+    t = d.finding("temperature")
+    assert "temperature_offset_K" in t.at_bound and t.delta_bic > d.best.delta_bic + d.criteria.min_delta_bic
 
 
 def test_hk_scenario_as_a_lab_delivers_it(hk_clean, cache, tmp_path):

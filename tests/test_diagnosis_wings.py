@@ -100,8 +100,11 @@ def test_a_pupil_shift_is_still_the_pupils(tmp_path):
     position is not pinned to better than a few mm by these profiles: their cost has two
     minima, near 4.0 and 6.6 mm, 0.002 apart against a residual variance of 0.44, and which
     one the fit ends in has differed between machines (the rule first written here, 6 ± 1.5
-    mm, passed on one and failed on another). Asserted: the truth within the reported 1 sigma
-    of the fit, a sigma that spans both minima (> 2 mm) and stays below 3 mm."""
+    mm, passed on one and failed on another). The detector's inter-pixel coupling, a nuisance
+    of every profile model, broadens the line as the pupil's x position partly does: with it
+    the fit reads 6.9 ± 3.3 mm (2-3 mm sigma without it). Asserted: the truth within the
+    reported 1 sigma of the fit, a sigma that spans both minima (> 2 mm) and stays below half
+    the prior's ±10 mm (the profiles still say where the pupil is)."""
     d = diagnose(_profiles(tmp_path, pupil_shift_mm=(6.0, 0.0)), effects=("pupil_shift", "temperature",
                                                                           "slit_width", "quilt_shape"),
                  heldout=False)
@@ -109,7 +112,7 @@ def test_a_pupil_shift_is_still_the_pupils(tmp_path):
     assert WINGS_LABEL not in d.best.degenerate_with and d.best.needs_outside == ()
     assert "still needed beside the detector side" in d.ranking_note
     x, sx = d.best.parameters["pupil_x_mm"], d.best.uncertainties["pupil_x_mm"]
-    assert abs(x - 6.0) <= sx and 2.0 < sx < 3.0
+    assert abs(x - 6.0) <= sx and 2.0 < sx < 5.0
 
 
 @pytest.mark.slow

@@ -27,6 +27,7 @@ from collections import OrderedDict
 import numpy as np
 from scipy.interpolate import CubicSpline, RegularGridInterpolator
 
+from optics.grating import SPIFFI
 from optics.lineprofile import LsfSettings, line_profile
 from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
 from optics.sagmap import SagMap
@@ -62,6 +63,40 @@ def lstsq_residual(A: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray
     """``(d - A c, c)`` for the least-squares coefficients ``c`` of ``A c = d``."""
     c, *_ = np.linalg.lstsq(A, d, rcond=None)
     return d - A @ c, c
+
+
+#: Largest inter-pixel coupling a line-profile model fits (fraction of a pixel's signal
+#: read in each neighbour along x). HAWAII-type arrays measure 1-2 %; 5 % leaves room for
+#: another detector without letting the nuisance take up a broadened line.
+MAX_COUPLING = 0.05
+
+
+def coupled_lstsq(line: np.ndarray, neighbours: np.ndarray, d: np.ndarray,
+                  max_coupling: float = MAX_COUPLING) -> tuple[np.ndarray, float, float, float]:
+    """Least-squares ``d ~ flux * (line + c * neighbours) + background`` with the coupling
+    ``c`` in ``[0, max_coupling]``.
+
+    ``neighbours`` is what coupling moves: the line one pixel either side minus twice the
+    line (the kernel ``[c, 1 - 2c, c]`` keeps the flux). With ``c`` free the model is linear
+    in ``(flux, flux * c, background)``; where that optimum has ``c`` outside the range (or
+    no positive flux), both faces ``c = 0`` and ``c = max_coupling`` are solved and the one
+    of lower residual kept, which is the bounded optimum of the quadratic on that face.
+
+    Returns
+    -------
+    (d - model, flux, c, background)
+    """
+    one = np.ones_like(line)
+    r, (a, b, bg) = lstsq_residual(np.column_stack([line, neighbours, one]), d)
+    if a > 0 and 0.0 <= b / a <= max_coupling:
+        return r, float(a), float(b / a), float(bg)
+    best = None
+    for c in (0.0, max_coupling):
+        rc, (ac, bgc) = lstsq_residual(np.column_stack([line + c * neighbours, one]), d)
+        cost = float(rc @ rc)
+        if best is None or cost < best[0]:
+            best = (cost, rc, float(ac), c, float(bgc))
+    return best[1], best[2], best[3], best[4]
 
 
 def quilt_parts(quilt: QuiltComponents | None, x_mm: np.ndarray, y_mm: np.ndarray) -> dict | None:
@@ -369,12 +404,27 @@ class SpectrographImageModel:
 
 
 class ProfileForward(SpectrographImageModel):
-    """Line-profile model: ``flux * P(u - delta_um; params) + background``."""
+    """Line-profile model: ``flux * C_c[P](u - delta_um; params) + background``, ``C_c`` the
+    detector's inter-pixel coupling: a fraction ``c`` of each pixel's signal read in each
+    neighbour along x, ``C_c[P](u) = (1 - 2c) P(u) + c P(u - p) + c P(u + p)`` at the pixel
+    pitch ``p`` (:func:`coupled_lstsq`).
+
+    Why the coupling is a nuisance of every model, beside flux and background: every
+    infrared array couples its pixels capacitively (HAWAII-type arrays: 1-2 % to each
+    neighbour), so a measured line is broadened by it whatever the grating does, and the
+    spectrograph's own optics cannot hold it. Left out, it is a gap in every profile that the
+    library's broadening effects take up (``benchmarks/results_coupling.md``: independent
+    truths with 1-3 % coupling, as the truth generator makes every profile). It is fitted,
+    not stated, because it is rarely known per detector column at the line's position; it
+    is linear in the fit (flux times coupling), so it costs one column of the nuisances'
+    least squares."""
 
     kind = "line_profile"
-    #: nuisances solved inside :meth:`residual` (flux, background) and position nuisances
-    #: that are fit parameters (the offset shift ``delta_um``)
-    nuisance_count, n_shift = 2, 1
+    #: nuisances solved inside :meth:`residual` (flux, inter-pixel coupling, background) and
+    #: position nuisances that are fit parameters (the offset shift ``delta_um``)
+    nuisance_count, n_shift = 3, 1
+    #: detector pixel pitch (µm) along x: the distance coupling moves light
+    pixel_um = SPIFFI.pixel_um
 
     def __init__(self, data: ProfileData, nominal: SagMap, cold_K: float, warm_K: float = 293.0,
                  settings: LsfSettings = FIT_LSF_SETTINGS, cache_size: int = 512,
@@ -419,8 +469,14 @@ class ProfileForward(SpectrographImageModel):
         v = self.curve(p)(self.x - delta_um)
         return np.where(np.isfinite(v), v, 0.0)
 
-    def _design(self, p, delta_um):
-        return np.column_stack([self.predict(p, delta_um), np.ones(self.n)])
+    def _nuisances(self, p, delta_um, mask):
+        """(residual on ``mask``, model at every sample) with flux, coupling and background
+        fitted on ``mask`` (:func:`coupled_lstsq`)."""
+        line = self.predict(p, delta_um)
+        neighbours = self.predict(p, delta_um + self.pixel_um) + self.predict(p, delta_um - self.pixel_um) - 2.0 * line
+        sel = slice(None) if mask is None else mask
+        r, flux, c, bg = coupled_lstsq(line[sel], neighbours[sel], self.data[sel])
+        return r, flux * (line + c * neighbours) + bg
 
     def estimate_noise(self, nominal_residual: np.ndarray) -> float:
         """RMS noise (fraction of the data peak) from the profile itself, its variance growing
@@ -463,16 +519,12 @@ class ProfileForward(SpectrographImageModel):
         return SIGNAL_DEPENDENT_NOISE_REL_SD_SQRT_N / np.sqrt(max(self.n, 1))
 
     def residual(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
-        """Data minus model with flux and background fitted on ``mask`` (fraction of the data peak)."""
-        sel = slice(None) if mask is None else mask
-        r, _ = lstsq_residual(self._design(p, delta_um)[sel], self.data[sel])
-        return r
+        """Data minus model with flux, coupling and background fitted on ``mask`` (fraction
+        of the data peak)."""
+        return self._nuisances(p, delta_um, mask)[0]
 
     def fitted(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> np.ndarray:
-        sel = slice(None) if mask is None else mask
-        A = self._design(p, delta_um)
-        _, c = lstsq_residual(A[sel], self.data[sel])
-        return A @ c
+        return self._nuisances(p, delta_um, mask)[1]
 
     def _initial_shift(self) -> float:
         """Offset shift of the nominal model by a 1-µm grid search over ±40 µm (the data

@@ -1,0 +1,69 @@
+"""Inter-pixel coupling, a nuisance of every line-profile model (flux, coupling, background):
+its bounded least squares, and the profile model read against data coupled by the
+independent truth's detector code (:func:`pipeline.diagnosis.truth.detector.coupled`,
+which shares no code with the model's)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.diagnosis.forward import MAX_COUPLING, ProfileForward, coupled_lstsq, lstsq_residual
+from pipeline.diagnosis.truth.detector import coupled
+
+from diagnosis_cases import gaussian_profile_data, nominal_map
+
+PIXEL_UM = 18.0
+
+
+def _line_and_neighbours(u):
+    line = np.exp(-0.5 * (u / 12.0) ** 2) + 0.3 * np.exp(-0.5 * ((u - 20.0) / 8.0) ** 2)
+    shifted = np.exp(-0.5 * ((u - PIXEL_UM) / 12.0) ** 2) + 0.3 * np.exp(-0.5 * ((u - PIXEL_UM - 20.0) / 8.0) ** 2)
+    back = np.exp(-0.5 * ((u + PIXEL_UM) / 12.0) ** 2) + 0.3 * np.exp(-0.5 * ((u + PIXEL_UM - 20.0) / 8.0) ** 2)
+    return line, shifted + back - 2.0 * line
+
+
+def test_coupled_lstsq_recovers_flux_coupling_and_background():
+    u = np.linspace(-100.0, 100.0, 301)
+    line, nb = _line_and_neighbours(u)
+    d = 3.0 * (line + 0.02 * nb) + 0.1
+    r, flux, c, bg = coupled_lstsq(line, nb, d)
+    assert (flux, c, bg) == pytest.approx((3.0, 0.02, 0.1), rel=1e-9)
+    assert np.max(np.abs(r)) < 1e-12
+
+
+@pytest.mark.parametrize("c_true, c_read", [(-0.01, 0.0), (0.08, MAX_COUPLING)])
+def test_coupled_lstsq_keeps_the_coupling_in_its_range(c_true, c_read):
+    """A sharpened line (negative coupling) and a coupling above the range are read at the
+    range's ends, each the better of the two bounded faces solved on their own."""
+    u = np.linspace(-100.0, 100.0, 301)
+    line, nb = _line_and_neighbours(u)
+    d = 2.0 * (line + c_true * nb) + 0.05 + 0.001 * np.random.default_rng(3).normal(size=u.size)
+    r, flux, c, bg = coupled_lstsq(line, nb, d)
+    assert c == c_read
+    faces = [lstsq_residual(np.column_stack([line + k * nb, np.ones_like(u)]), d)[0] for k in (0.0, MAX_COUPLING)]
+    assert float(r @ r) == pytest.approx(min(float(f @ f) for f in faces), rel=1e-12)
+
+
+@pytest.mark.parametrize("c_true", [0.0, 0.015, 0.03])
+def test_profile_model_reads_coupling_made_by_the_truths_detector_code(tmp_path, c_true):
+    """The model's own nominal line, coupled by the truth's detector code at ``c_true`` and
+    shifted, offset and scaled as counts, is fitted to rounding by the nominal with the
+    coupling the truth applied (its nuisances alone; no effect parameter)."""
+    nominal = nominal_map(tmp_path)
+    x = np.sort(np.random.default_rng(5).uniform(-120.0, 120.0, 160))
+    f = ProfileForward(gaussian_profile_data(tmp_path, nominal, x, 15.0, noise_rel=0.01), nominal, 80.0)
+    fine = np.arange(-150.0, 150.001, 0.25)
+    line = np.nan_to_num(f.curve({})(fine))
+    data = 5e3 * np.interp(x - 3.0, fine, coupled(fine, line, c_true, PIXEL_UM)) + 40.0
+    f.data = data
+    r = f.residual({}, 3.0)
+    assert np.sqrt(np.mean(r**2)) < 1e-3 * data.max()
+    fit = f.fitted({}, 3.0)
+    line_x = f.predict({}, 3.0)
+    nb = f.predict({}, 3.0 + PIXEL_UM) + f.predict({}, 3.0 - PIXEL_UM) - 2.0 * line_x
+    _, flux, c, bg = coupled_lstsq(line_x, nb, data)
+    assert c == pytest.approx(c_true, abs=1e-3)
+    assert bg == pytest.approx(40.0, abs=0.5)
+    assert np.allclose(fit, flux * (line_x + c * nb) + bg)
+
