@@ -261,6 +261,18 @@ def _ranked(manifest: Manifest, data: tuple, nominal, criteria: Criteria, cands,
     return _Ranking(prob, nom, findings, fits, joint_fits, errors, model, base_forwards)
 
 
+def _couplings(prob: Problem, nominal: FitOutcome, after: FitOutcome) -> dict:
+    """Each line profile's fitted inter-pixel coupling (fraction to each x neighbour) with the
+    nominal (``"nominal"``) and with the fit the verdict rests on (``"after"``: the explaining
+    finding's, else the nominal's): a detector's measured coupling can be set beside them."""
+    out = {"nominal": {}, "after": {}}
+    for f in prob.forwards:
+        if f.kind == "line_profile":
+            for key, fo in (("nominal", nominal), ("after", after)):
+                out[key][f.name] = float(f.coupling(fo.parameters, fo.deltas_um.get(f.name, f.delta0_um)))
+    return out
+
+
 def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Criteria = Criteria(),
              cache_dir=None, heldout: bool = True, nominal=None, keep_curves: bool = True) -> Diagnosis:
     """Diagnose the sim-to-real gap of a manifest's measurements.
@@ -363,7 +375,8 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
                 "error_model": criteria.error_model, "error_model_used": model, "errors": errors_summary(errors),
                 "weights": dict(prob.weights), "nominal_map": nominal.label,
                 "map_departures": list(departures.values()),
-                "map_departure_choice": choice.summary() if choice is not None else None}
+                "map_departure_choice": choice.summary() if choice is not None else None,
+                "interpixel_coupling": _couplings(prob, nom, after)}
     ms = tuple({"name": m.name, "kind": m.kind, "file": str(m.file), "blank": m.blank, "grating": m.grating,
                 "wavelength_um": m.wavelength_um, "pixel_scale_mas": m.pixel_scale_mas,
                 "temperature_K": m.temperature_K, "read": read_summary(d), **_data_notes(d, f)}

@@ -470,13 +470,18 @@ class ProfileForward(SpectrographImageModel):
         return np.where(np.isfinite(v), v, 0.0)
 
     def _nuisances(self, p, delta_um, mask):
-        """(residual on ``mask``, model at every sample) with flux, coupling and background
-        fitted on ``mask`` (:func:`coupled_lstsq`)."""
+        """(residual on ``mask``, model at every sample, coupling) with flux, coupling and
+        background fitted on ``mask`` (:func:`coupled_lstsq`)."""
         line = self.predict(p, delta_um)
         neighbours = self.predict(p, delta_um + self.pixel_um) + self.predict(p, delta_um - self.pixel_um) - 2.0 * line
         sel = slice(None) if mask is None else mask
         r, flux, c, bg = coupled_lstsq(line[sel], neighbours[sel], self.data[sel])
-        return r, flux * (line + c * neighbours) + bg
+        return r, flux * (line + c * neighbours) + bg, c
+
+    def coupling(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> float:
+        """The inter-pixel coupling (fraction to each x neighbour) fitted with the model of
+        parameters ``p`` at offset shift ``delta_um``."""
+        return self._nuisances(p, delta_um, mask)[2]
 
     def estimate_noise(self, nominal_residual: np.ndarray) -> float:
         """RMS noise (fraction of the data peak) from the profile itself, its variance growing
