@@ -17,10 +17,9 @@ PIXEL_UM = 18.0
 
 
 def _line_and_neighbours(u):
-    line = np.exp(-0.5 * (u / 12.0) ** 2) + 0.3 * np.exp(-0.5 * ((u - 20.0) / 8.0) ** 2)
-    shifted = np.exp(-0.5 * ((u - PIXEL_UM) / 12.0) ** 2) + 0.3 * np.exp(-0.5 * ((u - PIXEL_UM - 20.0) / 8.0) ** 2)
-    back = np.exp(-0.5 * ((u + PIXEL_UM) / 12.0) ** 2) + 0.3 * np.exp(-0.5 * ((u + PIXEL_UM - 20.0) / 8.0) ** 2)
-    return line, shifted + back - 2.0 * line
+    def line(v):
+        return np.exp(-0.5 * (v / 12.0) ** 2) + 0.3 * np.exp(-0.5 * ((v - 20.0) / 8.0) ** 2)
+    return line(u), line(u - PIXEL_UM) + line(u + PIXEL_UM) - 2.0 * line(u)
 
 
 def test_coupled_lstsq_recovers_flux_coupling_and_background():
