@@ -69,11 +69,12 @@ def abbe_profiles_manifest(tmp_path, pixel_scales, seed, distortion=None, line=(
     return p
 
 
-def gaussian_profile_data(tmp_path, nominal, offset_um, sigma_um, noise_rel=None):
+def gaussian_profile_data(tmp_path, nominal, offset_um, sigma_um, noise_rel=None, extra=""):
     """The data of one J 1.25 µm order -2 profile at 250 mas, read through a manifest whose
     nominal is ``nominal`` (written beside it): a Gaussian of ``sigma_um`` sampled at
-    ``offset_um``, its noise ``noise_rel`` where given. For tests of the profile model's
-    machinery (memos, carried shapes), not of a line's physics."""
+    ``offset_um``, its noise ``noise_rel`` where given, ``extra`` added to its
+    [[measurement]] table. For tests of the profile model's machinery (memos, carried shapes,
+    nuisances), not of a line's physics."""
     from pipeline.diagnosis.manifest import load_data, load_manifest
 
     write_sag_map(nominal, tmp_path / "nominal.npz")
@@ -82,7 +83,7 @@ def gaussian_profile_data(tmp_path, nominal, offset_um, sigma_um, noise_rel=None
     noise = "" if noise_rel is None else f"noise_rel = {noise_rel}\n"
     (tmp_path / "m.toml").write_text('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\n'
                                      'kind = "line_profile"\nfile = "p.csv"\ngrating = "J"\norder = -2\n'
-                                     'wavelength_um = 1.25\npixel_scale_mas = 250\n' + noise)
+                                     'wavelength_um = 1.25\npixel_scale_mas = 250\n' + noise + extra)
     (data,) = load_data(load_manifest(tmp_path / "m.toml"))
     return data
 

@@ -76,11 +76,52 @@ def test_diagnosis_reports_each_profiles_coupling(tmp_path):
     below the 1-2 % of a real array on data that have none (measured 0.010 and 0.008; the
     slit 32.5 µm for 33)."""
     from pipeline.diagnosis import diagnose
+    from pipeline.diagnosis.report import coupling_text
 
     d = diagnose(profile_image_case(tmp_path, {"slit_image_width_um": 33.0}, psf=False),
                  effects=("slit_width",), heldout=False)
     c = d.baseline["interpixel_coupling"]
-    assert set(c) == {"nominal", "after"} and set(c["after"]) == {"p250", "p25"}
+    assert set(c) == {"nominal", "after", "stated"} and set(c["after"]) == {"p250", "p25"} and not c["stated"]
     assert all(0.0 <= v <= MAX_COUPLING for fit in c.values() for v in fit.values())
+    assert coupling_text(d.baseline, "p25") == f"{c['after']['p25']:.4f} fitted (nominal: {c['nominal']['p25']:.4f})"
     assert d.best.effect == "slit_width" and all(v < 0.02 for v in c["after"].values())
     assert d.to_dict()["baseline"]["interpixel_coupling"] == c
+
+
+def _coupled_counts(f, c_true, shift_um=3.0):
+    """The model's nominal line at ``f``'s offsets coupled by the truth's detector code,
+    shifted by ``shift_um`` and put in counts on a pedestal."""
+    fine = np.arange(-150.0, 150.001, 0.25)
+    line = np.nan_to_num(f.curve({})(fine))
+    return 5e3 * np.interp(f.x - shift_um, fine, coupled(fine, line, c_true, PIXEL_UM)) + 40.0
+
+
+def test_a_stated_coupling_is_used_instead_of_fitted(tmp_path):
+    """A characterised detector: the manifest's ``interpixel_coupling`` is held, only flux and
+    background are fitted (two nuisances, not three). Stated at the truth's 2 %, the nominal
+    fits the truth-coupled line to rounding; stated at 0 on the same data, the residual is
+    the coupling's own broadening, which the fitted coupling removes."""
+    nominal = nominal_map(tmp_path)
+    x = np.sort(np.random.default_rng(5).uniform(-120.0, 120.0, 160))
+    fits = {}
+    for stated in (None, 0.02, 0.0):
+        extra = "" if stated is None else f"interpixel_coupling = {stated}\n"
+        sub = tmp_path / str(stated)
+        sub.mkdir()
+        f = ProfileForward(gaussian_profile_data(sub, nominal, x, 15.0, noise_rel=0.01, extra=extra), nominal, 80.0)
+        f.data = _coupled_counts(f, 0.02)
+        fits[stated] = (f, float(np.sqrt(np.mean(f.residual({}, 3.0) ** 2))) / f.data.max())
+    assert fits[None][0].nuisance_count == 3 and fits[0.02][0].nuisance_count == 2
+    assert fits[0.02][0].coupling({}, 3.0) == 0.02 and fits[0.0][0].coupling({}, 3.0) == 0.0
+    assert fits[0.02][1] < 1e-3 and fits[None][1] < 1e-3
+    assert fits[0.0][1] > 5 * fits[0.02][1]
+
+
+@pytest.mark.parametrize("value, match", [(2, r"interpixel_coupling=2 is outside the valid range \[0, 0.25\]"),
+                                          (-0.01, r"interpixel_coupling=-0.01 is outside"),
+                                          ("1%", r"interpixel_coupling='1%'")])
+def test_a_stated_coupling_out_of_range_is_refused(tmp_path, value, match):
+    nominal = nominal_map(tmp_path)
+    v = f'"{value}"' if isinstance(value, str) else value
+    with pytest.raises(ValueError, match=match):
+        gaussian_profile_data(tmp_path, nominal, np.linspace(-100, 100, 50), 15.0, extra=f"interpixel_coupling = {v}\n")

@@ -417,7 +417,8 @@ class ProfileForward(SpectrographImageModel):
     truths with 1-3 % coupling, as the truth generator makes every profile). It is fitted,
     not stated, because it is rarely known per detector column at the line's position; it
     is linear in the fit (flux times coupling), so it costs one column of the nuisances'
-    least squares."""
+    least squares. Where the manifest states it (``interpixel_coupling``, a characterised
+    detector) the stated value is used and only flux and background are fitted."""
 
     kind = "line_profile"
     #: nuisances solved inside :meth:`residual` (flux, inter-pixel coupling, background) and
@@ -434,6 +435,10 @@ class ProfileForward(SpectrographImageModel):
         self.x = np.asarray(data.offset_um, float)
         self.data = np.asarray(data.intensity, float)
         self.n = self.data.size
+        #: the coupling the manifest states (None: fitted with flux and background)
+        self.stated_coupling = data.measurement.interpixel_coupling
+        if self.stated_coupling is not None:
+            self.nuisance_count = 2
         self.delta0_um = self._initial_shift()
 
     def curve(self, p: dict) -> CubicSpline:
@@ -471,11 +476,17 @@ class ProfileForward(SpectrographImageModel):
 
     def _nuisances(self, p, delta_um, mask):
         """(residual on ``mask``, model at every sample, coupling) with flux, coupling and
-        background fitted on ``mask`` (:func:`coupled_lstsq`)."""
+        background fitted on ``mask`` (:func:`coupled_lstsq`), the coupling held at the
+        stated one where the manifest gives it."""
         line = self.predict(p, delta_um)
         neighbours = self.predict(p, delta_um + self.pixel_um) + self.predict(p, delta_um - self.pixel_um) - 2.0 * line
         sel = slice(None) if mask is None else mask
-        r, flux, c, bg = coupled_lstsq(line[sel], neighbours[sel], self.data[sel])
+        if self.stated_coupling is None:
+            r, flux, c, bg = coupled_lstsq(line[sel], neighbours[sel], self.data[sel])
+        else:
+            c = self.stated_coupling
+            r, (flux, bg) = lstsq_residual(np.column_stack([line[sel] + c * neighbours[sel], np.ones_like(line[sel])]),
+                                           self.data[sel])
         return r, flux * (line + c * neighbours) + bg, c
 
     def coupling(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> float:

@@ -50,7 +50,9 @@ within the optical model's domain (:meth:`optics.grating.Grating.check_in_domain
 Optional per measurement: ``name`` (default: file stem), ``blank`` (which grating blank
 the data see; default the grating for profiles, ``grating`` or "spare" for surfaces),
 ``noise_um`` (surface) / ``noise_rel`` (profile or PSF image, fraction of the peak) when
-known. A PSF image is a dithered (sub-pixel sampled) image of the pixel-integrated PSF;
+known; ``interpixel_coupling`` (profile: the fraction of a pixel's signal read in each x
+neighbour, valid 0-0.25) where the detector is characterised, used as stated instead of
+fitted. A PSF image is a dithered (sub-pixel sampled) image of the pixel-integrated PSF;
 its white noise is estimated from the power beyond the optical cut-off when it lies on a
 regular grid finer than ``wavelength f_cam / (2 D)`` (≈ 2 µm in J), else along the image
 rows (biased high where the Airy rings are not smooth on the sample step), so a coarser
@@ -83,7 +85,8 @@ from fea.case import PARAMETERS, FEACase
 from optics.sagmap import SagMap
 
 __all__ = ["Simulation", "MESH_SPECS", "NOMINAL_SIMULATION", "Measurement", "Manifest", "SurfaceData", "ProfileData",
-           "PsfImageData", "MEASUREMENT_KEYS", "SIMULATION_KEYS", "NOISE_RANGES", "ALLOW_OUTSIDE_FLAG", "recentre",
+           "PsfImageData", "MEASUREMENT_KEYS", "SIMULATION_KEYS", "NOISE_RANGES", "COUPLING_RANGE", "ALLOW_OUTSIDE_FLAG",
+           "recentre",
            "read_summary", "resolve_data_path", "unit_line_peak", "unknown_keys_error", "load_manifest", "parse_manifest",
            "load_data"]
 
@@ -105,7 +108,7 @@ MEASUREMENT_KEYS = {
     "surface": _COMMON_KEYS + ("grating", "temperature_K", "aperture_diameter_mm", "noise_um", "spacing_mm",
                                "extent_mm", "wavelength_um", "centre_mm", "sag_sign"),
     "line_profile": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_scale_mas", "slit_position",
-                                    "noise_rel"),
+                                    "noise_rel", "interpixel_coupling"),
     "psf_image": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_um", "noise_rel"),
 }
 SIMULATION_KEYS = (*_SIMULATION_FEA_KEYS, "mesh", "sag_file")
@@ -116,6 +119,10 @@ FLOOR_PERCENTILE = 20.0
 #: noise in µm (1e-6 µm = 1 pm, far below any interferometer; 10 µm, 40x the nominal
 #: map's RMS). Outside them the fit's weights (1/noise^2) overflow or the data hold no line.
 NOISE_RANGES = {"noise_rel": (1e-6, 1.0), "noise_um": (1e-6, 10.0)}
+#: Valid stated inter-pixel coupling (fraction of a pixel's signal read in each x neighbour):
+#: the kernel ``[c, 1 - 2c, c]`` stays positive to 0.5; 0.25 is far beyond any measured
+#: infrared array (HAWAII-type: 0.01-0.02), so a larger value is a typing error (a percentage).
+COUPLING_RANGE = (0.0, 0.25)
 #: The flag that lets a manifest name files outside its own directory (CLI; the API's is
 #: ``allow_outside=True``).
 ALLOW_OUTSIDE_FLAG = "--allow-outside-paths"
@@ -183,6 +190,9 @@ class Measurement:
     slit_position: float = 0.0
     noise_um: float | None = None
     noise_rel: float | None = None
+    #: The detector's inter-pixel coupling at the line (fraction to each x neighbour) where it
+    #: is characterised; None: every line-profile model fits it (0-5 %).
+    interpixel_coupling: float | None = None
     pixel_um: float | None = None
     spacing_mm: float | tuple[float, float] | None = None
     extent_mm: tuple[float, float, float, float] | None = None
@@ -454,9 +464,13 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
     sp = _number(entry, "slit_position", name, 0.0)
     if not -1 <= sp <= 1:
         raise _err(name, "slit_position", sp, "must be in [-1, 1]")
+    ipc = _number(entry, "interpixel_coupling", name)
+    if ipc is not None and not COUPLING_RANGE[0] <= ipc <= COUPLING_RANGE[1]:
+        raise _err(name, "interpixel_coupling", ipc, f"is outside the valid range [{COUPLING_RANGE[0]:g}, "
+                   f"{COUPLING_RANGE[1]:g}] (fraction of a pixel's signal read in each x neighbour, not a percentage)")
     return Measurement(name, kind, path, str(entry.get("blank", key)), grating=key, order=int(order),
                        wavelength_um=float(wl), pixel_scale_mas=int(ps), slit_position=float(sp),
-                       noise_rel=noise_rel)
+                       noise_rel=noise_rel, interpixel_coupling=ipc)
 
 
 def parse_manifest(data: dict, base_dir: str | Path | None = None, source: str = "",

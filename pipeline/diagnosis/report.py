@@ -16,7 +16,7 @@ from pipeline.io.common import atomic_write
 from .effects import library_rows
 from .verdict import OUTSIDE_ALTERNATIVES, failed_tests
 
-__all__ = ["read_text", "verdict_text", "write_report"]
+__all__ = ["coupling_text", "read_text", "verdict_text", "write_report"]
 
 
 def _png(fig) -> str:
@@ -162,8 +162,20 @@ def _measurement_rows(d) -> list[dict]:
         rows.append({"measurement": m["name"], "kind": m["kind"], "file": m["file"],
                      "read": read_text(m["read"]) if m.get("read") else "—", "gridding": m.get("gridding") or "—",
                      "noise": f"{sigma:.3g} {unit}" if isinstance(sigma, float) else "—",
-                     "noise from": m.get("noise_from", "—")})
+                     "noise from": m.get("noise_from", "—"), "inter-pixel coupling": coupling_text(d.baseline, m["name"])})
     return rows
+
+
+def coupling_text(baseline: dict, name: str) -> str:
+    """A profile's inter-pixel coupling as the report states it: stated by the manifest, or
+    fitted with the verdict's fit and with the nominal ("—" for other measurements)."""
+    c = baseline.get("interpixel_coupling") or {}
+    if name in c.get("stated", {}):
+        return f"{c['stated'][name]:.4f} (stated)"
+    if name not in c.get("after", {}):
+        return "—"
+    text = f"{c['after'][name]:.4f} fitted"
+    return text + (f" (nominal: {c['nominal'][name]:.4f})" if name in c.get("nominal", {}) else "")
 
 
 def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
@@ -177,7 +189,8 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
     parts = [f"<h1>Sim-to-real diagnosis</h1><p>manifest: {html.escape(d.manifest)}</p>",
              f"<h2>Verdict: {html.escape(d.verdict)}</h2>", f"<p>{html.escape(verdict_text(d))}</p>",
              "<h3>What was read</h3>" + _table(_measurement_rows(d), ["measurement", "kind", "file", "read", "gridding",
-                                                                     "noise", "noise from"])]
+                                                                     "noise", "noise from",
+                                                                     "inter-pixel coupling"])]
 
     if d.best:
         b = d.best
