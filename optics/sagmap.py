@@ -109,6 +109,17 @@ def resolve_region(region: str | Region | None) -> Region:
         ) from None
 
 
+def _checked_sag(s: np.ndarray, ny: int, nx: int) -> np.ndarray:
+    """``s`` if it is a valid sag array on an ``(ny, nx)`` grid, else ValueError."""
+    if s.shape != (ny, nx):
+        raise ValueError(f"SagMap.sag_um has shape {s.shape}; expected (len(y_mm), len(x_mm)) = {(ny, nx)}")
+    if np.isinf(s).any():
+        raise ValueError("SagMap.sag_um contains inf; use NaN for invalid samples")
+    if not np.isfinite(s).any():
+        raise ValueError("SagMap.sag_um has no valid (finite) samples")
+    return s
+
+
 @dataclass(frozen=True)
 class SagMap:
     """A surface sag map on a regular grid.
@@ -143,17 +154,9 @@ class SagMap:
                 raise ValueError(f"SagMap.{name} must be strictly increasing")
             if not np.allclose(d, d[0], rtol=1e-6, atol=1e-9):
                 raise ValueError(f"SagMap.{name} must be uniformly spaced (spacing {d.min()}..{d.max()} mm)")
-        if s.shape != (y.size, x.size):
-            raise ValueError(
-                f"SagMap.sag_um has shape {s.shape}; expected (len(y_mm), len(x_mm)) = {(y.size, x.size)}"
-            )
-        if np.isinf(s).any():
-            raise ValueError("SagMap.sag_um contains inf; use NaN for invalid samples")
-        if not np.isfinite(s).any():
-            raise ValueError("SagMap.sag_um has no valid (finite) samples")
         object.__setattr__(self, "x_mm", x)
         object.__setattr__(self, "y_mm", y)
-        object.__setattr__(self, "sag_um", s)
+        object.__setattr__(self, "sag_um", _checked_sag(s, y.size, x.size))
 
     # ------------------------------------------------------------------ geometry
     @property
@@ -200,7 +203,15 @@ class SagMap:
     # ------------------------------------------------------------------ transforms
     def with_sag(self, sag_um: np.ndarray, label: str | None = None) -> "SagMap":
         """Copy with new sag values on the same grid."""
-        return SagMap(self.x_mm, self.y_mm, sag_um, self.label if label is None else label, dict(self.meta))
+        # the grid was checked when this map was made; only the sag is new (a diagnosis
+        # deforms the nominal tens of thousands of times, and the grid checks were a tenth
+        # of a line profile's cost there)
+        new = object.__new__(type(self))
+        for name, v in (("x_mm", self.x_mm), ("y_mm", self.y_mm),
+                        ("sag_um", _checked_sag(np.asarray(sag_um, dtype=float), self.y_mm.size, self.x_mm.size)),
+                        ("label", self.label if label is None else label), ("meta", dict(self.meta))):
+            object.__setattr__(new, name, v)
+        return new
 
     def scaled(self, factor: float) -> "SagMap":
         """Copy with the sag multiplied by ``factor`` (e.g. an amplitude scale)."""

@@ -34,6 +34,14 @@ def test_bad_input_names_the_field():
         SagMap(np.arange(3.0), np.arange(2.0), np.zeros((3, 3)))
     with pytest.raises(ValueError, match="no valid"):
         SagMap(np.arange(3.0), np.arange(2.0), np.full((2, 3), np.nan))
+    m = SagMap(np.arange(3.0), np.arange(2.0), np.zeros((2, 3)), "m", {"k": 1})
+    for bad, match in ((np.zeros((3, 3)), "sag_um has shape"), (np.full((2, 3), np.nan), "no valid"),
+                       (np.full((2, 3), np.inf), "contains inf")):
+        with pytest.raises(ValueError, match=match):  # a new sag on a checked grid is checked too
+            m.with_sag(bad)
+    w = m.with_sag([[1, 2, 3], [4, 5, 6]])
+    assert w.sag_um.dtype == float and w.label == "m" and w.meta == {"k": 1} and w.meta is not m.meta
+    assert w == SagMap(m.x_mm, m.y_mm, w.sag_um, "m")
     with pytest.raises(ValueError, match="region='middle'"):
         quilt_sag_map(1.0).pv_um("middle")
     with pytest.raises(ValueError, match="diameter_mm"):

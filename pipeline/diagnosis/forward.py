@@ -471,15 +471,22 @@ class ProfileForward(SpectrographImageModel):
 
     def predict(self, p: dict, delta_um: float = 0.0) -> np.ndarray:
         """Model profile at the measured offsets shifted by ``delta_um`` (before flux/background)."""
-        v = self.curve(p)(self.x - delta_um)
+        return self._sampled(self.curve(p), delta_um)
+
+    def _sampled(self, curve: CubicSpline, delta_um: float) -> np.ndarray:
+        v = curve(self.x - delta_um)
         return np.where(np.isfinite(v), v, 0.0)
 
     def _nuisances(self, p, delta_um, mask):
         """(residual on ``mask``, model at every sample, coupling) with flux, coupling and
         background fitted on ``mask`` (:func:`coupled_lstsq`), the coupling held at the
         stated one where the manifest gives it."""
-        line = self.predict(p, delta_um)
-        neighbours = self.predict(p, delta_um + self.pixel_um) + self.predict(p, delta_um - self.pixel_um) - 2.0 * line
+        # one memo lookup for the line and its two neighbours (the lookup, not the spline,
+        # is most of a residual's cost once the line is built)
+        curve = self.curve(p)
+        line = self._sampled(curve, delta_um)
+        neighbours = (self._sampled(curve, delta_um + self.pixel_um) + self._sampled(curve, delta_um - self.pixel_um)
+                      - 2.0 * line)
         sel = slice(None) if mask is None else mask
         if self.stated_coupling is None:
             r, flux, c, bg = coupled_lstsq(line[sel], neighbours[sel], self.data[sel])
