@@ -44,6 +44,7 @@ __all__ = [
     "PSF",
     "detector_axis_um",
     "box_convolve",
+    "box_convolve_bandlimited",
     "psf",
     "basic_lsf",
     "source_points",
@@ -133,6 +134,36 @@ def box_convolve(offset_um: np.ndarray, intensity: np.ndarray, width_um: float) 
     hi = np.interp(x + width_um / 2, x, c, left=0.0, right=c[-1])
     lo = np.interp(x - width_um / 2, x, c, left=0.0, right=c[-1])
     return (hi - lo) / width_um
+
+
+def box_convolve_bandlimited(offset_um: np.ndarray, intensity: np.ndarray, width_um: float,
+                             axis: int = -1) -> np.ndarray:
+    """Running mean over a window ``width_um`` along ``axis`` of samples of a band-limited
+    intensity on the uniform grid ``offset_um``: the spectrum times the box's transfer
+    function ``sinc(width_um f)`` (the pixel MTF), zero outside the input range.
+
+    Why beside :func:`box_convolve`: an image formed by an FFT is band-limited, and its
+    samples determine it between them; the trapezoid rule integrates the straight lines
+    between samples instead. For an 18 µm pixel over a J-band point image sampled every
+    1.5 µm (the diagnosis's fitting grid, a ~4 µm diffraction core) the trapezoid is 0.53 %
+    of the peak RMS (1.7 % at worst) from the converged image, this 0.08 % (0.31 %)
+    (``tests/test_diagnosis_psf.py``; an analytic case: ``tests/test_imaging.py``)."""
+    if width_um < 0:
+        raise ValueError(f"width_um={width_um} must be >= 0")
+    y = np.asarray(intensity, float)
+    if width_um == 0:
+        return y.copy()
+    x = np.asarray(offset_um, float)
+    n = y.shape[axis]
+    if x.size != n or n < 2:
+        raise ValueError(f"offset_um has {x.size} samples; intensity has {n} along axis {axis} (need >= 2)")
+    pad = n + int(np.ceil(width_um / (x[1] - x[0]))) + 1  # no wrap-around of the box
+    f = np.fft.rfftfreq(n + pad, x[1] - x[0])
+    shape = [1] * y.ndim
+    shape[axis] = f.size
+    out = np.fft.irfft(np.fft.rfft(y, n=n + pad, axis=axis) * np.sinc(width_um * f).reshape(shape), n=n + pad,
+                       axis=axis)
+    return np.take(out, np.arange(n), axis=axis)
 
 
 def psf(field: np.ndarray, xi_mm: np.ndarray, eta_mm: np.ndarray, wavelength_um: float,

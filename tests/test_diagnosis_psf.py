@@ -10,6 +10,7 @@ import pytest
 from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.psf_image import psf_image_model
 from pipeline.diagnosis.where import psf_image_parts
+from optics.sagmap import quilt_sag_map
 
 from diagnosis_cases import nominal_map, profile_image_case
 
@@ -29,6 +30,26 @@ def test_pixel_integration_is_a_box_filter():
         for f in (1 / 100, 1 / 60, 1 / 40):
             ratio = abs(np.sum(mb * np.exp(-2j * np.pi * f * u)) / np.sum(ma * np.exp(-2j * np.pi * f * u)))
             assert ratio == pytest.approx(np.sinc(18.0 * f), rel=1e-3), (axis, f)
+
+
+def test_fitting_grid_image_is_within_a_tenth_of_a_percent_of_converged():
+    """The pixel-integrated J image on the fitting grid (1.5 µm steps) against a converged one
+    (0.25 µm, 2048-point FFT), both peak-normalised over ±30 µm: within 0.1 % of the peak
+    RMS and 0.4 % at worst (measured 0.077 % and 0.31 %; the trapezoid rule's pixel
+    integral was 0.53 % and 1.7 %)."""
+    from scipy.interpolate import RectBivariateSpline
+
+    from pipeline.diagnosis.psf_image import FIT_PSF_SETTINGS, PsfImageSettings
+
+    g = np.arange(-30.0, 30.001, 1.0)
+    X, Y = np.meshgrid(g, g)
+    images = []
+    for s in (PsfImageSettings(0.25, 2048, 100.0), FIT_PSF_SETTINGS):
+        ux, uy, img = psf_image_model("J", 1.25, -2, quilt_sag_map(0.6, "sum", spacing_mm=0.5), {}, 18.0, s)
+        v = RectBivariateSpline(uy, ux, img).ev(Y, X)
+        images.append(v / v.max())
+    d = images[1] - images[0]
+    assert np.sqrt(np.mean(d**2)) < 1e-3 and np.abs(d).max() < 4e-3
 
 
 def test_where_parity_parts():

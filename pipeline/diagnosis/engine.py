@@ -264,14 +264,14 @@ def _ranked(manifest: Manifest, data: tuple, nominal, criteria: Criteria, cands,
 def _couplings(prob: Problem, nominal: FitOutcome, after: FitOutcome) -> dict:
     """Each line profile's inter-pixel coupling (fraction to each x neighbour) with the
     nominal (``"nominal"``) and with the fit the verdict rests on (``"after"``: the explaining
-    finding's, else the nominal's), fitted unless the manifest states it (``"stated"``, the
-    profiles whose coupling was held at the manifest's value): a detector's measured coupling
-    can be set beside the fitted ones."""
+    finding's, else the nominal's), fitted unless the manifest states it (``"stated"``: the
+    profiles whose coupling was held at the manifest's value, and the PSF images whose model
+    applies it): a detector's measured coupling can be set beside the fitted ones."""
     out = {"nominal": {}, "after": {}, "stated": {}}
     for f in prob.forwards:
+        if getattr(f, "stated_coupling", None) is not None:
+            out["stated"][f.name] = float(f.stated_coupling)
         if f.kind == "line_profile":
-            if f.stated_coupling is not None:
-                out["stated"][f.name] = float(f.stated_coupling)
             for key, fo in (("nominal", nominal), ("after", after)):
                 out[key][f.name] = float(f.coupling(fo.parameters, fo.deltas_um.get(f.name, f.delta0_um)))
     return out

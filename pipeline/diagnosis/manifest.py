@@ -50,9 +50,10 @@ within the optical model's domain (:meth:`optics.grating.Grating.check_in_domain
 Optional per measurement: ``name`` (default: file stem), ``blank`` (which grating blank
 the data see; default the grating for profiles, ``grating`` or "spare" for surfaces),
 ``noise_um`` (surface) / ``noise_rel`` (profile or PSF image, fraction of the peak) when
-known; ``interpixel_coupling`` (profile: the fraction of a pixel's signal read in each x
-neighbour, valid 0-0.25) where the detector is characterised, used as stated instead of
-fitted. A PSF image is a dithered (sub-pixel sampled) image of the pixel-integrated PSF;
+known; ``interpixel_coupling`` (the fraction of a pixel's signal read in each neighbour,
+valid 0-0.25) where the detector is characterised: a profile's model holds it instead of
+fitting it (its two x neighbours), a PSF image's applies it to its four neighbours (an image
+needs ``pixel_um > 0``; without it the image model has no coupling). A PSF image is a dithered (sub-pixel sampled) image of the pixel-integrated PSF;
 its white noise is estimated from the power beyond the optical cut-off when it lies on a
 regular grid finer than ``wavelength f_cam / (2 D)`` (≈ 2 µm in J), else along the image
 rows (biased high where the Airy rings are not smooth on the sample step), so a coarser
@@ -109,7 +110,7 @@ MEASUREMENT_KEYS = {
                                "extent_mm", "wavelength_um", "centre_mm", "sag_sign"),
     "line_profile": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_scale_mas", "slit_position",
                                     "noise_rel", "interpixel_coupling"),
-    "psf_image": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_um", "noise_rel"),
+    "psf_image": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_um", "noise_rel", "interpixel_coupling"),
 }
 SIMULATION_KEYS = (*_SIMULATION_FEA_KEYS, "mesh", "sag_file")
 #: Fraction of a profile's or image's samples at or below its floor (background estimate).
@@ -452,22 +453,25 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
     if isinstance(order, bool) or not isinstance(order, int) or order == 0:
         raise _err(name, "order", order, "must be a non-zero integer")
     _check_line(name, GRATINGS[key], float(wl), order)
+    ipc = _number(entry, "interpixel_coupling", name)
+    if ipc is not None and not COUPLING_RANGE[0] <= ipc <= COUPLING_RANGE[1]:
+        raise _err(name, "interpixel_coupling", ipc, f"is outside the valid range [{COUPLING_RANGE[0]:g}, "
+                   f"{COUPLING_RANGE[1]:g}] (fraction of a pixel's signal read in each neighbour, not a percentage)")
     if kind == "psf_image":
         pix = _number(entry, "pixel_um", name, 18.0)
         if not 0 <= pix <= 100:
             raise _err(name, "pixel_um", pix, "must be in [0, 100] µm (0: the PSF itself)")
+        if ipc is not None and pix == 0:
+            raise _err(name, "interpixel_coupling", ipc, "needs a detector pixel: pixel_um = 0 is a focal-plane "
+                       "image, which no detector's pixels couple (give pixel_um > 0, or leave the coupling out)")
         return Measurement(name, kind, path, str(entry.get("blank", key)), grating=key, order=int(order),
-                           wavelength_um=float(wl), noise_rel=noise_rel, pixel_um=float(pix))
+                           wavelength_um=float(wl), noise_rel=noise_rel, pixel_um=float(pix), interpixel_coupling=ipc)
     ps = entry.get("pixel_scale_mas")
     if ps not in _PIXEL_SCALES:
         raise _err(name, "pixel_scale_mas", ps, f"is unknown; valid: {list(_PIXEL_SCALES)}")
     sp = _number(entry, "slit_position", name, 0.0)
     if not -1 <= sp <= 1:
         raise _err(name, "slit_position", sp, "must be in [-1, 1]")
-    ipc = _number(entry, "interpixel_coupling", name)
-    if ipc is not None and not COUPLING_RANGE[0] <= ipc <= COUPLING_RANGE[1]:
-        raise _err(name, "interpixel_coupling", ipc, f"is outside the valid range [{COUPLING_RANGE[0]:g}, "
-                   f"{COUPLING_RANGE[1]:g}] (fraction of a pixel's signal read in each x neighbour, not a percentage)")
     return Measurement(name, kind, path, str(entry.get("blank", key)), grating=key, order=int(order),
                        wavelength_um=float(wl), pixel_scale_mas=int(ps), slit_position=float(sp),
                        noise_rel=noise_rel, interpixel_coupling=ipc)
