@@ -44,6 +44,14 @@ def test_coupled_lstsq_keeps_the_coupling_in_its_range(c_true, c_read):
     assert float(r @ r) == pytest.approx(min(float(f @ f) for f in faces), rel=1e-12)
 
 
+def _coupled_counts(f, c_true, shift_um=3.0):
+    """The model's nominal line at ``f``'s offsets coupled by the truth's detector code,
+    shifted by ``shift_um`` and put in counts on a pedestal."""
+    fine = np.arange(-150.0, 150.001, 0.25)
+    line = np.nan_to_num(f.curve({})(fine))
+    return 5e3 * np.interp(f.x - shift_um, fine, coupled(fine, line, c_true, PIXEL_UM)) + 40.0
+
+
 @pytest.mark.parametrize("c_true", [0.0, 0.015, 0.03])
 def test_profile_model_reads_coupling_made_by_the_truths_detector_code(tmp_path, c_true):
     """The model's own nominal line, coupled by the truth's detector code at ``c_true`` and
@@ -52,9 +60,7 @@ def test_profile_model_reads_coupling_made_by_the_truths_detector_code(tmp_path,
     nominal = nominal_map(tmp_path)
     x = np.sort(np.random.default_rng(5).uniform(-120.0, 120.0, 160))
     f = ProfileForward(gaussian_profile_data(tmp_path, nominal, x, 15.0, noise_rel=0.01), nominal, 80.0)
-    fine = np.arange(-150.0, 150.001, 0.25)
-    line = np.nan_to_num(f.curve({})(fine))
-    data = 5e3 * np.interp(x - 3.0, fine, coupled(fine, line, c_true, PIXEL_UM)) + 40.0
+    data = _coupled_counts(f, c_true)
     f.data = data
     r = f.residual({}, 3.0)
     assert np.sqrt(np.mean(r**2)) < 1e-3 * data.max()
@@ -65,7 +71,6 @@ def test_profile_model_reads_coupling_made_by_the_truths_detector_code(tmp_path,
     assert c == pytest.approx(c_true, abs=1e-3) and f.coupling({}, 3.0) == c
     assert bg == pytest.approx(40.0, abs=0.5)
     assert np.allclose(fit, flux * (line_x + c * nb) + bg)
-
 
 
 def test_diagnosis_reports_each_profiles_coupling(tmp_path):
@@ -86,14 +91,6 @@ def test_diagnosis_reports_each_profiles_coupling(tmp_path):
     assert coupling_text(d.baseline, "p25") == f"{c['after']['p25']:.4f} fitted (nominal: {c['nominal']['p25']:.4f})"
     assert d.best.effect == "slit_width" and all(v < 0.02 for v in c["after"].values())
     assert d.to_dict()["baseline"]["interpixel_coupling"] == c
-
-
-def _coupled_counts(f, c_true, shift_um=3.0):
-    """The model's nominal line at ``f``'s offsets coupled by the truth's detector code,
-    shifted by ``shift_um`` and put in counts on a pedestal."""
-    fine = np.arange(-150.0, 150.001, 0.25)
-    line = np.nan_to_num(f.curve({})(fine))
-    return 5e3 * np.interp(f.x - shift_um, fine, coupled(fine, line, c_true, PIXEL_UM)) + 40.0
 
 
 def test_a_stated_coupling_is_used_instead_of_fitted(tmp_path):

@@ -42,7 +42,7 @@ from .quilt import QuiltComponents, quilt_components
 
 __all__ = ["FIT_LSF_SETTINGS", "NOISE_LEAK_LIMIT", "PROFILE_KEYS", "SurfaceForward", "SpectrographImageModel", "ProfileForward", "profile_curve",
            "true_temperature", "deformation_factor", "blank_coordinates", "blank_shape_um", "map_terms_um",
-           "collimator_terms", "spectrograph_optics", "quilt_parts", "lstsq_residual"]
+           "collimator_terms", "spectrograph_optics", "quilt_parts", "lstsq_residual", "MAX_COUPLING", "coupled_lstsq", "coupled_at"]
 
 #: A profile's noise estimate is refused when the noise-free nominal line, sampled like
 #: the data, reads as at least this fraction of it (:meth:`ProfileForward.estimate_noise`).
@@ -86,17 +86,18 @@ def coupled_lstsq(line: np.ndarray, neighbours: np.ndarray, d: np.ndarray,
     -------
     (d - model, flux, c, background)
     """
-    one = np.ones_like(line)
-    r, (a, b, bg) = lstsq_residual(np.column_stack([line, neighbours, one]), d)
+    r, (a, b, bg) = lstsq_residual(np.column_stack([line, neighbours, np.ones_like(line)]), d)
     if a > 0 and 0.0 <= b / a <= max_coupling:
         return r, float(a), float(b / a), float(bg)
-    best = None
-    for c in (0.0, max_coupling):
-        rc, (ac, bgc) = lstsq_residual(np.column_stack([line + c * neighbours, one]), d)
-        cost = float(rc @ rc)
-        if best is None or cost < best[0]:
-            best = (cost, rc, float(ac), c, float(bgc))
-    return best[1], best[2], best[3], best[4]
+    faces = [coupled_at(line, neighbours, d, c) for c in (0.0, max_coupling)]
+    return min(faces, key=lambda face: float(face[0] @ face[0]))
+
+
+def coupled_at(line: np.ndarray, neighbours: np.ndarray, d: np.ndarray,
+               c: float) -> tuple[np.ndarray, float, float, float]:
+    """:func:`coupled_lstsq` with the coupling held at ``c``: ``(d - model, flux, c, background)``."""
+    r, (flux, bg) = lstsq_residual(np.column_stack([line + c * neighbours, np.ones_like(line)]), d)
+    return r, float(flux), c, float(bg)
 
 
 def quilt_parts(quilt: QuiltComponents | None, x_mm: np.ndarray, y_mm: np.ndarray) -> dict | None:
@@ -491,9 +492,7 @@ class ProfileForward(SpectrographImageModel):
         if self.stated_coupling is None:
             r, flux, c, bg = coupled_lstsq(line[sel], neighbours[sel], self.data[sel])
         else:
-            c = self.stated_coupling
-            r, (flux, bg) = lstsq_residual(np.column_stack([line[sel] + c * neighbours[sel], np.ones_like(line[sel])]),
-                                           self.data[sel])
+            r, flux, c, bg = coupled_at(line[sel], neighbours[sel], self.data[sel], self.stated_coupling)
         return r, flux * (line + c * neighbours) + bg, c
 
     def coupling(self, p: dict, delta_um: float = 0.0, mask: np.ndarray | None = None) -> float:

@@ -53,8 +53,8 @@ the data see; default the grating for profiles, ``grating`` or "spare" for surfa
 known; ``interpixel_coupling`` (the fraction of a pixel's signal read in each neighbour,
 valid 0-0.25) where the detector is characterised: a profile's model holds it instead of
 fitting it (its two x neighbours), a PSF image's applies it to its four neighbours (an image
-needs ``pixel_um > 0``; without it the image model has no coupling). A PSF image is a dithered (sub-pixel sampled) image of the pixel-integrated PSF;
-its white noise is estimated from the power beyond the optical cut-off when it lies on a
+needs ``pixel_um > 0``; without it the image model has no coupling). A PSF image is a
+dithered (sub-pixel sampled) image of the pixel-integrated PSF; its white noise is estimated from the power beyond the optical cut-off when it lies on a
 regular grid finer than ``wavelength f_cam / (2 D)`` (≈ 2 µm in J), else along the image
 rows (biased high where the Airy rings are not smooth on the sample step), so a coarser
 image, or one that is not on rows of >= 5 samples, should give ``noise_rel``.
@@ -87,8 +87,7 @@ from optics.sagmap import SagMap
 
 __all__ = ["Simulation", "MESH_SPECS", "NOMINAL_SIMULATION", "Measurement", "Manifest", "SurfaceData", "ProfileData",
            "PsfImageData", "MEASUREMENT_KEYS", "SIMULATION_KEYS", "NOISE_RANGES", "COUPLING_RANGE", "ALLOW_OUTSIDE_FLAG",
-           "recentre",
-           "read_summary", "resolve_data_path", "unit_line_peak", "unknown_keys_error", "load_manifest", "parse_manifest",
+           "recentre", "read_summary", "resolve_data_path", "unit_line_peak", "unknown_keys_error", "load_manifest", "parse_manifest",
            "load_data"]
 
 #: Named FEA meshes of the nominal model (element size near surfaces / in the bulk, mm); see

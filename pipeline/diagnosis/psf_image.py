@@ -61,8 +61,6 @@ FIT_PSF_SETTINGS = PsfImageSettings(detector_step_um=1.5, n_fft=256, window_um=9
 FIT_PSF_SETTINGS_FINE = PsfImageSettings(detector_step_um=0.5, n_fft=512, window_um=60.0)
 
 
-
-
 def psf_image_model(grating: str, wavelength_um: float, order: int, sag: SagMap | None, p: dict,
                     pixel_um: float = 18.0, settings: PsfImageSettings = PsfImageSettings()):
     """Pixel-integrated point-source image for effect parameters ``p``.
