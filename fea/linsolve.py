@@ -19,6 +19,7 @@ preconditioner (:class:`SharedFactor`); blocks of cases are solved in lockstep i
 from __future__ import annotations
 
 import os
+import weakref
 
 import numpy as np
 import scipy.sparse as sp
@@ -136,7 +137,8 @@ class SPDFactor:
 
     PARDISO: sparse Cholesky of the upper triangle. AMG: a smoothed-aggregation
     V-cycle (an approximate inverse, only useful as a preconditioner).
-    Call :meth:`free` to release the factor's memory (~0.7 GB at 216 k P2 DOFs).
+    Call :meth:`free` to release the factor's memory (~0.7 GB at 216 k P2 DOFs); a factor
+    collected unfreed releases it then.
     """
 
     def __init__(self, K: sp.csr_matrix, backend: str = "auto", coords_mm=None, free=None):
@@ -155,6 +157,10 @@ class SPDFactor:
             _set_pardiso_options(self._solver)
             self._K = sp.triu(K, format="csr")
             self._K.sort_indices()
+            # PARDISO's factor lives in MKL's memory under the solver's handle and pypardiso
+            # frees it only when asked: a factor dropped unfreed (a model kept a factor and
+            # went out of scope) stayed for the life of the process, ~1 GB per default-mesh case
+            self._release = weakref.finalize(self, self._solver.free_memory, True)
             try:
                 self._solver.factorize(self._K)
             except Exception as exc:
@@ -177,8 +183,9 @@ class SPDFactor:
         return self._M @ b
 
     def free(self) -> None:
+        """Release the factor's memory now (it is also released when the factor is collected)."""
         if self.backend == "pardiso" and self._solver is not None:
-            self._solver.free_memory(everything=True)
+            self._release()
             self._solver = None
 
 
