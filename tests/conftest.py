@@ -86,13 +86,13 @@ def paper_fea_dir(tmp_path_factory):
 
 @pytest.fixture(autouse=True, scope="module")
 def _return_freed_memory():
-    """After each module, hand the heap that its work freed back to the system.
+    """After each module, collect its garbage and hand the heap it freed back to the system.
 
     A worker runs many heavy modules in turn and glibc keeps what they freed: measured after
-    the paper's scorecard (Tables 1 and 2 on the default mesh), a process held 8.0 GB, of
-    which 2.5 GB was freed heap that ``malloc_trim`` returned (the rest is native memory no
-    Python object holds). Two workers each holding their largest module's peak leave little
-    of a small machine: on a 24 GB one, a worker died mid-suite while the other held 10.4 GB."""
+    the paper's scorecard (Tables 1 and 2 on the default mesh), a process held 2.7 GB, of
+    which ``malloc_trim`` returned 2.4 GB (a solver factor's MKL memory goes when its factor
+    is collected: :class:`fea.linsolve.SPDFactor`). Two workers each holding their largest module's peak must fit a small machine:
+    measured over the whole suite, each worker peaks at 4.8 GB."""
     yield
     import ctypes
     import ctypes.util
