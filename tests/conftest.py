@@ -91,8 +91,8 @@ def _return_freed_memory():
     A worker runs many heavy modules in turn and glibc keeps what they freed: measured after
     the paper's scorecard (Tables 1 and 2 on the default mesh), a process held 2.7 GB, of
     which ``malloc_trim`` returned 2.4 GB (a solver factor's MKL memory goes when its factor
-    is collected: :class:`fea.linsolve.SPDFactor`). Two workers each holding their largest module's peak must fit a small machine:
-    measured over the whole suite, each worker peaks at 4.8 GB."""
+    is collected: :class:`fea.linsolve.SPDFactor`). Two workers each holding their largest
+    module's peak must fit a small machine: over the whole suite each peaks at 4.8 GB."""
     yield
     import ctypes
     import ctypes.util
