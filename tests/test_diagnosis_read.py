@@ -260,3 +260,68 @@ def test_the_explained_excess_is_counted_per_measurement():
     nominal = outcome({"a": 4 * 100 * 1e-4, "b": 0.4 * 100 * 1e-4})
     assert excess_explained(prob, nominal, outcome({"a": 1 * 100 * 1e-4, "b": 0.4 * 100 * 1e-4})) == 1.0
     assert excess_explained(prob, nominal, outcome({"a": 2.5 * 100 * 1e-4, "b": 0.1 * 100 * 1e-4})) == pytest.approx(0.5)
+
+
+def _counts_profile(tmp_path, **extra):
+    """A Gaussian line of 5000 counts above a 300-count pedestal at 1 µm steps over +-100 µm
+    (over half the samples at the pedestal), read through a manifest with ``extra``."""
+    u = np.arange(-100.0, 100.5, 1.0)
+    f = tmp_path / "counts.csv"
+    np.savetxt(f, np.column_stack([u, 300.0 + 5000.0 * np.exp(-0.5 * (u / 12.0) ** 2)]), delimiter=",",
+               header="offset_um,counts", comments="", fmt="%.4f")
+    return parse_manifest({"measurement": [{"kind": "line_profile", "file": str(f), "grating": "J",
+                                            "wavelength_um": 1.25, "pixel_scale_mas": 250, **extra}]})
+
+
+def test_a_noise_in_counts_is_a_fraction_of_the_lines_peak(tmp_path):
+    """25 counts of noise on a line 5000 counts above its pedestal: 0.005 of the peak, what
+    the profile's model is weighted by."""
+    (pd,) = load_data(_counts_profile(tmp_path, noise_counts=25.0))
+    assert pd.measurement.noise_rel == pytest.approx(0.005, rel=1e-9)
+    fw = ProfileForward(pd, quilt_sag_map(0.6, "sum", spacing_mm=1.0), 80.0)
+    assert fw.noise_known == pytest.approx(0.005, rel=1e-9)
+
+
+@pytest.mark.parametrize("extra, pattern", [
+    ({"noise_counts": 25.0, "noise_rel": 0.005}, r"noise_counts=25.*and noise_rel = 0.005 are both given"),
+    ({"noise_counts": -3.0}, r"noise_counts=-3.*must be a finite number > 0"),
+    ({"noise_counts": 6000.0}, r"noise_counts=6000.*is 1.2 of the line's peak above background \(5000 in the "
+                               r"file's units\), outside the valid range \[1e-06, 1\]"),
+])
+def test_a_noise_in_counts_that_cannot_be_used_is_refused_by_name(tmp_path, extra, pattern):
+    with pytest.raises(ValueError, match=pattern):
+        load_data(_counts_profile(tmp_path, **extra))
+
+
+def test_a_psf_images_noise_in_counts_matches_its_residual_where_the_files_maximum_does_not(tmp_path):
+    """A J PSF image of 18 µm pixels cut at +-30 µm (the image model's nominal; its floor is
+    the PSF's own wing, 0.45 of the peak above the true background), noise of 45 counts
+    written here on a 9100-count peak: with ``noise_counts = 45`` the nominal fit's residual RMS is the stated noise
+    (ratio 1 +- 3 sd of a 961-sample RMS, 0.07); the same noise stated by hand from the
+    file's maximum (``noise_rel = 45 / max``) is 1.8x too small."""
+    from scipy.interpolate import RectBivariateSpline
+    from scipy.optimize import minimize
+
+    from pipeline.diagnosis.psf_image import PsfImageForward, psf_image_model
+    from pipeline.io.measured import write_psf_image_csv
+
+    nominal = quilt_sag_map(0.6, "sum", spacing_mm=0.5)
+    ux, uy, img = psf_image_model("J", 1.25, -2, nominal, {}, 18.0)
+    g = np.arange(-30.0, 30.001, 2.0)
+    X, Y = np.meshgrid(g, g)
+    v = RectBivariateSpline(uy, ux, img).ev(Y.ravel() - 1.0, X.ravel() + 2.0)
+    counts = 50.0 + 9100.0 * v / v.max()
+    counts += np.random.default_rng(3).normal(0.0, 45.0, counts.size)
+    write_psf_image_csv(tmp_path / "psf.csv", X.ravel(), Y.ravel(), counts)
+    ratio = {}
+    for key, value in (("noise_counts", 45.0), ("noise_rel", 45.0 / counts.max())):
+        (data,) = load_data(parse_manifest({"measurement": [{"kind": "psf_image", "file": str(tmp_path / "psf.csv"),
+                                                             "grating": "J", "order": -2, "wavelength_um": 1.25,
+                                                             "pixel_um": 18, key: value}]}))
+        f = PsfImageForward(data, nominal, 80.0)
+        best = minimize(lambda s: float(np.sum(f.residual({}, tuple(s)) ** 2)), np.asarray(f.delta0_um, float),
+                        method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-12})
+        r = f.residual({}, tuple(best.x))
+        ratio[key] = float(np.sqrt(np.sum(r**2) / (r.size - 4))) / f.noise_known
+    assert ratio["noise_counts"] == pytest.approx(1.0, abs=0.07), ratio
+    assert ratio["noise_rel"] > 1.5, ratio

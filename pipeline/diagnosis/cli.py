@@ -154,6 +154,7 @@ that none does. MANIFEST is a TOML file listing the simulation and the measureme
   wavelength_um = 1.25
   pixel_scale_mas = 250       # 25, 100 or 250
   # noise_rel = 0.003         # white noise / line peak; required for one sample per pixel
+  # noise_counts = 12.0       #   or the same in the file's intensity units
 
 Paths are relative to the manifest. Each error names the measurement and the field; the
 run prints what it read from each file. Details: README (Sim-to-real diagnosis) and

@@ -49,9 +49,10 @@ within the optical model's domain (:meth:`optics.grating.Grating.check_in_domain
 
 Optional per measurement: ``name`` (default: file stem), ``blank`` (which grating blank
 the data see; default the grating for profiles, ``grating`` or "spare" for surfaces),
-``noise_um`` (surface) / ``noise_rel`` (profile or PSF image, fraction of the peak) when
-known; ``interpixel_coupling`` (the fraction of a pixel's signal read in each neighbour,
-valid 0-0.25) where the detector is characterised: a profile's model holds it instead of
+``noise_um`` (surface) / ``noise_rel`` (profile or PSF image, fraction of the peak) or
+``noise_counts`` (profile or PSF image: the RMS noise in the file's own intensity units,
+turned into ``noise_rel`` with the floor and peak the data are scaled by) when known;
+``interpixel_coupling`` (the fraction of a pixel's signal read in each neighbour, valid 0-0.25) where the detector is characterised: a profile's model holds it instead of
 fitting it (its two x neighbours), a PSF image's applies it to its four neighbours (an image
 needs ``pixel_um > 0``; without it the image model has no coupling). A PSF image is a
 dithered (sub-pixel sampled) image of the pixel-integrated PSF; its white noise is estimated from the power beyond the optical cut-off when it lies on a
@@ -77,7 +78,7 @@ from __future__ import annotations
 import difflib
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -108,8 +109,9 @@ MEASUREMENT_KEYS = {
     "surface": _COMMON_KEYS + ("grating", "temperature_K", "aperture_diameter_mm", "noise_um", "spacing_mm",
                                "extent_mm", "wavelength_um", "centre_mm", "sag_sign"),
     "line_profile": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_scale_mas", "slit_position",
-                                    "noise_rel", "interpixel_coupling"),
-    "psf_image": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_um", "noise_rel", "interpixel_coupling"),
+                                    "noise_rel", "noise_counts", "interpixel_coupling"),
+    "psf_image": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_um", "noise_rel", "noise_counts",
+                                 "interpixel_coupling"),
 }
 SIMULATION_KEYS = (*_SIMULATION_FEA_KEYS, "mesh", "sag_file")
 #: Fraction of a profile's or image's samples at or below its floor (background estimate).
@@ -190,6 +192,10 @@ class Measurement:
     slit_position: float = 0.0
     noise_um: float | None = None
     noise_rel: float | None = None
+    #: The RMS white noise in the file's own intensity units (counts, ADU, electrons), as a
+    #: detector is characterised; the reader turns it into ``noise_rel`` with the same floor
+    #: and peak it scales the data by.
+    noise_counts: float | None = None
     #: The detector's inter-pixel coupling at the line (fraction to each x neighbour) where it
     #: is characterised; None: every line-profile model fits it (0-5 %).
     interpixel_coupling: float | None = None
@@ -412,6 +418,15 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
         raise _err(name, "file", str(entry["file"]), f"does not exist (resolved to {path})")
     noise_um = _number(entry, "noise_um", name)
     noise_rel = _number(entry, "noise_rel", name)
+    noise_counts = _number(entry, "noise_counts", name)
+    if noise_counts is not None:
+        if noise_rel is not None:
+            raise _err(name, "noise_counts", noise_counts, f"and noise_rel = {noise_rel:g} are both given: state the "
+                       "noise once, in the file's intensity units (noise_counts) or as a fraction of the line's "
+                       "peak above background (noise_rel)")
+        if not (math.isfinite(noise_counts) and noise_counts > 0):
+            raise _err(name, "noise_counts", noise_counts, "must be a finite number > 0 (the RMS white noise in "
+                       "the file's intensity units)")
     for k, v in (("noise_um", noise_um), ("noise_rel", noise_rel)):
         lo, hi = NOISE_RANGES[k]
         if v is not None and not lo <= v <= hi:
@@ -464,7 +479,8 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
             raise _err(name, "interpixel_coupling", ipc, "needs a detector pixel: pixel_um = 0 is a focal-plane "
                        "image, which no detector's pixels couple (give pixel_um > 0, or leave the coupling out)")
         return Measurement(name, kind, path, str(entry.get("blank", key)), grating=key, order=int(order),
-                           wavelength_um=float(wl), noise_rel=noise_rel, pixel_um=float(pix), interpixel_coupling=ipc)
+                           wavelength_um=float(wl), noise_rel=noise_rel, noise_counts=noise_counts, pixel_um=float(pix),
+                           interpixel_coupling=ipc)
     ps = entry.get("pixel_scale_mas")
     if ps not in _PIXEL_SCALES:
         raise _err(name, "pixel_scale_mas", ps, f"is unknown; valid: {list(_PIXEL_SCALES)}")
@@ -473,7 +489,7 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
         raise _err(name, "slit_position", sp, "must be in [-1, 1]")
     return Measurement(name, kind, path, str(entry.get("blank", key)), grating=key, order=int(order),
                        wavelength_um=float(wl), pixel_scale_mas=int(ps), slit_position=float(sp),
-                       noise_rel=noise_rel, interpixel_coupling=ipc)
+                       noise_rel=noise_rel, noise_counts=noise_counts, interpixel_coupling=ipc)
 
 
 def parse_manifest(data: dict, base_dir: str | Path | None = None, source: str = "",
@@ -598,18 +614,34 @@ def _check_centred(m: Measurement, x: np.ndarray, y: np.ndarray, inside: np.ndar
                    f"{c[1] + cy:.1f}] (the map coordinates of the blank's centre, mm)")
 
 
-def unit_line_peak(intensity: np.ndarray, what: str, name: str, file: Path) -> np.ndarray:
+def unit_line_peak(intensity: np.ndarray, what: str, name: str, file: Path) -> tuple[np.ndarray, float]:
     """Intensity minus its floor (the :data:`FLOOR_PERCENTILE` percentile, a background
-    estimate) over the line's peak above it. The fit's flux and background nuisances
-    absorb any error in the floor; removing it makes ``noise_rel`` a fraction of the
-    line's peak whatever the pedestal, and keeps a centroid from being pulled to the
-    middle of the window by it."""
+    estimate) over the line's peak above it, and that peak (the file's units). The fit's
+    flux and background nuisances absorb any error in the floor; removing it makes
+    ``noise_rel`` a fraction of the line's peak whatever the pedestal, and keeps a
+    centroid from being pulled to the middle of the window by it."""
     v = np.asarray(intensity, float)
     floor = float(np.percentile(v, FLOOR_PERCENTILE))
     peak = float(v.max()) - floor
     if not peak > 0:
         raise _err(name, "file", str(file), f"has no {what} above its background: every sample equals {floor:g}")
-    return (v - floor) / peak
+    return (v - floor) / peak, peak
+
+
+def _noise_as_fraction(m: Measurement, peak: float) -> Measurement:
+    """``m`` with a ``noise_counts`` (the file's units) stated as ``noise_rel``, a fraction of
+    the ``peak`` the data were scaled by (file units). The floor a small window reads can be
+    the line's own wing (a J PSF image of 18 µm pixels cut at +-30 µm: 0.45 of the peak above
+    the true background), so a noise known in counts is not the file's maximum times
+    ``noise_rel``."""
+    if m.noise_counts is None:
+        return m
+    rel = m.noise_counts / peak
+    lo, hi = NOISE_RANGES["noise_rel"]
+    if not lo <= rel <= hi:
+        raise _err(m.name, "noise_counts", m.noise_counts, f"is {rel:.3g} of the line's peak above background "
+                   f"({peak:.6g} in the file's units), outside the valid range [{lo:g}, {hi:g}]")
+    return replace(m, noise_rel=rel)
 
 
 #: Lines found farther than this from the origin (µm) are moved to it: half the range of
@@ -648,7 +680,8 @@ def _read_profile(m: Measurement) -> ProfileData:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
     if u.size < 10:
         raise _err(m.name, "file", str(m.file), f"has {u.size} samples; need >= 10")
-    v = unit_line_peak(y, "line", m.name, m.file)
+    v, peak = unit_line_peak(y, "line", m.name, m.file)
+    m = _noise_as_fraction(m, peak)
     u = np.asarray(u, float)
     c = recentre(u, v, RECENTRE_BEYOND_UM["line_profile"])
     return ProfileData(m, u - c, v, c)
@@ -663,12 +696,13 @@ def _read_psf_image(m: Measurement) -> PsfImageData:
         x, y, v = read_measured("psf image", m.file, pixel_um=m.pixel_um or None)
     except ValueError as exc:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
-    if m.noise_rel is None:
+    if m.noise_rel is None and m.noise_counts is None:
         _, counts = np.unique(np.round(y, 6), return_counts=True)
         if (counts >= 5).sum() < 5:
             raise _err(m.name, "noise_rel", None, f"is required: the {x.size} samples of {m.file.name} are not on "
                        "rows of >= 5 points, so the noise cannot be estimated from the image")
-    v = unit_line_peak(v, "image", m.name, m.file)
+    v, peak = unit_line_peak(v, "image", m.name, m.file)
+    m = _noise_as_fraction(m, peak)
     cx, cy = (recentre(a, v, RECENTRE_BEYOND_UM["psf_image"]) for a in (x, y))
     return PsfImageData(m, x - cx, y - cy, v, (cx, cy))
 
