@@ -147,27 +147,51 @@ def _psf_data(tmp_path, nominal, c_true, extra):
                                      'wavelength_um = 1.25\npixel_um = 18\nnoise_rel = 0.001\n' + extra)
 
 
-def test_a_psf_images_stated_coupling_is_applied_to_its_four_neighbours(tmp_path):
+def test_a_psf_images_coupling_is_fitted_or_held_at_the_stated_value(tmp_path):
     """An image whose pixels couple 2 % to each neighbour (applied on the model image's grid
-    by this test): the image model with the stated 2 % fits it to the model's own sampling
-    error (the fitting grid's 1.5 µm against the data's 0.5 µm), without it the coupling's blur
-    is left (measured: 1.0e-3 and 1.07e-2 of the peak; stated at 1 or 3 %, 5.5e-3 and 5.8e-3)."""
+    by this test): the image model fits it to the model's own sampling error (the fitting
+    grid's 1.5 µm against the data's 0.5 µm) with the coupling fitted (read within 0.002 of
+    0.02) or stated at 2 %; held at a stated 0 the coupling's blur is left (measured:
+    1.0e-3 fitted and stated, 1.07e-2 held at 0)."""
     from scipy.optimize import minimize
 
     from pipeline.diagnosis.manifest import load_data, load_manifest
     from pipeline.diagnosis.psf_image import PsfImageForward
 
     nominal = nominal_map(tmp_path)
-    rms = {}
-    for extra in ("", "interpixel_coupling = 0.02\n"):
+    rms, read = {}, {}
+    for extra, count in (("", 3), ("interpixel_coupling = 0.02\n", 2), ("interpixel_coupling = 0\n", 2)):
         _psf_data(tmp_path, nominal, 0.02, extra)
         (data,) = load_data(load_manifest(tmp_path / "m.toml"))
         f = PsfImageForward(data, nominal, 80.0)
         best = minimize(lambda s: float(np.sum(f.residual({}, tuple(s)) ** 2)), np.asarray(f.delta0_um, float),
                         method="Nelder-Mead", options={"xatol": 1e-3, "fatol": 1e-12})
         rms[extra] = float(np.sqrt(np.mean(f.residual({}, tuple(best.x)) ** 2)))
-        assert f.nuisance_count == 2 and f.stated_coupling == (0.02 if extra else None)
-    assert rms["interpixel_coupling = 0.02\n"] < 2e-3 and rms[""] > 5 * rms["interpixel_coupling = 0.02\n"], rms
+        read[extra] = f.coupling({}, tuple(best.x))
+        assert f.nuisance_count == count and f.fits_coupling == (not extra)
+    assert read[""] == pytest.approx(0.02, abs=0.002) and read["interpixel_coupling = 0.02\n"] == 0.02, read
+    assert rms[""] < 2e-3 and rms["interpixel_coupling = 0.02\n"] < 2e-3, rms
+    assert rms["interpixel_coupling = 0\n"] > 5 * rms["interpixel_coupling = 0.02\n"], rms
+
+
+def test_a_coupled_image_is_no_gap_once_its_coupling_is_fitted(tmp_path):
+    """The 2 %-coupled nominal image with 0.5 % of the peak of white noise, its noise stated in
+    counts: no gap, and the report gives the fitted coupling (left out of the model, this
+    image's residual was a gap no effect explained: ``unexplained``)."""
+    from pipeline.diagnosis import diagnose
+    from pipeline.io.measured import write_psf_image_csv
+
+    nominal = nominal_map(tmp_path)
+    _psf_data(tmp_path, nominal, 0.02, "")
+    v = np.loadtxt(tmp_path / "psf.csv", delimiter=",", skiprows=1)
+    counts = 1000.0 * (v[:, 2] - 200.0) + 50.0
+    counts += np.random.default_rng(5).normal(0.0, 0.005 * counts.max(), counts.size)
+    write_psf_image_csv(tmp_path / "psf.csv", v[:, 0], v[:, 1], counts)
+    text = (tmp_path / "m.toml").read_text().replace("noise_rel = 0.001", f"noise_counts = {0.005 * counts.max()}")
+    (tmp_path / "m.toml").write_text(text)
+    d = diagnose(tmp_path / "m.toml", heldout=False, keep_curves=False)
+    assert d.verdict == "no_gap", d.verdict
+    assert d.baseline["interpixel_coupling"]["nominal"]["psf"] == pytest.approx(0.02, abs=0.002)
 
 
 def test_a_focal_plane_image_refuses_a_coupling(tmp_path):
@@ -179,3 +203,11 @@ def test_a_focal_plane_image_refuses_a_coupling(tmp_path):
 
     with pytest.raises(ValueError, match=r"interpixel_coupling=0.02 needs a detector pixel: pixel_um = 0"):
         load_manifest(tmp_path / "m.toml")
+    # without it, a focal-plane image's model has no coupling to fit either
+    from pipeline.diagnosis.manifest import load_data
+    from pipeline.diagnosis.psf_image import PsfImageForward
+
+    (tmp_path / "m.toml").write_text(text.replace("interpixel_coupling = 0.02\n", ""))
+    (data,) = load_data(load_manifest(tmp_path / "m.toml"))
+    f = PsfImageForward(data, nominal, 80.0)
+    assert f.nuisance_count == 2 and not f.fits_coupling and f.coupling({}) == 0.0

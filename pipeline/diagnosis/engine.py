@@ -262,16 +262,16 @@ def _ranked(manifest: Manifest, data: tuple, nominal, criteria: Criteria, cands,
 
 
 def _couplings(prob: Problem, nominal: FitOutcome, after: FitOutcome) -> dict:
-    """Each line profile's inter-pixel coupling (fraction to each x neighbour) with the
-    nominal (``"nominal"``) and with the fit the verdict rests on (``"after"``: the explaining
-    finding's, else the nominal's), fitted unless the manifest states it (``"stated"``: the
-    profiles whose coupling was held at the manifest's value, and the PSF images whose model
-    applies it): a detector's measured coupling can be set beside the fitted ones."""
+    """Each line profile's and detector PSF image's inter-pixel coupling (fraction to each x
+    neighbour; an image's to each of four) with the nominal (``"nominal"``) and with the fit
+    the verdict rests on (``"after"``: the explaining finding's, else the nominal's), fitted
+    unless the manifest states it (``"stated"``: the measurements whose coupling was held at
+    the manifest's value): a detector's measured coupling can be set beside the fitted ones."""
     out = {"nominal": {}, "after": {}, "stated": {}}
     for f in prob.forwards:
         if getattr(f, "stated_coupling", None) is not None:
             out["stated"][f.name] = float(f.stated_coupling)
-        if f.kind == "line_profile":
+        if f.kind == "line_profile" or (f.kind == "psf_image" and f.pixel_um > 0):
             for key, fo in (("nominal", nominal), ("after", after)):
                 out[key][f.name] = float(f.coupling(fo.parameters, fo.deltas_um.get(f.name, f.delta0_um)))
     return out

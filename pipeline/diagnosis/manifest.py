@@ -52,13 +52,16 @@ the data see; default the grating for profiles, ``grating`` or "spare" for surfa
 ``noise_um`` (surface) / ``noise_rel`` (profile or PSF image, fraction of the peak) or
 ``noise_counts`` (profile or PSF image: the RMS noise in the file's own intensity units,
 turned into ``noise_rel`` with the floor and peak the data are scaled by) when known;
-``interpixel_coupling`` (the fraction of a pixel's signal read in each neighbour, valid 0-0.25) where the detector is characterised: a profile's model holds it instead of
-fitting it (its two x neighbours), a PSF image's applies it to its four neighbours (an image
-needs ``pixel_um > 0``; without it the image model has no coupling). A PSF image is a
-dithered (sub-pixel sampled) image of the pixel-integrated PSF; its white noise is estimated from the power beyond the optical cut-off when it lies on a
-regular grid finer than ``wavelength f_cam / (2 D)`` (≈ 2 µm in J), else along the image
-rows (biased high where the Airy rings are not smooth on the sample step), so a coarser
-image, or one that is not on rows of >= 5 samples, should give ``noise_rel``.
+``interpixel_coupling`` (the fraction of a pixel's signal read in each neighbour, valid
+0-0.25) where the detector is characterised: a profile's model holds it instead of fitting
+it (its two x neighbours), a PSF image's holds it on its four neighbours (an image needs
+``pixel_um > 0``; without a stated one a detector image's coupling is fitted, 0-5 %, and a
+focal-plane image has none). A PSF image is a dithered (sub-pixel sampled) image of the
+pixel-integrated PSF; its white noise is estimated from the power beyond the optical
+cut-off when it lies on a regular grid finer than ``wavelength f_cam / (2 D)`` (≈ 2 µm in
+J), else along the image rows (biased high where the Airy rings are not smooth on the
+sample step), so a coarser image, or one that is not on rows of >= 5 samples, should give
+``noise_rel`` or ``noise_counts``.
 Surfaces may also give ``wavelength_um`` (for a sag in waves: a NetCDF ``units = "waves"``, a
 table column ``sag [waves]``);
 ``spacing_mm`` / ``extent_mm`` / ``wavelength_um`` go to the sag-map reader, which
@@ -700,7 +703,8 @@ def _read_psf_image(m: Measurement) -> PsfImageData:
         _, counts = np.unique(np.round(y, 6), return_counts=True)
         if (counts >= 5).sum() < 5:
             raise _err(m.name, "noise_rel", None, f"is required: the {x.size} samples of {m.file.name} are not on "
-                       "rows of >= 5 points, so the noise cannot be estimated from the image")
+                       "rows of >= 5 points, so the noise cannot be estimated from the image (or give "
+                       "noise_counts, in the file's intensity units)")
     v, peak = unit_line_peak(v, "image", m.name, m.file)
     m = _noise_as_fraction(m, peak)
     cx, cy = (recentre(a, v, RECENTRE_BEYOND_UM["psf_image"]) for a in (x, y))
