@@ -10,6 +10,7 @@ from pipeline.sweeps.surrogate import run_surrogate_sweep
 COARSE = ["--param", "mesh_size_mm=5", "--param", "mesh_bulk_mm=10"]
 
 
+@pytest.mark.slow  # eight FEA solves through the CLI, the slowest test of the fast tier: the full tier
 def test_surrogate_sweep_cli_matches_full_solves(tmp_path, capsys):
     out = tmp_path / "sur"
     # tol 1e-2 (looser than the default 2e-3) keeps the greedy build to a few solves here;

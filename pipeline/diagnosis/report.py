@@ -167,8 +167,9 @@ def _measurement_rows(d) -> list[dict]:
 
 
 def coupling_text(baseline: dict, name: str) -> str:
-    """A profile's inter-pixel coupling as the report states it: stated by the manifest, or
-    fitted with the verdict's fit and with the nominal ("—" for other measurements)."""
+    """A profile's or detector image's inter-pixel coupling as the report states it: stated
+    by the manifest, or fitted with the verdict's fit and with the nominal ("—" for maps and
+    focal-plane images)."""
     c = baseline.get("interpixel_coupling") or {}
     if name in c.get("stated", {}):
         return f"{c['stated'][name]:.4f} (stated)"
