@@ -98,11 +98,13 @@ def _profile_forward(tmp_path, step_um, sigma_rel, seed):
 
 def test_a_profile_sampled_once_per_pixel_asks_for_its_noise(tmp_path):
     """At one sample per 18 µm pixel the neighbour-prediction estimate reads the line's
-    structure as noise (here ~50x the true 0.002 of the peak): refused, naming noise_rel."""
+    structure as noise (here ~50x the true 0.002 of the peak): refused, naming noise_rel and
+    noise_counts."""
     pd, fw, r = _profile_forward(tmp_path, 18.0, 0.002, 1)
     with pytest.raises(ValueError, match=r"measurement 'p18': noise_rel is required: its 14 samples \(18 µm apart\) "
-                                         r"are too coarse.*valid 1e-06..1\) in its \[\[measurement\]\]; the \d+ "
-                                         r"samples where the nominal line is below 5 % of its peak scatter"):
+                                         r"are too coarse.*valid 1e-06..1\) in its \[\[measurement\]\], or "
+                                         r"noise_counts = the same in the file's intensity units; the \d+ samples "
+                                         r"where the nominal line is below 5 % of its peak scatter"):
         fw.estimate_noise(r)
     assert pd.origin_um == pytest.approx(35.0, abs=3.0)  # the line's centre, moved to the model's origin
 

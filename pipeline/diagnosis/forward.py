@@ -531,7 +531,8 @@ class ProfileForward(SpectrographImageModel):
                 f"noise-free, reads as noise {leak:.3g} of the peak against {sigma:.3g} from the data; the estimate "
                 f"needs the first below {NOISE_LEAK_LIMIT:g} x the second); give noise_rel = the RMS noise over the "
                 f"profile as a fraction of the line's peak above background (valid {NOISE_RANGES['noise_rel'][0]:g}.."
-                f"{NOISE_RANGES['noise_rel'][1]:g}) in its [[measurement]]{hint}")
+                f"{NOISE_RANGES['noise_rel'][1]:g}) in its [[measurement]], or noise_counts = the same in the "
+                f"file's intensity units{hint}")
         return sigma
 
     @property
