@@ -18,8 +18,8 @@ measured 4x slower) — and a flux and a constant background (linear, projected 
 image read by a detector (``pixel_um > 0``) also has its inter-pixel coupling: the fraction
 ``c`` of each pixel's signal read in each of its four neighbours, fitted in 0-5 % like a
 profile's (linear in flux times ``c``, :func:`.forward.coupled_lstsq`) unless the manifest
-states it. Left out, a 2 % coupling blurs the image by about 1 % of its peak (RMS), more
-than its noise: a nominal image coupled 2 % with 0.5 % noise was left ``unexplained``.
+states it. Held at 0, a 2 % coupling blurs the image by about 1 % of its peak (RMS), more
+than its noise: a nominal image coupled 2 % with 0.5 % noise is then ``unexplained``.
 """
 
 from __future__ import annotations
