@@ -192,6 +192,7 @@ def test_a_coupled_image_is_no_gap_once_its_coupling_is_fitted(tmp_path):
     d = diagnose(tmp_path / "m.toml", heldout=False, keep_curves=False)
     assert d.verdict == "no_gap", d.verdict
     assert d.baseline["interpixel_coupling"]["nominal"]["psf"] == pytest.approx(0.02, abs=0.002)
+    assert d.measurements[0]["noise_from"].startswith("manifest: noise_counts ")
 
 
 def test_a_focal_plane_image_refuses_a_coupling(tmp_path):
