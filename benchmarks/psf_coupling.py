@@ -34,20 +34,12 @@ from diagnosis_cases import nominal_map  # noqa: E402
 from pipeline.diagnosis import diagnose  # noqa: E402
 from pipeline.diagnosis.psf_image import psf_image_model  # noqa: E402
 from pipeline.diagnosis.synth import synthetic_profile  # noqa: E402
+from pipeline.diagnosis.truth.detector import coupled_image  # noqa: E402
 from pipeline.io.measured import write_line_profile_csv, write_psf_image_csv  # noqa: E402
 
 TRUTH = {"coll_coma_um": 0.05, "coll_defocus_um": 0.05, "coll_astig45_um": -0.15}
 COUPLINGS = (0.0, 0.01, 0.02, 0.03)
 PIXEL_UM, NOISE_REL, PEAK_COUNTS = 18.0, 0.01, 5000.0
-
-
-def coupled(img: np.ndarray, step_um: float, c: float) -> np.ndarray:
-    """``img`` read through a coupling ``c`` to each of the four neighbours one pixel away
-    (whole-sample shifts of the array; the model image's grid holds a pixel in whole steps)."""
-    k = int(round(PIXEL_UM / step_um))
-    pad = np.pad(img, k)
-    around = pad[k:-k, :-2 * k] + pad[k:-k, 2 * k:] + pad[:-2 * k, k:-k] + pad[2 * k:, k:-k]
-    return (1.0 - 4.0 * c) * img + c * around
 
 
 def write_case(tmp: Path, c: float, hold_at_zero: bool) -> Path:
@@ -62,7 +54,7 @@ def write_case(tmp: Path, c: float, hold_at_zero: bool) -> Path:
     ux, uy, img = psf_image_model("J", 1.25, -2, nominal, TRUTH, PIXEL_UM)
     g = np.arange(-30.0, 30.001, 1.0)
     X, Y = np.meshgrid(g, g)
-    v = RectBivariateSpline(uy, ux, coupled(img, ux[1] - ux[0], c)).ev(Y.ravel() - 1.3, X.ravel() + 2.1)
+    v = RectBivariateSpline(uy, ux, coupled_image(img, ux[1] - ux[0], c, PIXEL_UM)).ev(Y.ravel() - 1.3, X.ravel() + 2.1)
     peak = float(v.max())
     counts = PEAK_COUNTS * (v + 0.03 * peak + rng.normal(0.0, NOISE_REL * peak, v.size)) / peak
     write_psf_image_csv(tmp / "psf.csv", X.ravel(), Y.ravel(), counts)

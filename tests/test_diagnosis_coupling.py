@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.diagnosis.forward import MAX_COUPLING, ProfileForward, coupled_lstsq, lstsq_residual
-from pipeline.diagnosis.truth.detector import coupled
+from pipeline.diagnosis.truth.detector import coupled, coupled_image
 
 from diagnosis_cases import gaussian_profile_data, nominal_map, profile_image_case
 
@@ -124,6 +124,19 @@ def test_a_stated_coupling_out_of_range_is_refused(tmp_path, value, match):
         gaussian_profile_data(tmp_path, nominal, np.linspace(-100, 100, 50), 15.0, extra=f"interpixel_coupling = {v}\n")
 
 
+def test_coupled_image_moves_c_of_each_pixel_into_its_four_neighbours():
+    """A single lit sample on a 2 µm grid with 18 µm pixels: 1 - 4c stays, c lands 9 samples
+    away in each direction, nothing else moves; a pixel that is not a whole number of steps
+    is refused by name."""
+    img = np.zeros((41, 41))
+    img[20, 20] = 1.0
+    out = coupled_image(img, 2.0, 0.02, PIXEL_UM)
+    assert out[20, 20] == pytest.approx(0.92) and out.sum() == pytest.approx(1.0)
+    assert [out[20, 11], out[20, 29], out[11, 20], out[29, 20]] == pytest.approx([0.02] * 4)
+    with pytest.raises(ValueError, match=r"pixel_um=18.0 must be a whole number >= 1 of step_um=5.0"):
+        coupled_image(img, 5.0, 0.02, PIXEL_UM)
+
+
 def _psf_data(tmp_path, nominal, c_true, extra):
     """A noise-free dithered PSF image (J 1.25 µm, 18 µm pixels) of the nominal, each sample
     read through a coupling ``c_true`` to the four neighbours applied here on the model
@@ -134,10 +147,7 @@ def _psf_data(tmp_path, nominal, c_true, extra):
     from pipeline.io.measured import write_psf_image_csv
 
     ux, uy, img = psf_image_model("J", 1.25, -2, nominal, {}, 18.0)
-    k = int(round(PIXEL_UM / (ux[1] - ux[0])))
-    pad = np.pad(img, k)
-    around = pad[k:-k, :-2 * k] + pad[k:-k, 2 * k:] + pad[:-2 * k, k:-k] + pad[2 * k:, k:-k]
-    coupled_img = (1.0 - 4.0 * c_true) * img + c_true * around
+    coupled_img = coupled_image(img, ux[1] - ux[0], c_true, PIXEL_UM)
     g = np.arange(-30.0, 30.001, 2.0)
     X, Y = np.meshgrid(g, g)
     v = RectBivariateSpline(uy, ux, coupled_img).ev(Y.ravel() - 1.0, X.ravel() + 2.0)

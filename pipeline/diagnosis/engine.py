@@ -136,10 +136,9 @@ def _data_notes(data, forward) -> dict:
     """How a measurement's samples came to be the diagnosed ones, for the report: ``gridding``
     (scattered points interpolated onto a grid, a point list put back on its grid; None for
     a file holding its grid or for a profile) and ``noise_from`` (where its noise comes from)."""
-    m = data.measurement
-    default = "manifest" if forward.noise_known else "the data"
-    if getattr(m, "noise_counts", None) is not None:
-        default = f"manifest: noise_counts {m.noise_counts:g} in the file's units"
+    counts = data.measurement.noise_counts
+    default = ("the data" if not forward.noise_known else "manifest" if counts is None
+               else f"manifest: noise_counts {counts:g} in the file's units")
     return {"gridding": getattr(data, "gridding", None), "noise_from": getattr(forward, "noise_from", default)}
 
 

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-__all__ = ["coupling_kernel", "pixel_values", "coupled", "correlated_noise", "subtract_background",
+__all__ = ["coupling_kernel", "pixel_values", "coupled", "coupled_image", "correlated_noise", "subtract_background",
            "measure_profile"]
 
 
@@ -40,6 +40,20 @@ def coupled(offset_um: np.ndarray, profile: np.ndarray, c: float, pixel_um: floa
     left = np.interp(offset_um - pixel_um, offset_um, profile, left=0.0, right=0.0)
     right = np.interp(offset_um + pixel_um, offset_um, profile, left=0.0, right=0.0)
     return k[1] * profile + k[0] * left + k[2] * right
+
+
+def coupled_image(image: np.ndarray, step_um: float, c: float, pixel_um: float) -> np.ndarray:
+    """A pixel-integrated image (rows y, columns x, uniform ``step_um`` on both axes) after
+    inter-pixel coupling to the four neighbours: ``(1 - 4c) I + c`` times the image one
+    pixel away in each direction, by whole-sample shifts of the array (``pixel_um`` must be
+    a whole number of steps; zero beyond the array). No interpolation, so it shares nothing
+    with an image model that couples through its spline."""
+    k = int(round(pixel_um / step_um))
+    if not (k >= 1 and abs(k * step_um - pixel_um) <= 1e-6 * pixel_um):
+        raise ValueError(f"coupled_image: pixel_um={pixel_um} must be a whole number >= 1 of step_um={step_um}")
+    pad = np.pad(image, k)
+    around = pad[k:-k, :-2 * k] + pad[k:-k, 2 * k:] + pad[:-2 * k, k:-k] + pad[2 * k:, k:-k]
+    return (1.0 - 4.0 * c) * image + c * around
 
 
 def correlated_noise(x_um: np.ndarray, sigma: float, length_um: float, rng: np.random.Generator) -> np.ndarray:
