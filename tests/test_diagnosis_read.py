@@ -284,6 +284,21 @@ def test_a_noise_in_counts_is_a_fraction_of_the_lines_peak(tmp_path):
     assert fw.noise_known == pytest.approx(0.005, rel=1e-9)
 
 
+def test_an_images_noise_in_counts_is_a_fraction_of_its_peak_above_the_pedestal(tmp_path):
+    """A 2-D Gaussian spot (numpy, no project model) 4000 counts above a 300-count pedestal,
+    window reaching the pedestal: 20 counts of noise are 0.005 of the peak."""
+    from pipeline.io.measured import write_psf_image_csv
+
+    g = np.arange(-60.0, 60.5, 2.0)
+    X, Y = np.meshgrid(g, g)
+    write_psf_image_csv(tmp_path / "spot.csv", X.ravel(), Y.ravel(),
+                        300.0 + 4000.0 * np.exp(-0.5 * (X.ravel() ** 2 + Y.ravel() ** 2) / 5.0**2))
+    (d,) = load_data(parse_manifest({"measurement": [{"kind": "psf_image", "file": str(tmp_path / "spot.csv"),
+                                                      "grating": "J", "order": -2, "wavelength_um": 1.25,
+                                                      "pixel_um": 18, "noise_counts": 20.0}]}))
+    assert d.measurement.noise_rel == pytest.approx(0.005, rel=1e-9)
+
+
 @pytest.mark.parametrize("extra, pattern", [
     ({"noise_counts": 25.0, "noise_rel": 0.005}, r"noise_counts=25.*and noise_rel = 0.005 are both given"),
     ({"noise_counts": -3.0}, r"noise_counts=-3.*must be a finite number > 0"),
