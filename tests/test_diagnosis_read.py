@@ -251,7 +251,8 @@ def test_the_explained_excess_is_counted_per_measurement():
     from pipeline.diagnosis.gap import excess_explained
 
     def fw(name):
-        return SimpleNamespace(name=name, kind="line_profile", n=103, noise_known=0.01, nuisance_count=2, n_shift=1)
+        return SimpleNamespace(name=name, kind="line_profile", n=103, noise_known=0.01, nuisance_count=2, n_shift=1,
+                               correlated_noise=None)
 
     prob = Problem([fw("a"), fw("b")], weights={"a": 1.0, "b": 1.0}, noise={"a": 0.01, "b": 0.01})
     n = {"a": 103, "b": 103}  # 100 degrees of freedom each after 3 nuisances

@@ -155,6 +155,8 @@ that none does. MANIFEST is a TOML file listing the simulation and the measureme
   pixel_scale_mas = 250       # 25, 100 or 250
   # noise_rel = 0.003         # white noise / line peak; required for one sample per pixel
   # noise_counts = 12.0       #   or the same in the file's intensity units
+  # correlated_noise_rel = 0.004  # a characterised correlated noise / line peak (or
+  # correlation_length_um = 12    #   correlated_noise_counts), its correlation length at the detector
 
 Paths are relative to the manifest. Each error names the measurement and the field; the
 run prints what it read from each file. Details: README (Sim-to-real diagnosis) and

@@ -139,7 +139,12 @@ def _data_notes(data, forward) -> dict:
     counts = data.measurement.noise_counts
     default = ("the data" if not forward.noise_known else "manifest" if counts is None
                else f"manifest: noise_counts {counts:g} in the file's units")
-    return {"gridding": getattr(data, "gridding", None), "noise_from": getattr(forward, "noise_from", default)}
+    source = getattr(forward, "noise_from", default)
+    cn = forward.correlated_noise
+    if cn is not None:
+        source += (f"; beside it a stated correlated noise of {cn.rms_rel:.3g} of the peak over "
+                   f"{cn.length_um:g} µm (manifest)")
+    return {"gridding": getattr(data, "gridding", None), "noise_from": source}
 
 
 def summary_context(prob: Problem, cold_K: float) -> SummaryContext:

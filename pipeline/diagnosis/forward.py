@@ -36,7 +36,7 @@ from optics.zernike import zernike_xy
 from .effects import LIBRARY, SHAPE_STAGES, SpectrographOptics, forward_effects
 from .manifest import NOISE_RANGES, ProfileData, SurfaceData
 from .noise import (SCATTERED_NOISE_REL_SD_SQRT_N, SIGNAL_DEPENDENT_NOISE_REL_SD_SQRT_N, estimate_noise,
-                    WING_LEVEL, estimate_noise_signal_dependent)
+                    WING_LEVEL, estimate_noise_signal_dependent, rss_moments)
 from .nominal import DEFAULT_MATERIALS, thermal_factor
 from .quilt import QuiltComponents, quilt_components
 
@@ -189,6 +189,8 @@ class SurfaceForward:
     kind = "surface"
     #: nuisances solved inside :meth:`residual` (piston, x and y tilt); no position nuisance
     nuisance_count, n_shift, delta0_um = 3, 0, 0.0
+    #: a map's noise is white in the gap test (its smooth errors are the two-part model's)
+    correlated_noise = None
 
     def __init__(self, data: SurfaceData, nominal: SagMap, cold_K: float, warm_K: float = 293.0,
                  materials: tuple[str, str] = DEFAULT_MATERIALS):
@@ -350,6 +352,9 @@ class SpectrographImageModel:
     deformation's overall factor and a memo of the model per physical parameter set
     (varying only the nuisances then costs an interpolation)."""
 
+    #: a stated correlated noise (:class:`.noise.CorrelatedNoise`): line profiles only
+    correlated_noise = None
+
     #: the memo key's parameters and their nulls: :data:`PROFILE_KEYS` and the alternatives' likewise,
     #: except those acting after the optics (``Effect.detected``), which the line-profile model
     #: applies to the memoised optics (a change of them then costs a convolution, not an image)
@@ -440,6 +445,8 @@ class ProfileForward(SpectrographImageModel):
         self.stated_coupling = data.measurement.interpixel_coupling
         if self.stated_coupling is not None:
             self.nuisance_count = 2
+        #: the correlated noise the manifest states (None: white noise only)
+        self.correlated_noise = data.measurement.correlated_noise
         self.delta0_um = self._initial_shift()
 
     def curve(self, p: dict) -> CubicSpline:
@@ -533,7 +540,46 @@ class ProfileForward(SpectrographImageModel):
                 f"profile as a fraction of the line's peak above background (valid {NOISE_RANGES['noise_rel'][0]:g}.."
                 f"{NOISE_RANGES['noise_rel'][1]:g}) in its [[measurement]], or noise_counts = the same in the "
                 f"file's intensity units{hint}")
-        return sigma
+        return self._white_part(sigma)
+
+    def _white_part(self, sigma: float) -> float:
+        """The white part of an estimated noise ``sigma``: the estimator reads a stated
+        correlated noise's share (:meth:`.noise.CorrelatedNoise.estimator_share`, nil for a
+        correlation longer than a few sample steps) as white noise too."""
+        cn = self.correlated_noise
+        if cn is None:
+            return sigma
+        leak = cn.estimator_share(self.x) * cn.rms_rel**2
+        if not leak < sigma**2:
+            raise ValueError(
+                f"measurement {self.name!r}: correlated_noise_rel={cn.rms_rel:.3g} over correlation_length_um="
+                f"{cn.length_um:g} would scatter neighbouring samples by {np.sqrt(leak):.3g} of the peak, more than "
+                f"the {sigma:.3g} the profile scatters by in all: the correlated noise stated is larger than these "
+                "data allow (a longer correlation, or a smaller RMS)")
+        return float(np.sqrt(sigma**2 - leak))
+
+    def nuisance_design(self) -> np.ndarray:
+        """The nuisances' columns at the nominal and the initial offset shift (n x k): flux,
+        coupling (unless stated), background and the shift's derivative. A right model's
+        residual is the noise less its projection on these (:meth:`noise_rss_moments`)."""
+        curve, d = self.curve({}), self.delta0_um
+        line = self._sampled(curve, d)
+        neighbours = self._sampled(curve, d + self.pixel_um) + self._sampled(curve, d - self.pixel_um) - 2.0 * line
+        h = 0.05  # µm: a central difference of the line's position, far below its width
+        slope = (self._sampled(curve, d + h) - self._sampled(curve, d - h)) / (2.0 * h)
+        flux = [line, neighbours] if self.stated_coupling is None else [line + self.stated_coupling * neighbours]
+        return np.column_stack([*flux, np.ones_like(line), slope])
+
+    def noise_rss_moments(self, sigma_w: float) -> tuple[float, float] | None:
+        """Mean and variance of the residual sum of squares (fraction of the peak, squared)
+        that white noise ``sigma_w`` and the stated correlated noise leave a right model over
+        all samples (:func:`.noise.rss_moments`); None where no correlated noise is stated
+        (the gap test's white-noise counting then holds exactly)."""
+        cn = self.correlated_noise
+        if cn is None:
+            return None
+        cov = sigma_w**2 * np.eye(self.n) + cn.rms_rel**2 * cn.correlation(self.x)
+        return rss_moments(cov, self.nuisance_design())
 
     @property
     def noise_rel_sd(self) -> float:

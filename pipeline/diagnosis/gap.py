@@ -9,7 +9,9 @@ residual beyond its noise that the fit removes. Taken per measurement, a profile
 is overstated (residual below it) neither cancels another's excess nor counts a fit into its
 noise as explanation (a stated peak-level photon noise put a 25 mas profile at
 chi^2_red 0.4 and a fit that took the 250 mas profile from chi^2_red 2.8 to its noise read as
-0 % explained). The decision logic that uses these is described in ``docs/diagnosis.md``.
+0 % explained). Where the manifest states a profile's correlated noise, ``N_i`` is the mean
+and the z-test's spread the variance of what white and correlated noise leave a right model
+(:meth:`.forward.ProfileForward.noise_rss_moments`). The decision logic that uses these is described in ``docs/diagnosis.md``.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from .effects import LIBRARY
 from .fitting import FitOutcome, Problem
 from .noise import effective_samples
 
-__all__ = ["NOISE_ESTIMATE_REL_SD_SQRT_N", "has_gap", "gap_statistics", "gaps", "excess_explained", "excesses",
+__all__ = ["NOISE_ESTIMATE_REL_SD_SQRT_N", "has_gap", "noise_per_dof", "gap_statistics", "gaps", "excess_explained", "excesses",
            "acting_on", "residual_n_eff", "post_fit_n_eff", "recounted", "recount"]
 
 
@@ -95,8 +97,21 @@ def _noise_cost(prob: Problem, n: dict) -> float:
     for f in prob.forwards:
         if f.name in n:
             sigma = prob.noise[f.name] * max(1.0 - _noise_rel_sd(f), 0.5)
-            out += prob.weights[f.name] ** 2 * max(n[f.name] - _nuisances(f), 0) * sigma**2
+            if f.correlated_noise is None:
+                out += prob.weights[f.name] ** 2 * max(n[f.name] - _nuisances(f), 0) * sigma**2
+            else:
+                out += prob.weights[f.name] ** 2 * f.noise_rss_moments(sigma)[0] * n[f.name] / f.n
     return out
+
+
+def noise_per_dof(prob: Problem, f) -> float:
+    """The residual RMS per degree of freedom that noise alone leaves measurement ``f``: its
+    white noise, or with a stated correlated noise the square root of the mean residual sum
+    of squares both leave over the degrees of freedom."""
+    sigma = prob.noise[f.name]
+    if f.correlated_noise is None or not sigma >= 0:
+        return sigma
+    return math.sqrt(f.noise_rss_moments(sigma)[0] / max(f.n - _nuisances(f), 1))
 
 
 def has_gap(prob: Problem, nom: FitOutcome, c: Criteria) -> bool:
@@ -125,8 +140,16 @@ def gap_statistics(prob: Problem, fo: FitOutcome) -> dict:
             out[m] = {"rms_ratio": math.inf, "z": math.inf}
             continue
         dof = max(fo.n[m] - _nuisances(f), 1)
-        out[m] = {"rms_ratio": math.sqrt(fo.rss[m] / fo.n[m]) / sigma,
-                  "z": (fo.rss[m] / (dof * sigma**2) - 1.0) / math.sqrt(2.0 / dof + (2.0 * _noise_rel_sd(f)) ** 2)}
+        if f.correlated_noise is None:
+            out[m] = {"rms_ratio": math.sqrt(fo.rss[m] / fo.n[m]) / sigma,
+                      "z": (fo.rss[m] / (dof * sigma**2) - 1.0) / math.sqrt(2.0 / dof + (2.0 * _noise_rel_sd(f)) ** 2)}
+            continue
+        # the stated correlated noise's share of the mean and of the spread; the white
+        # part's estimate keeps its own uncertainty
+        mean, var = (v * fo.n[m] / f.n for v in f.noise_rss_moments(sigma))
+        white = dof * sigma**2
+        out[m] = {"rms_ratio": math.sqrt(fo.rss[m] / fo.n[m]) / math.sqrt(mean / dof),
+                  "z": (fo.rss[m] / mean - 1.0) / math.sqrt(var / mean**2 + (2.0 * _noise_rel_sd(f) * white / mean) ** 2)}
     return out
 
 

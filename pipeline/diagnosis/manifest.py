@@ -56,7 +56,11 @@ turned into ``noise_rel`` with the floor and peak the data are scaled by) when k
 0-0.25) where the detector is characterised: a profile's model holds it instead of fitting
 it (its two x neighbours), a PSF image's holds it on its four neighbours (an image needs
 ``pixel_um > 0``; without a stated one a detector image's coupling is fitted, 0-5 %, and a
-focal-plane image has none). A PSF image is a dithered (sub-pixel sampled) image of the
+focal-plane image has none); for a profile, a correlated noise the detector is known to add
+(flat-field residual, fringing: ``correlated_noise_rel``, a fraction of the line's peak, or
+``correlated_noise_counts``, with ``correlation_length_um``, the squared-exponential
+correlation length at the detector), which the gap test then expects of a right model
+beside the white noise. A PSF image is a dithered (sub-pixel sampled) image of the
 pixel-integrated PSF; its white noise is estimated from the power beyond the optical
 cut-off when it lies on a regular grid finer than ``wavelength f_cam / (2 D)`` (≈ 2 µm in
 J), else along the image rows (biased high where the Airy rings are not smooth on the
@@ -89,6 +93,8 @@ import numpy as np
 from fea.case import PARAMETERS, FEACase
 from optics.sagmap import SagMap
 
+from .noise import CorrelatedNoise
+
 __all__ = ["Simulation", "MESH_SPECS", "NOMINAL_SIMULATION", "Measurement", "Manifest", "SurfaceData", "ProfileData",
            "PsfImageData", "MEASUREMENT_KEYS", "SIMULATION_KEYS", "NOISE_RANGES", "COUPLING_RANGE", "ALLOW_OUTSIDE_FLAG",
            "recentre", "read_summary", "resolve_data_path", "unit_line_peak", "unknown_keys_error", "load_manifest", "parse_manifest",
@@ -112,7 +118,8 @@ MEASUREMENT_KEYS = {
     "surface": _COMMON_KEYS + ("grating", "temperature_K", "aperture_diameter_mm", "noise_um", "spacing_mm",
                                "extent_mm", "wavelength_um", "centre_mm", "sag_sign"),
     "line_profile": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_scale_mas", "slit_position",
-                                    "noise_rel", "noise_counts", "interpixel_coupling"),
+                                    "noise_rel", "noise_counts", "interpixel_coupling", "correlated_noise_rel",
+                                    "correlated_noise_counts", "correlation_length_um"),
     "psf_image": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_um", "noise_rel", "noise_counts",
                                  "interpixel_coupling"),
 }
@@ -124,6 +131,10 @@ FLOOR_PERCENTILE = 20.0
 #: noise in µm (1e-6 µm = 1 pm, far below any interferometer; 10 µm, 40x the nominal
 #: map's RMS). Outside them the fit's weights (1/noise^2) overflow or the data hold no line.
 NOISE_RANGES = {"noise_rel": (1e-6, 1.0), "noise_um": (1e-6, 10.0)}
+#: Valid stated correlation length of a profile's correlated noise (µm at the detector):
+#: below 0.1 µm it is white noise (far below any sample step), beyond 1000 µm (55 pixels)
+#: it is a constant over any profile's window, which the background nuisance takes.
+CORRELATION_LENGTH_RANGE_UM = (0.1, 1000.0)
 #: Valid stated inter-pixel coupling (fraction of a pixel's signal read in each x neighbour):
 #: the kernel ``[c, 1 - 2c, c]`` stays positive to 0.5; 0.25 is far beyond any measured
 #: infrared array (HAWAII-type: 0.01-0.02), so a larger value is a typing error (a percentage).
@@ -202,6 +213,13 @@ class Measurement:
     #: The detector's inter-pixel coupling at the line (fraction to each x neighbour) where it
     #: is characterised; None: every line-profile model fits it (0-5 %).
     interpixel_coupling: float | None = None
+    #: A correlated noise along a profile's offsets where the detector is characterised
+    #: (flat-field residual, fringing): its RMS as a fraction of the line's peak above
+    #: background, or in the file's units (turned into the fraction as ``noise_counts``),
+    #: and its squared-exponential correlation length (:class:`.noise.CorrelatedNoise`).
+    correlated_noise_rel: float | None = None
+    correlated_noise_counts: float | None = None
+    correlation_length_um: float | None = None
     pixel_um: float | None = None
     spacing_mm: float | tuple[float, float] | None = None
     extent_mm: tuple[float, float, float, float] | None = None
@@ -211,6 +229,13 @@ class Measurement:
     #: +1, or -1 for a map whose heights are measured the other way (surface height along
     #: -z, the grating's sag along +z): multiplies the file's values.
     sag_sign: int = 1
+
+    @property
+    def correlated_noise(self) -> CorrelatedNoise | None:
+        """The stated correlated noise (None: none stated)."""
+        if self.correlated_noise_rel is None or self.correlation_length_um is None:
+            return None
+        return CorrelatedNoise(self.correlated_noise_rel, self.correlation_length_um)
 
     @property
     def read_options(self) -> dict:
@@ -484,6 +509,7 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
         return Measurement(name, kind, path, str(entry.get("blank", key)), grating=key, order=int(order),
                            wavelength_um=float(wl), noise_rel=noise_rel, noise_counts=noise_counts, pixel_um=float(pix),
                            interpixel_coupling=ipc)
+    corr = _correlated_noise(entry, name)
     ps = entry.get("pixel_scale_mas")
     if ps not in _PIXEL_SCALES:
         raise _err(name, "pixel_scale_mas", ps, f"is unknown; valid: {list(_PIXEL_SCALES)}")
@@ -492,7 +518,42 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
         raise _err(name, "slit_position", sp, "must be in [-1, 1]")
     return Measurement(name, kind, path, str(entry.get("blank", key)), grating=key, order=int(order),
                        wavelength_um=float(wl), pixel_scale_mas=int(ps), slit_position=float(sp),
-                       noise_rel=noise_rel, noise_counts=noise_counts, interpixel_coupling=ipc)
+                       noise_rel=noise_rel, noise_counts=noise_counts, interpixel_coupling=ipc, **corr)
+
+
+def _correlated_noise(entry: dict, name: str) -> dict:
+    """A profile's stated correlated noise as Measurement fields (empty: none stated): an RMS
+    as a fraction of the line's peak (``correlated_noise_rel``) or in the file's units
+    (``correlated_noise_counts``), with its ``correlation_length_um``; one needs the other."""
+    rel = _number(entry, "correlated_noise_rel", name)
+    counts = _number(entry, "correlated_noise_counts", name)
+    length = _number(entry, "correlation_length_um", name)
+    if rel is not None and counts is not None:
+        raise _err(name, "correlated_noise_counts", counts, f"and correlated_noise_rel = {rel:g} are both given: "
+                   "state the correlated noise once, in the file's intensity units or as a fraction of the line's "
+                   "peak above background")
+    rms = rel if rel is not None else counts
+    if rms is None and length is None:
+        return {}
+    if rms is None:
+        raise _err(name, "correlation_length_um", length, "is given without the noise it describes: give "
+                   "correlated_noise_rel (fraction of the line's peak) or correlated_noise_counts (the file's units)")
+    key = "correlated_noise_rel" if rel is not None else "correlated_noise_counts"
+    if length is None:
+        raise _err(name, key, rms, "needs correlation_length_um: the distance (µm at the detector) over which the "
+                   "noise's correlation falls to exp(-1/2)")
+    lo, hi = CORRELATION_LENGTH_RANGE_UM
+    if not lo <= length <= hi:
+        raise _err(name, "correlation_length_um", length, f"is outside the valid range [{lo:g}, {hi:g}] µm")
+    if rel is not None:
+        lo, hi = NOISE_RANGES["noise_rel"]
+        if not lo <= rel <= hi:
+            raise _err(name, "correlated_noise_rel", rel, f"is outside the valid range [{lo:g}, {hi:g}] (fraction "
+                       "of the line's peak)")
+    elif not (math.isfinite(counts) and counts > 0):
+        raise _err(name, "correlated_noise_counts", counts, "must be a finite number > 0 (the RMS correlated noise "
+                   "in the file's intensity units)")
+    return {"correlated_noise_rel": rel, "correlated_noise_counts": counts, "correlation_length_um": float(length)}
 
 
 def parse_manifest(data: dict, base_dir: str | Path | None = None, source: str = "",
@@ -633,18 +694,22 @@ def unit_line_peak(intensity: np.ndarray, what: str, name: str, file: Path) -> t
 
 def _noise_as_fraction(m: Measurement, peak: float) -> Measurement:
     """``m`` with a ``noise_counts`` (the file's units) stated as ``noise_rel``, a fraction of
-    the ``peak`` the data were scaled by (file units). The floor a small window reads can be
+    the ``peak`` the data were scaled by (file units), and a ``correlated_noise_counts`` as
+    ``correlated_noise_rel`` likewise. The floor a small window reads can be
     the line's own wing (a J PSF image of 18 µm pixels cut at +-30 µm: 0.45 of the peak above
     the true background), so a noise known in counts is not the file's maximum times
     ``noise_rel``."""
-    if m.noise_counts is None:
-        return m
-    rel = m.noise_counts / peak
     lo, hi = NOISE_RANGES["noise_rel"]
-    if not lo <= rel <= hi:
-        raise _err(m.name, "noise_counts", m.noise_counts, f"is {rel:.3g} of the line's peak above background "
-                   f"({peak:.6g} in the file's units), outside the valid range [{lo:g}, {hi:g}]")
-    return replace(m, noise_rel=rel)
+    for counts_key, rel_key in (("noise_counts", "noise_rel"), ("correlated_noise_counts", "correlated_noise_rel")):
+        counts = getattr(m, counts_key)
+        if counts is None:
+            continue
+        rel = counts / peak
+        if not lo <= rel <= hi:
+            raise _err(m.name, counts_key, counts, f"is {rel:.3g} of the line's peak above background "
+                       f"({peak:.6g} in the file's units), outside the valid range [{lo:g}, {hi:g}]")
+        m = replace(m, **{rel_key: rel})
+    return m
 
 
 #: Lines found farther than this from the origin (µm) are moved to it: half the range of

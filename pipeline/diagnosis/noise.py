@@ -8,6 +8,9 @@
   so the row cubic sees only a fraction of it.
 * :func:`estimate_noise_band_limited` — the same for a focal-plane image sampled finer
   than its optical cut-off: the power at frequencies the optics cannot pass.
+* :class:`CorrelatedNoise` — a stated correlated noise (a detector's flat-field or
+  fringing residual, characterised beforehand): what it adds to a right model's residual
+  (:func:`rss_moments`) and how much of it the estimators above read as white noise.
 * :func:`effective_samples` — ``n / L`` with ``L`` the integral correlation length of a
   residual in samples (per axis for a map or image; scattered points are read along
   thin strips and counted as a grid of their density would be): how many independent
@@ -23,14 +26,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["effective_samples", "estimate_noise", "estimate_noise_band_limited", "estimate_noise_scattered",
+__all__ = ["CorrelatedNoise", "rss_moments", "effective_samples", "estimate_noise", "estimate_noise_band_limited", "estimate_noise_scattered",
            "estimate_noise_signal_dependent", "SIGNAL_DEPENDENT_NOISE_REL_SD_SQRT_N", "WING_LEVEL",
            "SCATTERED_NOISE_REL_SD_SQRT_N", "TwoPartErrors", "two_part_errors"]
 
 
-def _standardised_errors(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    if x.size < 5:
-        return np.empty(0)
+def _cubic_stencil(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(i, nb, L)``: each interior sample ``i`` of the sorted ``x``, its two neighbours on
+    each side ``nb`` (4 x m) and the Lagrange weights ``L`` of the cubic through them that
+    predicts it."""
     i = np.arange(2, x.size - 2)
     nb = np.stack([i - 2, i - 1, i + 1, i + 2])
     xs, x0 = x[nb], x[i]
@@ -39,6 +43,13 @@ def _standardised_errors(x: np.ndarray, y: np.ndarray) -> np.ndarray:
         for b in range(4):
             if a != b:
                 L[a] *= (x0 - xs[b]) / (xs[a] - xs[b])
+    return i, nb, L
+
+
+def _standardised_errors(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    if x.size < 5:
+        return np.empty(0)
+    i, nb, L = _cubic_stencil(x)
     return (y[i] - np.sum(L * y[nb], axis=0)) / np.sqrt(1.0 + np.sum(L**2, axis=0))
 
 
@@ -456,3 +467,65 @@ def two_part_errors(residual: np.ndarray, x: np.ndarray, y: np.ndarray | None, s
     lrv = max(var * L, sigma_w**2, 1e-300)
     Lm = max((lrv - sigma_w**2) / sm2, 1.0) if sm2 > 0 else 1.0
     return TwoPartErrors(float(sigma_w), float(np.sqrt(sm2)), float(Lm), float(sigma_w**2 + sm2 * Lm), int(n))
+
+
+@dataclass(frozen=True)
+class CorrelatedNoise:
+    """A correlated noise along a line profile's offset axis, stated by the user: Gaussian,
+    RMS ``rms_rel`` (fraction of the line's peak above background, as ``noise_rel``) and a
+    squared-exponential correlation ``exp(-(dx / length_um)^2 / 2)`` between samples ``dx``
+    µm apart.
+
+    Why stated, not estimated: a noise smooth on the sample step is what a broad model
+    mismatch or a halo also is, so on one profile it cannot be told from them by where its
+    power lies (``benchmarks/results_nominal_floor.md``); a detector's flat-field residual
+    or fringing is characterised on flats, as its read noise is."""
+
+    rms_rel: float
+    length_um: float
+
+    def __post_init__(self):
+        if not (np.isfinite(self.rms_rel) and self.rms_rel >= 0):
+            raise ValueError(f"CorrelatedNoise: rms_rel={self.rms_rel!r} must be a finite number >= 0")
+        if not (np.isfinite(self.length_um) and self.length_um > 0):
+            raise ValueError(f"CorrelatedNoise: length_um={self.length_um!r} must be a finite number > 0 µm")
+
+    def correlation(self, x_um: np.ndarray) -> np.ndarray:
+        """Correlation matrix between the samples at ``x_um`` (µm)."""
+        x = np.asarray(x_um, float)
+        return np.exp(-0.5 * ((x[:, None] - x[None, :]) / self.length_um) ** 2)
+
+    def estimator_share(self, x_um: np.ndarray) -> float:
+        """The fraction of this noise's variance that the local-cubic noise estimators
+        (:func:`estimate_noise`, :func:`estimate_noise_signal_dependent`) read as white noise
+        on samples at ``x_um``: the mean over interior samples of ``l^T R l / l^T l``, ``l``
+        a sample's prediction-error weights ``(1, -L_j)`` and ``R`` the correlation of its
+        five samples. 1 for a correlation much shorter than the sample step (white noise),
+        0 for one much longer (a constant is predicted exactly by the cubic)."""
+        x = np.sort(np.asarray(x_um, float))
+        if x.size < 5:
+            return 1.0
+        i, nb, L = _cubic_stencil(x)
+        pts = np.vstack([i[None, :], nb])  # 5 x m: the sample and its four neighbours
+        w = np.vstack([np.ones((1, i.size)), -L])
+        d = (x[pts][:, None, :] - x[pts][None, :, :]) / self.length_um
+        quad = np.einsum("am,abm,bm->m", w, np.exp(-0.5 * d * d), w)
+        return float(np.mean(quad / np.sum(w * w, axis=0)))
+
+
+def rss_moments(covariance: np.ndarray, design: np.ndarray) -> tuple[float, float]:
+    """Mean and variance of the residual sum of squares that Gaussian errors of
+    ``covariance`` leave after a least-squares fit of ``design``'s columns.
+
+    The residual is ``M e`` with ``M = I - Q Q^T`` (``Q`` an orthonormal basis of the
+    columns), so ``E[RSS] = tr(M C)`` and ``Var[RSS] = 2 tr(M C M C)``. For white noise
+    ``C = s^2 I`` these are ``(n - k) s^2`` and ``2 (n - k) s^4``; a correlated noise puts
+    more of its variance into the smooth directions the nuisances take up (a background
+    takes the noise's mean) and gives a wider spread (fewer independent samples)."""
+    C = np.asarray(covariance, float)
+    D = np.asarray(design, float)
+    if C.ndim != 2 or C.shape[0] != C.shape[1] or D.ndim != 2 or D.shape[0] != C.shape[0]:
+        raise ValueError(f"rss_moments: covariance {C.shape} must be n x n and design {D.shape} n x k")
+    Q = np.linalg.qr(D)[0] if D.shape[1] else np.zeros((C.shape[0], 0))
+    MC = C - Q @ (Q.T @ C)
+    return float(np.trace(MC)), float(2.0 * np.sum(MC * MC.T))

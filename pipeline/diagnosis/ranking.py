@@ -12,7 +12,7 @@ from .criteria import Criteria
 from .effects import LIBRARY, effect_parameters
 from .finding import Finding
 from .fitting import FitOutcome, Problem, fit
-from .gap import excesses, recount
+from .gap import excesses, noise_per_dof, recount
 
 __all__ = ["parameters_of", "in_library_order", "fit_effects", "rank", "pair_singles", "pairs_to_fit", "predictions",
            "mismatch_errors"]
@@ -265,7 +265,7 @@ def _stats(prob: Problem, nom: FitOutcome, fo: FitOutcome):
     ratio = math.sqrt(wa / wb) if wb > 0 else 1.0
     per = []
     for f in prob.forwards:
-        m, sig = f.name, prob.noise[f.name]
+        m, sig = f.name, noise_per_dof(prob, f)
         before, after = math.sqrt(nom.rss[m] / nom.n[m]), math.sqrt(fo.rss[m] / fo.n[m])
         per.append({"measurement": m, "unit": "um" if f.kind == "surface" else "fraction_of_peak",
                     "rms_before": before, "rms_after": after, "noise": sig,

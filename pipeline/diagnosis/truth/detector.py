@@ -111,11 +111,13 @@ def measure_profile(offset_um: np.ndarray, detected: np.ndarray, rng: np.random.
     signal = scale * model
     counts = rng.poisson(np.clip(signal + bg, 0.0, None)).astype(float)
     counts += rng.normal(0.0, rng.uniform(*read_e), x.size)
-    counts += correlated_noise(x, rng.uniform(*corr_rel) * peak, rng.uniform(*corr_len_um), rng)
+    corr_counts, corr_len = rng.uniform(*corr_rel) * peak, rng.uniform(*corr_len_um)
+    counts += correlated_noise(x, corr_counts, corr_len, rng)
     subtracted = bool(rng.random() < subtract_probability)
     est = 0.0
     if subtracted:
         counts, est = subtract_background(x, counts)
     info = {"coupling": c, "centre_um": centre, "peak_counts": peak, "background_counts": bg,
-            "background_subtracted": subtracted, "background_estimate": est}
+            "background_subtracted": subtracted, "background_estimate": est,
+            "correlated_noise_counts": corr_counts, "correlation_length_um": corr_len}
     return x, counts, info
