@@ -65,6 +65,9 @@ def main(argv=None):
                     help="campaign truth generator (CampaignConfig.truth; benchmarks/truth_families.md)")
     ap.add_argument("--truth-families", default="sum_mix,product_mix",
                     help="independent truth's grating families, comma-separated (benchmarks/truth_families.md)")
+    ap.add_argument("--state-correlated-noise", action="store_true",
+                    help="the profiles' manifests state the correlated noise the truth's detector drew "
+                         "(CampaignConfig.state_correlated_noise)")
     ap.add_argument("--error-model", default=Criteria().error_model, choices=ERROR_MODELS,
                     help="the score's error model (Criteria.error_model)")
     ap.add_argument("--pair-forward", action="store_true",
@@ -107,7 +110,8 @@ def main(argv=None):
     cfg = CampaignConfig(n_cases=a.cases, seed=a.seed, workers=a.workers, profile_specs=PROFILE_SETS[a.profiles],
                          profile_map_K=a.profile_map_K, psf_image=PSF_IMAGE_SPEC if a.psf_image else None,
                          only_types=parse_types(a.types, a.truth), discrepancy=a.discrepancy, criteria=criteria,
-                         truth=a.truth, truth_families=a.truth_families)
+                         truth=a.truth, truth_families=a.truth_families,
+                         state_correlated_noise=a.state_correlated_noise)
     res = run_campaign(cfg, cache_dir=a.cache_dir, progress=a.progress)
     res["profile_set"] = a.profiles
     out["campaign"] = res

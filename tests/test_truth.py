@@ -391,6 +391,40 @@ def test_a_map_beside_profiles_is_of_the_profiles_blank(tmp_path, monkeypatch):
     assert blanks == {"line_profile": "J", "surface": "J"} and set(truth) >= {"scale_J"}
 
 
+def test_a_campaign_can_state_the_correlated_noise_its_detector_drew(tmp_path, monkeypatch):
+    """With ``state_correlated_noise`` the profile manifests carry the RMS (counts) and length
+    the truth's detector drew for that profile, and the files are the same as without it (the
+    same draws); a truth that adds white noise only is refused the option by name."""
+    from pipeline.diagnosis.campaign import PROFILE_SETS, CampaignConfig
+    from pipeline.diagnosis.truth import generate
+
+    monkeypatch.setattr(generate, "abbe_line_profile",
+                        lambda *a, **kw: (np.linspace(-150.0, 150.0, 601), np.exp(-0.5 * (np.linspace(-150, 150, 601) / 20) ** 2)))
+    drawn = []
+    real = generate.measure_profile
+
+    def recording(*a, **kw):
+        out = real(*a, **kw)
+        drawn.append(out[2])
+        return out
+    monkeypatch.setattr(generate, "measure_profile", recording)
+    s = quilt_sag_map(0.6, "sum", spacing_mm=0.5)
+    files = {}
+    for state in (False, True):
+        cfg = CampaignConfig(profile_specs=PROFILE_SETS["minimal"][:2], state_correlated_noise=state)
+        (tmp_path / str(state)).mkdir()
+        man, _ = generate.make_case("line_profile", "amplitude_scale", np.random.default_rng(3), s, s,
+                                    tmp_path / str(state), cfg)
+        files[state] = [(tmp_path / str(state) / m["file"]).read_bytes() for m in man["measurement"]]
+    assert files[False] == files[True]
+    assert [(m["correlated_noise_counts"], m["correlation_length_um"]) for m in man["measurement"]] == \
+        [(d["correlated_noise_counts"], d["correlation_length_um"]) for d in drawn[2:]]
+    assert all(0.002 * 5e3 <= d["correlated_noise_counts"] <= 0.006 * 2e4 and 6 <= d["correlation_length_um"] <= 20
+               for d in drawn)
+    with pytest.raises(ValueError, match="state_correlated_noise=True needs truth='independent'"):
+        CampaignConfig(truth="model", state_correlated_noise=True)
+
+
 def test_a_rescaling_is_part_of_a_truth_whose_x_fundamental_differs():
     """In the diagnosis's amplitude convention (the rescalings measure the x fundamental),
     a truth whose x fundamental is 6 % above the nominal's carries an amplitude change;

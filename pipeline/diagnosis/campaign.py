@@ -167,6 +167,10 @@ class CampaignConfig:
     #: The independent truth's grating families (``benchmarks/truth_families.md``), one
     #: drawn per case; the default is ``pipeline.diagnosis.truth.generate.FAMILIES``.
     truth_families: tuple = ("sum_mix", "product_mix")
+    #: The independent truth's profile manifests state the correlated noise its detector drew
+    #: for each profile (``correlated_noise_counts``, ``correlation_length_um``), as a lab that
+    #: characterised its detector on flats would; False: they state no noise.
+    state_correlated_noise: bool = False
     criteria: Criteria = Criteria(heldout_top=1, pair_from=2)
 
     def __post_init__(self) -> None:
@@ -193,6 +197,9 @@ class CampaignConfig:
         if self.psf_image is not None and (len(self.psf_image) != 4 or not 0 <= self.psf_image[3] <= 100):
             raise ValueError(f"CampaignConfig: psf_image={self.psf_image!r} must be (grating, wavelength_um, order, "
                              "pixel_um) with pixel_um in [0, 100] (or None)")
+        if self.state_correlated_noise and self.truth != "independent":
+            raise ValueError(f"CampaignConfig: state_correlated_noise=True needs truth='independent' (truth="
+                             f"{self.truth!r} adds white noise only)")
         if self.discrepancy not in DISCREPANCIES:
             raise ValueError(f"CampaignConfig: discrepancy={self.discrepancy!r} is not one of {sorted(DISCREPANCIES)}")
         extra = EXTRA_CASE_TYPES if self.truth == "model" else _pair_types()  # opt-in cases

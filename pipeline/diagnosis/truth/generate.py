@@ -174,12 +174,15 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
         slit_i = None if slit is None else slit * GRATINGS[gr][4] / 27.0
         u, det = abbe_line_profile(gr, wl, order, RELATIVE_NA[ps], sag, pupil_shift_mm=shift, collimator_um=coll,
                                    camera_um=camera, slit_image_width_um=slit_i, settings=settings)
-        x, counts, _ = measure_profile(u, det, rng, distortion=distortion)
+        x, counts, info = measure_profile(u, det, rng, distortion=distortion)
         if artefact is not None:
             counts = artefact(x, counts, rng)
         write_line_profile_csv(out / f"p{i}.csv", x, counts)
         meas.append({"kind": "line_profile", "file": f"p{i}.csv", "name": f"{gr}_{wl}_{ps}mas", "grating": gr,
                      "order": order, "wavelength_um": wl, "pixel_scale_mas": ps})
+        if getattr(cfg, "state_correlated_noise", False):
+            meas[-1].update(correlated_noise_counts=float(info["correlated_noise_counts"]),
+                            correlation_length_um=float(info["correlation_length_um"]))
     if cfg.profile_map_K is not None:
         dT = truth.get("temperature_offset_K", 0.0)
         x, y, z = measured_map(g, scale * thermal_factor(cfg.profile_map_K + dT, _COLD_K + dT), rng, None, None, cfg.noise_um)
