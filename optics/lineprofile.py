@@ -15,10 +15,12 @@ from optics.grating import SPIFFI, Grating, PixelScale, Spectrograph, get_gratin
 from optics.imaging import (PSF, Profile, detected_profile, partially_coherent_lsf, psf,
                             source_points)
 from optics.pupil import (DEFAULT_COLLIMATOR_ZERNIKE_UM, centred_axis, circular_aperture,
-                          collimator_opd_um, grating_opd_um, pupil_field, pupil_shift_along_slit)
+                          collimator_opd_um, footprint_on_grating, grating_opd_um, pupil_field,
+                          pupil_shift_along_slit)
 from optics.sagmap import SagMap
 
-__all__ = ["LsfSettings", "LineProfileResult", "line_profile", "otf_cutoff_per_um", "point_psf", "pupil_rows"]
+__all__ = ["LsfSettings", "LineProfileResult", "line_profile", "line_profile_footprint_mm", "otf_cutoff_per_um",
+           "point_psf", "pupil_rows"]
 
 
 @dataclass(frozen=True)
@@ -118,6 +120,50 @@ def pupil_rows(grating: Grating, wavelength_um: float, xi_mm: np.ndarray, eta_mm
     return pupil_field(amp, opd, wavelength_um)
 
 
+def _pupil_sampling(grating, wavelength_um, pixel_scale_mas, order, pupil_shift_mm, torsion_shift_x_mm,
+                    slit_position, spectrograph, settings):
+    """What :func:`line_profile` and :func:`line_profile_footprint_mm` share: the geometry
+    ``(g, m, beta, anam)``, the pixel scale, the pupil shift at ``slit_position``, the pupil
+    step and axis ``d_xi``, ``xi`` and the source points ``sx, sy, w``."""
+    g, m, beta, anam = _geometry(grating, wavelength_um, order, spectrograph)
+    ps = get_pixel_scale(pixel_scale_mas)
+    shift = pupil_shift_along_slit(slit_position, tuple(pupil_shift_mm), torsion_shift_x_mm)
+    s = settings
+    R = 0.5 * spectrograph.pupil_diameter_mm
+    # Pupil step chosen so the FFT lands exactly on detector_step_um for every wavelength.
+    d_xi = wavelength_um * spectrograph.camera_focal_mm * anam / (s.n_fft * s.detector_step_um)
+    xi = centred_axis(d_xi, R)
+    if xi.size > s.n_fft:
+        raise ValueError(f"LsfSettings.n_fft={s.n_fft} is smaller than the {xi.size} pupil samples at "
+                         f"wavelength_um={wavelength_um:g}; a larger LsfSettings.n_fft (API) is needed")
+    r_src = ps.relative_na * R
+    sx, sy, w = source_points(r_src, min(s.source_step_mm, r_src / s.min_source_rows))
+    return g, m, beta, anam, ps, shift, d_xi, xi, sx, sy, w
+
+
+def line_profile_footprint_mm(grating: str | Grating, wavelength_um: float,
+                              pixel_scale_mas: int | str | PixelScale, *, order: int | None = None,
+                              pupil_shift_mm: tuple[float, float] = (0.0, 0.0), torsion_shift_x_mm: float = 0.0,
+                              slit_position: float = 0.0, spectrograph: Spectrograph = SPIFFI,
+                              settings: LsfSettings = LsfSettings()) -> tuple[float, float, float, float]:
+    """The rectangle of the grating (mm, the sag map's frame) that holds every point at
+    which :func:`line_profile` with the same arguments samples the sag map.
+
+    A caller that deforms a large map for each profile can deform only this part of it
+    (plus the bilinear stencil's neighbours): the profile reads nothing else.
+
+    Returns
+    -------
+    (x_min_mm, x_max_mm, y_min_mm, y_max_mm) : float
+        Extent of the footprint of the pupil axis ``xi`` over the source rows.
+    """
+    g, _, _, _, _, shift, _, xi, _, sy, _ = _pupil_sampling(
+        grating, wavelength_um, pixel_scale_mas, order, pupil_shift_mm, torsion_shift_x_mm, slit_position,
+        spectrograph, settings)
+    xg, yg = footprint_on_grating(xi, sy, g.incidence_deg, shift)
+    return float(xg.min()), float(xg.max()), float(yg.min()), float(yg.max())
+
+
 def line_profile(grating: str | Grating, wavelength_um: float, pixel_scale_mas: int | str | PixelScale,
                  sag: SagMap | None = None, *, order: int | None = None,
                  pupil_shift_mm: tuple[float, float] = (0.0, 0.0), torsion_shift_x_mm: float = 0.0,
@@ -157,20 +203,11 @@ def line_profile(grating: str | Grating, wavelength_um: float, pixel_scale_mas: 
         with wavelength_um, order, beta_deg, anamorphic, linear_dispersion_um_per_nm,
         slit_image_width_um, pixel_um, pixel_scale_mas, relative_na, pupil_shift_mm.
     """
-    g, m, beta, anam = _geometry(grating, wavelength_um, order, spectrograph)
-    ps = get_pixel_scale(pixel_scale_mas)
-    shift = pupil_shift_along_slit(slit_position, tuple(pupil_shift_mm), torsion_shift_x_mm)
+    g, m, beta, anam, ps, shift, d_xi, xi, sx, sy, w = _pupil_sampling(
+        grating, wavelength_um, pixel_scale_mas, order, pupil_shift_mm, torsion_shift_x_mm, slit_position,
+        spectrograph, settings)
     s = settings
     f_cam, f_coll = spectrograph.camera_focal_mm, spectrograph.collimator_focal_mm
-    R = 0.5 * spectrograph.pupil_diameter_mm
-    # Pupil step chosen so the FFT lands exactly on detector_step_um for every wavelength.
-    d_xi = wavelength_um * f_cam * anam / (s.n_fft * s.detector_step_um)
-    xi = centred_axis(d_xi, R)
-    if xi.size > s.n_fft:
-        raise ValueError(f"LsfSettings.n_fft={s.n_fft} is smaller than the {xi.size} pupil samples at "
-                         f"wavelength_um={wavelength_um:g}; a larger LsfSettings.n_fft (API) is needed")
-    r_src = ps.relative_na * R
-    sx, sy, w = source_points(r_src, min(s.source_step_mm, r_src / s.min_source_rows))
     rows = pupil_rows(g, wavelength_um, xi, sy, beta, sag, shift, collimator_zernike_um, spectrograph, d_xi)
     w_coll = g.slit_width_collimator_um(spectrograph)
     pc = partially_coherent_lsf(rows, xi, sx, w, wavelength_um, w_coll, f_coll, f_cam, anam, s.n_fft,

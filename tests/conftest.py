@@ -84,6 +84,21 @@ def paper_fea_dir(tmp_path_factory):
     return tmp_path_factory.mktemp("paper")
 
 
+@pytest.fixture(scope="session")
+def nominal_fea_cache(tmp_path_factory):
+    """One nominal-map FEA cache (:func:`pipeline.diagnosis.nominal.case_sag_map`) for the
+    whole run, shared by the xdist workers: the scenario diagnoses and the reduced campaign
+    diagnose against the same default-mesh case, and a second solve of it costs ~35 s of
+    CPU. The cache writes each map atomically under a name of its own, so two workers that
+    miss it together both solve and either file is the same map."""
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # the workers' base directories share this one
+    path = root / "nominal-fea-cache"
+    path.mkdir(exist_ok=True)
+    return path
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _return_freed_memory():
     """After each module, collect its garbage and hand the heap it freed back to the system.

@@ -14,8 +14,8 @@ pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    return tmp_path_factory.mktemp("fea-cache")
+def cache(nominal_fea_cache):
+    return nominal_fea_cache
 
 
 def test_reduced_campaign(cache):

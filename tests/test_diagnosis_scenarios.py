@@ -19,8 +19,8 @@ pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    return tmp_path_factory.mktemp("fea-cache")
+def cache(nominal_fea_cache):
+    return nominal_fea_cache
 
 
 def test_cryo_map_astigmatism(cache):

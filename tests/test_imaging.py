@@ -9,7 +9,7 @@ from scipy.special import j1, jv
 
 from optics.grating import GRATINGS, SPIFFI
 from optics.imaging import PSF, basic_lsf, box_convolve, box_convolve_bandlimited, partially_coherent_lsf, psf, source_points
-from optics.lineprofile import LsfSettings, line_profile, point_psf, pupil_rows
+from optics.lineprofile import LsfSettings, line_profile, line_profile_footprint_mm, point_psf, pupil_rows
 from optics.metrics import find_profile_peaks, l1_distance, profile_metrics
 from optics.pupil import centred_axis, circular_aperture, collimator_opd_um, grating_opd_um
 from optics.sagmap import SagMap, quilt_sag_map
@@ -322,3 +322,25 @@ def test_bandlimited_box_integrates_a_coarsely_sampled_line_exactly():
                        atol=1e-5 * peak)
     with pytest.raises(ValueError, match="width_um=-1"):
         box_convolve_bandlimited(u, y, -1.0)
+
+
+@pytest.mark.parametrize("mas, shift_mm", [(25, (0.0, 0.0)), (250, (3.3, -1.7))])
+def test_line_profile_reads_only_its_footprint(mas, shift_mm):
+    """The map cut to :func:`line_profile_footprint_mm` plus the bilinear stencil gives the
+    same profile to the last bit, and a sample changed outside it changes nothing: what a
+    caller deforming only that part of a map relies on."""
+    settings = LsfSettings(detector_step_um=1.5, n_fft=256, source_step_mm=2.5, min_source_rows=5, window_um=150.0,
+                           workers=1)
+    sag = quilt_sag_map(0.4, spacing_mm=0.5)
+    kw = dict(order=-2, pupil_shift_mm=shift_mm, settings=settings)
+    x0, x1, y0, y1 = line_profile_footprint_mm("J", 1.25, mas, **kw)
+    xs = slice(np.searchsorted(sag.x_mm, x0) - 2, np.searchsorted(sag.x_mm, x1) + 2)
+    ys = slice(np.searchsorted(sag.y_mm, y0) - 2, np.searchsorted(sag.y_mm, y1) + 2)
+    assert xs.start > 0 and ys.start > 0 and xs.stop < sag.x_mm.size and ys.stop < sag.y_mm.size
+    part = SagMap(sag.x_mm[xs], sag.y_mm[ys], sag.sag_um[ys, xs], sag.label)
+    whole = line_profile("J", 1.25, mas, sag, **kw).detected.intensity
+    assert np.array_equal(line_profile("J", 1.25, mas, part, **kw).detected.intensity, whole)
+    outside = sag.sag_um.copy()
+    outside[:ys.start, :] = np.nan
+    outside[:, xs.stop:] = 1.0
+    assert np.array_equal(line_profile("J", 1.25, mas, sag.with_sag(outside), **kw).detected.intensity, whole)

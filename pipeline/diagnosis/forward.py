@@ -28,7 +28,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline, RegularGridInterpolator
 
 from optics.grating import SPIFFI
-from optics.lineprofile import LsfSettings, line_profile
+from optics.lineprofile import LsfSettings, line_profile, line_profile_footprint_mm
 from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
 from optics.sagmap import SagMap
 from optics.zernike import zernike_xy
@@ -40,7 +40,7 @@ from .noise import (SCATTERED_NOISE_REL_SD_SQRT_N, SIGNAL_DEPENDENT_NOISE_REL_SD
 from .nominal import DEFAULT_MATERIALS, thermal_factor
 from .quilt import QuiltComponents, quilt_components
 
-__all__ = ["FIT_LSF_SETTINGS", "NOISE_LEAK_LIMIT", "PROFILE_KEYS", "SurfaceForward", "SpectrographImageModel", "ProfileForward", "profile_curve",
+__all__ = ["FIT_LSF_SETTINGS", "FOOTPRINT_MARGIN_CELLS", "NOISE_LEAK_LIMIT", "PROFILE_KEYS", "SurfaceForward", "SpectrographImageModel", "ProfileForward", "profile_curve",
            "true_temperature", "deformation_factor", "blank_coordinates", "blank_shape_um", "map_terms_um",
            "collimator_terms", "spectrograph_optics", "quilt_parts", "lstsq_residual", "MAX_COUPLING", "coupled_lstsq", "coupled_at"]
 
@@ -63,6 +63,16 @@ def lstsq_residual(A: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray
     """``(d - A c, c)`` for the least-squares coefficients ``c`` of ``A c = d``."""
     c, *_ = np.linalg.lstsq(A, d, rcond=None)
     return d - A @ c, c
+
+
+#: Grid cells kept around a spectrograph image's footprint on the map
+#: (:meth:`SpectrographImageModel._window`): one holds the bilinear stencil of a point on
+#: the footprint's edge, the second a point that rounding puts on the next node.
+FOOTPRINT_MARGIN_CELLS = 2
+#: Windows of the nominal's grid a spectrograph-image model keeps
+#: (:meth:`SpectrographImageModel._part`): a fit that moves the pupil moves the window, and a
+#: window costs a copy of a few arrays, small beside the image it serves.
+PARTS_MEMO_SIZE = 8
 
 
 #: Largest inter-pixel coupling a line-profile model fits (fraction of a pixel's signal
@@ -373,6 +383,7 @@ class SpectrographImageModel:
         self._quilt_at = quilt_parts(self.quilt, *self._grid)
         self._cache: OrderedDict = OrderedDict()
         self._cache_size = cache_size
+        self._parts: dict = {}
         self.noise_known = m.noise_rel
         self.departure = None
 
@@ -382,6 +393,7 @@ class SpectrographImageModel:
         grid) to the shape every image of this model is formed with."""
         self.departure = departure
         self._cache.clear()
+        self._parts.clear()
 
     def factor(self, p: dict) -> float:
         # taken at the simulation's cold_K: spectrograph data are stated at it
@@ -392,6 +404,61 @@ class SpectrographImageModel:
         k = self.factor(p)
         return (round(k, 12),) + tuple(round(float(p.get(q, self._NULLS[q])), 12) for q in self._KEYS), k
 
+    def _footprint_mm(self, p: dict) -> tuple[float, float, float, float] | None:
+        """``(x_min, x_max, y_min, y_max)`` (mm) of the map points the model's image of the
+        parameters ``p`` reads; None: the whole map."""
+        return None
+
+    def _window(self, p: dict) -> tuple[slice, slice] | None:
+        """``(rows, columns)`` of the nominal's grid that hold :meth:`_footprint_mm` with
+        :data:`FOOTPRINT_MARGIN_CELLS` cells to spare; None where that is not inside the map.
+
+        Every shape effect and the departure act point by point, and the optics read the map
+        by bilinear interpolation, so the image formed from this part of the map is the one
+        formed from the whole map, while deforming the whole map for each image of a narrow
+        pupil costs several times more."""
+        box = self._footprint_mm(p)
+        if box is None:
+            return None
+        x, y = self.nominal.x_mm, self.nominal.y_mm
+        m = FOOTPRINT_MARGIN_CELLS
+        i0, i1 = int(np.searchsorted(x, box[0], "right")) - 1 - m, int(np.searchsorted(x, box[1], "left")) + 1 + m
+        j0, j1 = int(np.searchsorted(y, box[2], "right")) - 1 - m, int(np.searchsorted(y, box[3], "left")) + 1 + m
+        if i0 < 0 or j0 < 0 or i1 > x.size or j1 > y.size:
+            return None
+        return slice(j0, j1), slice(i0, i1)
+
+    def _part(self, window: tuple[slice, slice] | None) -> tuple:
+        """``(nominal, grid, quilt parts, departure)`` on ``window`` of the nominal's grid
+        (:meth:`_window`; None: the whole map), memoised so that the same window gives the
+        same arrays (shape effects memoise terms on their coordinate arrays)."""
+        departure = None if self.departure is None else self.departure.shape_um
+        if window is None:
+            return self.nominal, self._grid, self._quilt_at, departure
+        ys, xs = window
+        key = (ys.start, ys.stop, xs.start, xs.stop)
+        hit = self._parts.get(key)
+        if hit is not None:
+            return hit
+        n = self.nominal
+        nominal = SagMap(n.x_mm[xs], n.y_mm[ys], np.ascontiguousarray(n.sag_um[ys, xs]), n.label, dict(n.meta))
+        grid = tuple(np.ascontiguousarray(g[ys, xs]) for g in self._grid)
+        quilt = None if self._quilt_at is None else {k: np.ascontiguousarray(v[ys, xs]) for k, v in self._quilt_at.items()}
+        hit = nominal, grid, quilt, None if departure is None else np.ascontiguousarray(departure[ys, xs])
+        self._parts[key] = hit
+        if len(self._parts) > PARTS_MEMO_SIZE:
+            self._parts.pop(next(iter(self._parts)))
+        return hit
+
+    def _image(self, p: dict, k: float, build, window: tuple[slice, slice] | None):
+        """``build`` for the sag of the parameters ``p`` (deformation factor ``k``) deformed on
+        ``window`` of the nominal's grid (:meth:`_window`)."""
+        nominal, grid, quilt, departure = self._part(window)
+        shape = blank_shape_um(nominal.sag_um, *grid, p, quilt)
+        if departure is not None:
+            shape = shape + departure
+        return build(nominal.with_sag(k * shape), p)
+
     def _memo(self, p: dict, build):
         """``build(sag, p)`` for the grating's deformed sag, memoised on the physical parameters."""
         key, k = self._key(p)
@@ -399,10 +466,13 @@ class SpectrographImageModel:
         if hit is not None:
             self._cache.move_to_end(key)
             return hit
-        shape = blank_shape_um(self.nominal.sag_um, *self._grid, p, self._quilt_at)
-        if self.departure is not None:
-            shape = shape + self.departure.shape_um
-        out = build(self.nominal.with_sag(k * shape), p)
+        try:
+            window = self._window(p)
+            out = None if window is None else self._image(p, k, build, window)
+        except ValueError:
+            out = None  # refused: the whole map's refusal is the one to raise (it names the map's extent)
+        if out is None:
+            out = self._image(p, k, build, None)
         self._cache[key] = out
         if len(self._cache) > self._cache_size:
             self._cache.popitem(last=False)
@@ -438,6 +508,7 @@ class ProfileForward(SpectrographImageModel):
                  materials: tuple[str, str] = DEFAULT_MATERIALS):
         self._setup(data.measurement, nominal, cold_K, warm_K, settings, cache_size, materials)
         self._splines: OrderedDict = OrderedDict()
+        self._footprints: dict = {}
         self.x = np.asarray(data.offset_um, float)
         self.data = np.asarray(data.intensity, float)
         self.n = self.data.size
@@ -470,6 +541,21 @@ class ProfileForward(SpectrographImageModel):
     def carry_departure(self, departure) -> None:
         super().carry_departure(departure)
         self._splines.clear()  # the detected curves too: memoised on the parameters only
+
+    def _footprint_mm(self, p: dict) -> tuple[float, float, float, float]:
+        # the footprint at no pupil shift, moved by the shift: adding the shift to every
+        # point keeps the extremes extreme (rounding is monotonic), so this is the extent
+        # of the shifted points themselves, without recomputing the pupil for each shift
+        o = spectrograph_optics(self.m.grating, p)
+        box = self._footprints.get(o.grating)
+        if box is None:
+            box = self._footprints[o.grating] = line_profile_footprint_mm(
+                o.grating, self.m.wavelength_um, self.m.pixel_scale_mas, order=self.m.order,
+                slit_position=self.m.slit_position, settings=self.settings)
+            if len(self._footprints) > PARTS_MEMO_SIZE:  # a fitted slit width makes a grating per value
+                self._footprints.pop(next(iter(self._footprints)))
+        sx, sy = o.pupil_shift_mm
+        return box[0] + sx, box[1] + sx, box[2] + sy, box[3] + sy
 
     def _build(self, sag, p):
         """((offset_um, intensity) the optics form, its spline) for the deformed ``sag``."""
