@@ -17,8 +17,8 @@ profiles with a gap is counted for:
 * **stated**: the same files, the manifest stating the RMS (in counts) and correlation
   length the detector drew for each profile — what a lab that characterised its detector
   on flats would state;
-* **halo, stated**: the full detector with an out-of-library halo written here (8 % of the
-  flux into a Lorentzian of 80 µm half width), its correlated noise stated: whether stating
+* **halo, stated**: the full detector with an out-of-library halo (``nominal_floor.halo``:
+  8 % of the flux into a Lorentzian of 80 µm half width, not the library's halo code), its correlated noise stated: whether stating
   the noise hides a halo.
 
 Acceptance rule, fixed before the reported run:
@@ -42,8 +42,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from diagnosis_cases import nominal_map, sag_function_of  # noqa: E402
+from nominal_floor import halo  # noqa: E402
 from pipeline.diagnosis.criteria import Criteria  # noqa: E402
 from pipeline.diagnosis.engine import build_problem  # noqa: E402
 from pipeline.diagnosis.gap import gap_statistics, gaps  # noqa: E402
@@ -55,16 +57,6 @@ from pipeline.io.measured import write_line_profile_csv  # noqa: E402
 
 #: The halo beside the stated noise: (fraction of the flux, Lorentzian half width µm).
 HALO = (0.08, 80.0)
-
-
-def halo(fraction: float, hwhm_um: float):
-    """A detector-side distortion ``(u, y) -> y``: ``fraction`` of the flux into a Lorentzian
-    of half width ``hwhm_um`` (``u`` a uniform grid)."""
-    def distort(u, y):
-        k = (np.arange(u.size) - u.size // 2) * (u[1] - u[0])
-        lor = hwhm_um / (k * k + hwhm_um * hwhm_um)
-        return (1.0 - fraction) * y + fraction * np.convolve(y, lor / lor.sum(), mode="same")
-    return distort
 
 
 def gap_of(work: Path, nominal, x, counts, mas: int, stated: dict | None) -> tuple[bool, float, float]:
