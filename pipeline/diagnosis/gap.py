@@ -11,7 +11,8 @@ noise as explanation (a stated peak-level photon noise put a 25 mas profile at
 chi^2_red 0.4 and a fit that took the 250 mas profile from chi^2_red 2.8 to its noise read as
 0 % explained). Where the manifest states a profile's correlated noise, ``N_i`` is the mean
 and the z-test's spread the variance of what white and correlated noise leave a right model
-(:meth:`.forward.ProfileForward.noise_rss_moments`). The decision logic that uses these is described in ``docs/diagnosis.md``.
+(:meth:`.forward.ProfileForward.noise_rss_moments`). The decision logic that uses these is
+described in ``docs/diagnosis.md``.
 """
 
 from __future__ import annotations
