@@ -45,7 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from diagnosis_cases import nominal_map, sag_function_of  # noqa: E402
-from nominal_floor import halo  # noqa: E402
+from nominal_floor import halo, profile_manifest  # noqa: E402
 from pipeline.diagnosis.criteria import Criteria  # noqa: E402
 from pipeline.diagnosis.engine import build_problem  # noqa: E402
 from pipeline.diagnosis.gap import gap_statistics, gaps  # noqa: E402
@@ -53,7 +53,6 @@ from pipeline.diagnosis.manifest import load_data, load_manifest  # noqa: E402
 from pipeline.diagnosis.truth.abbe import RELATIVE_NA, abbe_line_profile  # noqa: E402
 from pipeline.diagnosis.truth.detector import measure_profile  # noqa: E402
 from pipeline.diagnosis.truth.generate import COLLIMATOR_UM  # noqa: E402
-from pipeline.io.measured import write_line_profile_csv  # noqa: E402
 
 #: The halo beside the stated noise: (fraction of the flux, Lorentzian half width µm).
 HALO = (0.08, 80.0)
@@ -62,12 +61,8 @@ HALO = (0.08, 80.0)
 def gap_of(work: Path, nominal, x, counts, mas: int, stated: dict | None) -> tuple[bool, float, float]:
     """(gap found, RMS ratio, z) of the nominal fit of the profile ``(x, counts)``; ``stated``
     the correlated noise's manifest keys, or None."""
-    write_line_profile_csv(work / "p.csv", x, counts)
     extra = "".join(f"{k} = {v!r}\n" for k, v in (stated or {}).items())
-    (work / "m.toml").write_text('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\n'
-                                 'kind = "line_profile"\nfile = "p.csv"\ngrating = "J"\norder = -2\n'
-                                 f'wavelength_um = 1.25\npixel_scale_mas = {mas}\n{extra}')
-    man = load_manifest(work / "m.toml")
+    man = load_manifest(profile_manifest(work, x, counts, mas, extra))
     prob, nom = build_problem(man, load_data(man), nominal)
     g = gap_statistics(prob, nom)["p"]
     return bool(gaps(prob, nom, Criteria())), g["rms_ratio"], g["z"]

@@ -77,15 +77,23 @@ def band_rms(x_um: np.ndarray, r: np.ndarray, fine_um: float, broad_um: float) -
     return float(np.sqrt(np.mean((smooth(fine_um) - smooth(broad_um)) ** 2)))
 
 
+def profile_manifest(work: Path, x, counts, mas: int, extra: str = "") -> Path:
+    """Write the J 1.25 µm profile ``(x, counts)`` at ``mas`` and a manifest of it (nominal
+    map ``nominal.npz`` in ``work``, ``extra`` manifest lines for the measurement); returns
+    the manifest's path."""
+    write_line_profile_csv(work / "p.csv", x, counts)
+    path = work / "m.toml"
+    path.write_text('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\n'
+                    'kind = "line_profile"\nfile = "p.csv"\ngrating = "J"\norder = -2\n'
+                    f'wavelength_um = 1.25\npixel_scale_mas = {mas}\n{extra}')
+    return path
+
+
 def nominal_fit(work: Path, nominal, x, counts, mas: int) -> tuple[float, float, dict]:
     """(residual RMS per degree of freedom, noise estimate, band-pass RMS by band), fraction
     of the line's peak, of the nominal model fitted to the profile ``(x, counts)`` with its
     nuisances only."""
-    write_line_profile_csv(work / "p.csv", x, counts)
-    (work / "m.toml").write_text('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n\n[[measurement]]\n'
-                                 'kind = "line_profile"\nfile = "p.csv"\ngrating = "J"\norder = -2\n'
-                                 f'wavelength_um = 1.25\npixel_scale_mas = {mas}\n')
-    (data,) = load_data(load_manifest(work / "m.toml"))
+    (data,) = load_data(load_manifest(profile_manifest(work, x, counts, mas)))
     f = ProfileForward(data, nominal, 80.0)
     best = minimize_scalar(lambda d: float(np.sum(f.residual({}, d) ** 2)),
                            bounds=(f.delta0_um - 2.0, f.delta0_um + 2.0), method="bounded")

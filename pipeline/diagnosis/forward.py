@@ -571,16 +571,20 @@ class ProfileForward(SpectrographImageModel):
         v = curve(self.x - delta_um)
         return np.where(np.isfinite(v), v, 0.0)
 
+    def _line_and_neighbours(self, curve: CubicSpline, delta_um: float) -> tuple[np.ndarray, np.ndarray]:
+        """The line at the samples and what inter-pixel coupling moves: the line one pixel
+        either side minus twice the line (:func:`coupled_lstsq`)."""
+        line = self._sampled(curve, delta_um)
+        return line, (self._sampled(curve, delta_um + self.pixel_um) + self._sampled(curve, delta_um - self.pixel_um)
+                      - 2.0 * line)
+
     def _nuisances(self, p, delta_um, mask):
         """(residual on ``mask``, model at every sample, coupling) with flux, coupling and
         background fitted on ``mask`` (:func:`coupled_lstsq`), the coupling held at the
         stated one where the manifest gives it."""
         # one memo lookup for the line and its two neighbours (the lookup, not the spline,
         # is most of a residual's cost once the line is built)
-        curve = self.curve(p)
-        line = self._sampled(curve, delta_um)
-        neighbours = (self._sampled(curve, delta_um + self.pixel_um) + self._sampled(curve, delta_um - self.pixel_um)
-                      - 2.0 * line)
+        line, neighbours = self._line_and_neighbours(self.curve(p), delta_um)
         sel = slice(None) if mask is None else mask
         if self.stated_coupling is None:
             r, flux, c, bg = coupled_lstsq(line[sel], neighbours[sel], self.data[sel])
@@ -649,8 +653,7 @@ class ProfileForward(SpectrographImageModel):
         coupling (unless stated), background and the shift's derivative. A right model's
         residual is the noise less its projection on these (:meth:`noise_rss_moments`)."""
         curve, d = self.curve({}), self.delta0_um
-        line = self._sampled(curve, d)
-        neighbours = self._sampled(curve, d + self.pixel_um) + self._sampled(curve, d - self.pixel_um) - 2.0 * line
+        line, neighbours = self._line_and_neighbours(curve, d)
         h = 0.05  # µm: a central difference of the line's position, far below its width
         slope = (self._sampled(curve, d + h) - self._sampled(curve, d - h)) / (2.0 * h)
         flux = [line, neighbours] if self.stated_coupling is None else [line + self.stated_coupling * neighbours]
