@@ -15,7 +15,7 @@ from pipeline.diagnosis.criteria import Criteria
 from pipeline.diagnosis.engine import build_problem
 from pipeline.diagnosis.gap import gap_statistics, gaps
 from pipeline.diagnosis.manifest import load_data, load_manifest, parse_manifest
-from pipeline.diagnosis.noise import CorrelatedNoise, estimate_noise, rss_moments
+from pipeline.diagnosis.noise import CorrelatedNoise, RssTraces, estimate_noise, rss_moments
 from pipeline.io.measured import write_line_profile_csv
 
 
@@ -54,6 +54,21 @@ def test_correlated_noise_moments_match_monte_carlo():
     # the nuisances take far more of a correlated noise than of white noise of the same RMS
     white_mean = rss_moments(np.eye(x.size) * (0.004**2 + 0.01**2), design)[0]
     assert mean < 0.97 * white_mean
+
+
+def test_traces_give_the_moments_at_any_white_level():
+    """The three traces kept per profile give, for every white-noise level, the moments the
+    full covariance gives (the expansion of tr(MC) and tr(MCMC) in s^2; M idempotent)."""
+    rng = np.random.default_rng(3)
+    x = np.sort(rng.uniform(-120.0, 120.0, 140))
+    design = np.column_stack([np.exp(-0.5 * (x / 14.0) ** 2), np.ones_like(x), x * np.exp(-0.5 * (x / 14.0) ** 2)])
+    noise = CorrelatedNoise(0.008, 20.0)
+    K = noise.rms_rel**2 * noise.correlation(x)
+    traces = RssTraces.of(K, design)
+    assert traces.free == pytest.approx(x.size - design.shape[1], rel=1e-12)
+    for s in (0.0, 0.001, 0.004, 0.03):
+        expected = rss_moments(s**2 * np.eye(x.size) + K, design)
+        assert traces.moments(s) == pytest.approx(expected, rel=1e-10)
 
 
 def test_estimator_share_limits_and_monte_carlo():

@@ -36,7 +36,7 @@ from optics.zernike import zernike_xy
 from .effects import LIBRARY, SHAPE_STAGES, SpectrographOptics, forward_effects
 from .manifest import NOISE_RANGES, ProfileData, SurfaceData
 from .noise import (SCATTERED_NOISE_REL_SD_SQRT_N, SIGNAL_DEPENDENT_NOISE_REL_SD_SQRT_N, estimate_noise,
-                    WING_LEVEL, estimate_noise_signal_dependent, rss_moments)
+                    WING_LEVEL, RssTraces, estimate_noise_signal_dependent)
 from .nominal import DEFAULT_MATERIALS, thermal_factor
 from .quilt import QuiltComponents, quilt_components
 
@@ -518,6 +518,7 @@ class ProfileForward(SpectrographImageModel):
             self.nuisance_count = 2
         #: the correlated noise the manifest states (None: white noise only)
         self.correlated_noise = data.measurement.correlated_noise
+        self._rss_traces = None  # RssTraces of the stated correlated noise, on first use
         self.delta0_um = self._initial_shift()
 
     def curve(self, p: dict) -> CubicSpline:
@@ -541,6 +542,7 @@ class ProfileForward(SpectrographImageModel):
     def carry_departure(self, departure) -> None:
         super().carry_departure(departure)
         self._splines.clear()  # the detected curves too: memoised on the parameters only
+        self._rss_traces = None  # the nuisances' design is the nominal line's
 
     def _footprint_mm(self, p: dict) -> tuple[float, float, float, float]:
         # the footprint at no pupil shift, moved by the shift: adding the shift to every
@@ -667,8 +669,9 @@ class ProfileForward(SpectrographImageModel):
         cn = self.correlated_noise
         if cn is None:
             return None
-        cov = sigma_w**2 * np.eye(self.n) + cn.rms_rel**2 * cn.correlation(self.x)
-        return rss_moments(cov, self.nuisance_design())
+        if self._rss_traces is None:
+            self._rss_traces = RssTraces.of(cn.rms_rel**2 * cn.correlation(self.x), self.nuisance_design())
+        return self._rss_traces.moments(sigma_w)
 
     @property
     def noise_rel_sd(self) -> float:
