@@ -711,9 +711,6 @@ def run_campaign(cfg: CampaignConfig = CampaignConfig(), cache_dir=None, progres
 
     ``progress`` (path, optional): each finished case is appended to it as one JSON line
     (in case order), so an interrupted campaign leaves its partial results."""
-    if cfg.truth == "independent" and cfg.psf_image is not None:
-        raise ValueError("CampaignConfig: psf_image needs truth='model' (the independent truth makes no "
-                         "point-source images)")
     t0 = time.perf_counter()
     nominal, base = campaign_maps(cfg, cache_dir)
     tasks = [(i, case_type(cfg, i), cfg, nominal, base) for i in range(cfg.n_cases)

@@ -11,7 +11,9 @@ forward model (:mod:`pipeline.diagnosis.forward`, :mod:`.synth`, :mod:`.psf_imag
   :mod:`optics.grating`, :mod:`optics.pupil` functions, :mod:`optics.zernike`,
   :mod:`optics.sagmap` or :mod:`pipeline.diagnosis.forward`; the forward model's
   infinite-slit strip, ``LsfSettings`` discretisation, ``box_convolve`` and sag
-  resampling are not used;
+  resampling are not used. A point-source image (``CampaignConfig.psf_image``) is the
+  same pupil field propagated once (:func:`.abbe.point_image`), not
+  :func:`optics.lineprofile.point_psf` or :mod:`pipeline.diagnosis.psf_image`;
 * grating maps: :mod:`.gratings` mixes the FEA map with analytic sum- and product-form
   quilts fitted to it (own least squares), at a drawn harmonic distance from the nominal,
   and interpolates with scipy; :mod:`.lattice` jitters the FEA map's quilt per cell of the
@@ -20,8 +22,9 @@ forward model (:mod:`pipeline.diagnosis.forward`, :mod:`.synth`, :mod:`.psf_imag
   (:mod:`pipeline.diagnosis.quilt`) are not used;
 * detector and interferometer: :mod:`.detector` and :func:`.generate.measured_map`
   (super-sampled pixels at random sub-pixel phases, inter-pixel coupling, counts with
-  Poisson and read noise, correlated noise, pedestal or background subtraction; map
-  piston/tilt, correlated noise, dropouts) — not :mod:`.synth`;
+  Poisson and read noise, correlated noise, pedestal or background subtraction; an
+  image's dithered lattice, counts, background and missing samples; map piston/tilt,
+  correlated noise, dropouts) — not :mod:`.synth`;
 * out-of-library effects: :mod:`.families` (``benchmarks/truth_families.md``), not the
   model campaign's coma/bump/ghost/distortion.
 
@@ -36,7 +39,8 @@ Shared (deliberately, as data or physics the diagnosis is meant to assume):
   conventions (so the injected values mean what the library's do), and the manifest
   and file formats the diagnosis reads, with their writers in :mod:`pipeline.io` (file
   I/O, not model: a line profile goes out through
-  :func:`pipeline.io.measured.write_line_profile_csv`);
+  :func:`pipeline.io.measured.write_line_profile_csv`, an image through
+  :func:`pipeline.io.measured.write_psf_image_csv`);
 * the random magnitudes of the library effects' truths (:data:`pipeline.diagnosis.effect_draws.DRAWS`,
   random numbers only), so that both truths inject the same effects at the same sizes.
 """

@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["GRATINGS", "F_COLL_MM", "F_CAM_MM", "PUPIL_D_MM", "PIXEL_UM", "RELATIVE_NA", "AbbeSettings",
-           "beta_deg", "zernike_noll", "disc_cells", "abbe_line_profile"]
+           "beta_deg", "zernike_noll", "disc_cells", "abbe_line_profile", "point_image"]
 
 #: Paper table of grating parameters (80 K): groove spacing µm, order, incidence deg,
 #: band (short, centre, long) µm, geometric slit image width µm.
@@ -168,6 +168,36 @@ def _pixel_box(x_um: np.ndarray, y: np.ndarray, width_um: float) -> np.ndarray:
     return np.fft.irfft(np.fft.rfft(y) * np.sinc(width_um * f), n=y.size)
 
 
+def _pupil_field(grating: str, wavelength_um: float, order: int, sag_um, pupil_shift_mm, collimator_um,
+                 camera_um, s: AbbeSettings):
+    """The pupil samples ``p`` (dispersion) and ``q`` (grooves), mm, cell-centred; the field
+    ``U = aperture * exp(i phi)`` on them, shape (n_q, n_p), grey rim from 4 x 4 sub-samples;
+    and the anamorphic factor ``cos(alpha) / cos(beta)`` (module docstring)."""
+    _, _, alpha, _, _ = _grating(grating)
+    b = beta_deg(grating, wavelength_um, order)
+    ca, cb = math.cos(math.radians(alpha)), math.cos(math.radians(b))
+    R = 0.5 * PUPIL_D_MM
+    p = (np.arange(-math.ceil(R / s.pupil_step_mm), math.ceil(R / s.pupil_step_mm)) + 0.5) * s.pupil_step_mm
+    q = (np.arange(-math.ceil(R / s.pupil_step_q_mm), math.ceil(R / s.pupil_step_q_mm)) + 0.5) * s.pupil_step_q_mm
+    sub = (np.arange(4) + 0.5) / 4 - 0.5
+    pf = (p[:, None] + sub * s.pupil_step_mm).ravel()
+    qf = (q[:, None] + sub * s.pupil_step_q_mm).ravel()
+    amp = ((qf[:, None] ** 2 + pf[None, :] ** 2) <= R * R).reshape(q.size, 4, p.size, 4).mean(axis=(1, 3))
+    P, Q = np.meshgrid(p, q)
+    opd = _wavefront_um(collimator_um, P, Q, R) + _wavefront_um(camera_um, P, Q, R)
+    phase = 2 * np.pi * opd / wavelength_um
+    if sag_um is not None:
+        xg, yg = P / ca + pupil_shift_mm[0], Q + pupil_shift_mm[1]
+        h = np.zeros_like(P)
+        inside = amp > 0
+        h[inside] = sag_um(xg[inside], yg[inside])
+        if not np.all(np.isfinite(h[inside])):
+            raise ValueError("sag_um: the sag is not finite everywhere inside the pupil footprint "
+                             f"(shift {pupil_shift_mm} mm)")
+        phase = phase - 2 * np.pi / wavelength_um * (ca + cb) * h
+    return p, q, amp * np.exp(1j * phase), ca / cb
+
+
 def abbe_line_profile(grating: str, wavelength_um: float, order: int, relative_na: float, sag_um=None, *,
                       pupil_shift_mm: tuple[float, float] = (0.0, 0.0), collimator_um: dict | None = None,
                       camera_um: dict | None = None, slit_image_width_um: float | None = None,
@@ -205,37 +235,16 @@ def abbe_line_profile(grating: str, wavelength_um: float, order: int, relative_n
     """
     if not (0.0 < relative_na <= 1.0):
         raise ValueError(f"relative_na={relative_na!r} must be in (0, 1]")
-    d, m_blaze, alpha, band, w_img = _grating(grating)
+    _, m_blaze, alpha, band, w_img = _grating(grating)
     s = settings
-    b = beta_deg(grating, wavelength_um, order)
-    ca, cb = math.cos(math.radians(alpha)), math.cos(math.radians(b))
-    anam = ca / cb
+    ca = math.cos(math.radians(alpha))
     anam_c = ca / math.cos(math.radians(beta_deg(grating, band[1], m_blaze)))
     w_img = w_img if slit_image_width_um is None else slit_image_width_um
     w_c = w_img / (F_CAM_MM / F_COLL_MM * anam_c)          # µm, collimator focal plane
     l_c = s.slit_length_um * F_COLL_MM / F_CAM_MM            # µm
     lam_fcoll = wavelength_um * F_COLL_MM                   # µm * mm
     R = 0.5 * PUPIL_D_MM
-    # Pupil: cell-centred grids, grey rim from sub-sampled cells.
-    p = (np.arange(-math.ceil(R / s.pupil_step_mm), math.ceil(R / s.pupil_step_mm)) + 0.5) * s.pupil_step_mm
-    q = (np.arange(-math.ceil(R / s.pupil_step_q_mm), math.ceil(R / s.pupil_step_q_mm)) + 0.5) * s.pupil_step_q_mm
-    sub = (np.arange(4) + 0.5) / 4 - 0.5
-    pf = (p[:, None] + sub * s.pupil_step_mm).ravel()
-    qf = (q[:, None] + sub * s.pupil_step_q_mm).ravel()
-    amp = ((qf[:, None] ** 2 + pf[None, :] ** 2) <= R * R).reshape(q.size, 4, p.size, 4).mean(axis=(1, 3))
-    P, Q = np.meshgrid(p, q)
-    opd = _wavefront_um(collimator_um, P, Q, R) + _wavefront_um(camera_um, P, Q, R)
-    phase = 2 * np.pi * opd / wavelength_um
-    if sag_um is not None:
-        xg, yg = P / ca + pupil_shift_mm[0], Q + pupil_shift_mm[1]
-        h = np.zeros_like(P)
-        inside = amp > 0
-        h[inside] = sag_um(xg[inside], yg[inside])
-        if not np.all(np.isfinite(h[inside])):
-            raise ValueError("sag_um: the sag is not finite everywhere inside the pupil footprint "
-                             f"(shift {pupil_shift_mm} mm)")
-        phase = phase - 2 * np.pi / wavelength_um * (ca + cb) * h
-    U = amp * np.exp(1j * phase)                             # (n_q, n_p)
+    p, q, U, anam = _pupil_field(grating, wavelength_um, order, sag_um, pupil_shift_mm, collimator_um, camera_um, s)
     # Sources: disc of radius NA_rel R.
     r_src = relative_na * R
     sp, sq, sw = disc_cells(r_src, min(s.source_step_mm, r_src / s.min_source_rows))
@@ -261,3 +270,48 @@ def abbe_line_profile(grating: str, wavelength_um: float, order: int, relative_n
     keep = np.abs(x) <= s.window_um
     x, y = x[keep], acc[keep]
     return x, y / (y.sum() * du)
+
+
+def point_image(grating: str, wavelength_um: float, order: int, sag_um=None, *,
+                pupil_shift_mm: tuple[float, float] = (0.0, 0.0), collimator_um: dict | None = None,
+                camera_um: dict | None = None, settings: AbbeSettings = AbbeSettings(),
+                half_range_um: float = 32.0, step_y_um: float = 0.5):
+    """Focal-plane image of a point at the slit centre (one plane wave filling the pupil).
+
+    The pupil field is the line profiles' (:func:`abbe_line_profile`, same phase and
+    sign), with no slit spectrum: the object is a point, so one coherent propagation is
+    the whole image. Fraunhofer to the camera focal plane as there: an FFT along ``p``
+    (step ``lambda f_cam A / (n_fft pupil_step_mm)``) and a direct DFT along ``q`` at
+    rows ``step_y_um`` apart.
+
+    Parameters
+    ----------
+    grating, wavelength_um, order, sag_um, pupil_shift_mm, collimator_um, camera_um, settings
+        As :func:`abbe_line_profile`.
+    half_range_um : float
+        Half width of the returned image on both axes (µm).
+    step_y_um : float
+        Row step along the slit (µm).
+
+    Returns
+    -------
+    x_um : ndarray, shape (n_x,)
+        Detector offset along dispersion (µm, 0 = the undeviated image).
+    y_um : ndarray, shape (n_y,)
+        Detector offset along the slit (µm).
+    image : ndarray, shape (n_y, n_x)
+        Intensity normalised to unit volume (per µm²).
+    """
+    if not (math.isfinite(half_range_um) and half_range_um > 0 and math.isfinite(step_y_um) and step_y_um > 0):
+        raise ValueError(f"half_range_um={half_range_um!r} and step_y_um={step_y_um!r} must be finite numbers > 0")
+    s = settings
+    p, q, U, anam = _pupil_field(grating, wavelength_um, order, sag_um, pupil_shift_mm, collimator_um, camera_um, s)
+    n_y = int(math.floor(half_range_um / step_y_um))
+    y_um = np.arange(-n_y, n_y + 1) * step_y_um
+    Ey = np.exp(-2j * np.pi * np.outer(y_um, q) / (wavelength_um * F_CAM_MM))   # (n_y, n_q)
+    F = np.fft.fftshift(np.fft.fft(Ey @ U, n=s.n_fft, axis=-1), axes=-1)       # (n_y, n_fft)
+    du = wavelength_um * F_CAM_MM * anam / (s.n_fft * s.pupil_step_mm)
+    x_um = (np.arange(s.n_fft) - s.n_fft // 2) * du
+    keep = np.abs(x_um) <= half_range_um
+    img = F.real[:, keep] ** 2 + F.imag[:, keep] ** 2
+    return x_um[keep], y_um, img / (img.sum() * du * step_y_um)

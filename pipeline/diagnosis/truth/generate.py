@@ -15,13 +15,13 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from optics.pupil import DEFAULT_COLLIMATOR_ZERNIKE_UM
-from pipeline.io.measured import write_line_profile_csv
+from pipeline.io.measured import write_line_profile_csv, write_psf_image_csv
 
 from ..effect_draws import DRAWS
 from ..manifest import NOMINAL_SIMULATION
 from ..nominal import thermal_factor
-from .abbe import GRATINGS, RELATIVE_NA, AbbeSettings, abbe_line_profile, zernike_noll
-from .detector import measure_profile
+from .abbe import GRATINGS, RELATIVE_NA, AbbeSettings, abbe_line_profile, point_image, zernike_noll
+from .detector import measure_image, measure_profile
 from .families import PROFILE_OOL, SURFACE_OOL, draw_profile_ool, draw_surface_ool
 from .gratings import GratingTruth, fundamental_x_ratio, mixed_grating, sag_function
 from .lattice import pocket_jitter, sharp_ribs
@@ -121,8 +121,6 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
     parameters, and under ``"_present"`` the library effects the truth carries besides
     the injected one (``quilt_shape``: its quilt shape differs from the nominal's), under
     ``"_truth"`` how it was made."""
-    if getattr(cfg, "psf_image", None) is not None:
-        raise ValueError("the independent truth makes no point-source images; use truth='model' with psf_image")
     g = truth_grating(nominal, fea, rng, getattr(cfg, "truth_families", FAMILIES))
     sim = {**NOMINAL_SIMULATION, "mesh": cfg.nominal_mesh}
     meta = {"family": g.family, "mix": g.mix, "harmonic_distance": g.distance,
@@ -191,4 +189,13 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
         # blank's, with an amplitude scale of its own.
         meas.append({"kind": "surface", "file": "map.npz", "temperature_K": cfg.profile_map_K,
                      "aperture_diameter_mm": APERTURE_MM, "blank": _PROFILE_BLANK})
+    if getattr(cfg, "psf_image", None) is not None:
+        # Drawn last: the profiles (and map) are those of the campaign without the image.
+        gr, wl, order, pix = cfg.psf_image
+        ux, uy, img = point_image(gr, wl, order, sag, pupil_shift_mm=shift, collimator_um=coll, camera_um=camera,
+                                  settings=settings)
+        x, y, counts, _ = measure_image(ux, uy, img, rng, pixel_um=pix)
+        write_psf_image_csv(out / "psf.csv", x, y, counts)
+        meas.append({"kind": "psf_image", "file": "psf.csv", "name": f"{gr}_{wl}_psf", "grating": gr, "order": order,
+                     "wavelength_um": wl, "pixel_um": pix})
     return {"simulation": sim, "measurement": meas}, {**truth, "_present": ["quilt_shape"], "_truth": meta}
