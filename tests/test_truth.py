@@ -267,7 +267,9 @@ def test_measured_image_is_dithered_counts_around_a_drawn_centre():
     brightest sample next to the drawn centre, the background's level in the corners;
     with no background the read noise leaves negative samples, kept as they are; a pixel
     integral keeps the image's volume."""
-    x, y, img = point_image("J", 1.25, -2, None, collimator_um={})
+    x, y, img = point_image("J", 1.25, -2, None, collimator_um={}, half_range_um=36.0)
+    with pytest.raises(ValueError, match="max_centre_um=5 .* needs ±35"):
+        measure_image(*point_image("J", 1.25, -2, None, collimator_um={}), np.random.default_rng(4))
     xs, ys, counts, info = measure_image(x, y, img, np.random.default_rng(4))
     assert 0.94 * 61 * 61 < xs.size < 61 * 61 and xs.shape == ys.shape == counts.shape
     k = int(np.argmax(counts))
@@ -277,11 +279,15 @@ def test_measured_image_is_dithered_counts_around_a_drawn_centre():
     assert np.median(counts[corner]) == pytest.approx(info["background_counts"], rel=0.1)
     _, _, dark, _ = measure_image(x, y, img, np.random.default_rng(5), background_rel=(0.0, 0.0))
     assert (dark < 0).sum() > 100
+    from pipeline.diagnosis.truth.detector import box_along
     g = np.arange(-40.0, 40.01, 0.5)
     blob = np.exp(-0.5 * (g[:, None] ** 2 + g[None, :] ** 2) / 3.0**2)
-    from pipeline.diagnosis.truth.detector import box_along
     boxed = box_along(g, box_along(g, blob, 18.0, 1), 18.0, 0)
     assert boxed.sum() == pytest.approx(blob.sum(), rel=1e-9) and boxed.max() < 0.2 * blob.max()
+    # a blob at the grid's edge: none of it wraps round to the other side (what reaches it is
+    # the band-limited box's ringing, ~1e-5 of the peak; a periodic convolution puts ~0.1 there)
+    edge = np.exp(-0.5 * ((g[None, :] - 38.0) ** 2 + g[:, None] ** 2) / 3.0**2)
+    assert np.abs(box_along(g, edge, 18.0, 1)[:, g < -30.0]).max() < 1e-4
 
 
 def test_an_independent_case_with_a_point_image_writes_one_the_diagnosis_reads(tmp_path, monkeypatch):

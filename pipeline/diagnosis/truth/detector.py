@@ -128,13 +128,19 @@ def measure_profile(offset_um: np.ndarray, detected: np.ndarray, rng: np.random.
 
 
 def box_along(axis_um: np.ndarray, image: np.ndarray, width_um: float, axis: int) -> np.ndarray:
-    """``image`` convolved along ``axis`` with a ``width_um`` box by its transfer function
-    (periodic; the image must fall to ~0 at the grid's ends)."""
-    f = np.fft.rfftfreq(image.shape[axis], d=axis_um[1] - axis_um[0])
+    """``image`` (2-D) convolved along ``axis`` with a ``width_um`` box by its transfer
+    function, zero beyond the grid (padded by the box's width, so nothing wraps round)."""
+    step = axis_um[1] - axis_um[0]
+    pad = int(math.ceil(width_um / step)) + 1
+    widths = [(0, 0), (0, 0)]
+    widths[axis] = (pad, pad)
+    padded = np.pad(image, widths)
+    f = np.fft.rfftfreq(padded.shape[axis], d=step)
     shape = [1, 1]
     shape[axis] = f.size
-    spec = np.fft.rfft(image, axis=axis) * np.sinc(width_um * f).reshape(shape)
-    return np.fft.irfft(spec, n=image.shape[axis], axis=axis)
+    out = np.fft.irfft(np.fft.rfft(padded, axis=axis) * np.sinc(width_um * f).reshape(shape), n=padded.shape[axis],
+                       axis=axis)
+    return np.take(out, np.arange(pad, pad + image.shape[axis]), axis=axis)
 
 
 def measure_image(x_um: np.ndarray, y_um: np.ndarray, image: np.ndarray, rng: np.random.Generator, *,
@@ -144,7 +150,7 @@ def measure_image(x_um: np.ndarray, y_um: np.ndarray, image: np.ndarray, rng: np
                   dropout: float = 0.03) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
     """A measured point-source image from ``image`` (rows ``y_um``, columns ``x_um``, both
     uniform): integrated over a ``pixel_um`` square pixel if > 0 (0: a focal-plane image
-    that resolves the core), sampled on a ``step_um`` lattice over ±``half_range_um``
+    that resolves the core; the image must then reach ``pixel_um / 2`` beyond the lattice), sampled on a ``step_um`` lattice over ±``half_range_um``
     around a centre drawn within ±``max_centre_um`` on both axes (cubic interpolation of
     the image), in counts (peak 5e3-2e4 e-, Poisson) with read noise and a background of
     1-5 % of the peak (Poisson), a fraction ``dropout`` of the samples missing. Nothing is
@@ -154,6 +160,13 @@ def measure_image(x_um: np.ndarray, y_um: np.ndarray, image: np.ndarray, rng: np
     if not (math.isfinite(step_um) and step_um > 0 and math.isfinite(half_range_um) and half_range_um >= step_um):
         raise ValueError(f"measure_image: step_um={step_um!r} must be > 0 and half_range_um={half_range_um!r} >= it")
     img = np.asarray(image, float)
+    reach = half_range_um + max_centre_um + 0.5 * max(pixel_um, 0.0)
+    extent = min(np.abs(x_um[[0, -1]]).min(), np.abs(y_um[[0, -1]]).min())
+    if extent < reach:
+        # a sample beyond the image would read zero where the true image has wings
+        raise ValueError(f"measure_image: the image reaches ±{extent:.3g} µm; the lattice (half_range_um="
+                         f"{half_range_um:g}) moved by up to max_centre_um={max_centre_um:g} and integrated over "
+                         f"pixel_um={pixel_um:g} needs ±{reach:.3g} µm")
     if pixel_um > 0:
         img = box_along(y_um, box_along(x_um, img, pixel_um, 1), pixel_um, 0)
     lookup = RegularGridInterpolator((y_um, x_um), img, method="cubic", bounds_error=False, fill_value=0.0)

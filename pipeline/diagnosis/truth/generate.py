@@ -192,8 +192,9 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
     if getattr(cfg, "psf_image", None) is not None:
         # Drawn last: the profiles (and map) are those of the campaign without the image.
         gr, wl, order, pix = cfg.psf_image
+        # beyond the ±30 µm lattice by the drawn centre's 5 µm and half a pixel, plus a margin
         ux, uy, img = point_image(gr, wl, order, sag, pupil_shift_mm=shift, collimator_um=coll, camera_um=camera,
-                                  settings=settings)
+                                  settings=settings, half_range_um=37.0 + 0.5 * pix)
         x, y, counts, _ = measure_image(ux, uy, img, rng, pixel_um=pix)
         write_psf_image_csv(out / "psf.csv", x, y, counts)
         meas.append({"kind": "psf_image", "file": "psf.csv", "name": f"{gr}_{wl}_psf", "grating": gr, "order": order,
