@@ -99,6 +99,44 @@ def nominal_fea_cache(tmp_path_factory):
     return path
 
 
+class CoarseEighth:
+    """The eighth model of the default blank on the tests' coarse mesh (5 mm walls, 10 mm
+    bulk), built on first use, and its cases at the calibrated stress, each solved once."""
+
+    def __init__(self):
+        self._model = None
+        self._results: dict = {}
+
+    @property
+    def model(self):
+        """The :class:`fea.model.PreparedBlank` (mesh and bulk stiffness)."""
+        if self._model is None:
+            from fea.api import prepare
+            from fea.mesh import MeshSpec
+
+            self._model = prepare(mesh=MeshSpec.coarse())
+        return self._model
+
+    def solve(self, t0_um: float, polish: float):
+        """The :class:`fea.model.FEAResult` of ``fea.api.solve(t0_um, polish)`` (µm, fraction)
+        on :attr:`model`; callers share it, so they must not change its arrays."""
+        key = (float(t0_um), float(polish))
+        if key not in self._results:
+            from fea.api import solve
+
+            self._results[key] = solve(t0_um, polish, prepared=self.model)
+        return self._results[key]
+
+
+@pytest.fixture(scope="session")
+def coarse_eighth():
+    """One :class:`CoarseEighth` per test process: several modules solve the same coarse
+    cases (200 µm at 50 % and at 75 % polish), a direct solve costing ~7 s of CPU each.
+    The model's solves are direct (a small mesh), so a case gives the same arrays whichever
+    module solves it first."""
+    return CoarseEighth()
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _return_freed_memory():
     """After each module, collect its garbage and hand the heap it freed back to the system.

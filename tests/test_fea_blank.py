@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fea.api import prepare, solve
+from fea.api import solve
 from fea.coating import Coating
 from fea.geometry import Blank
 from fea.mesh import MeshSpec
@@ -19,15 +19,14 @@ COARSE = MeshSpec(size_mm=5.0, size_bulk_mm=10.0)
 
 
 @pytest.fixture(scope="module")
-def eighth():
-    return prepare(mesh=COARSE)
+def eighth(coarse_eighth):
+    return coarse_eighth.model
 
 
 @pytest.fixture(scope="module")
-def eighth_200_50(eighth):
-    """The eighth model's 200 µm / 50 % case, the reference of the symmetry checks: solved
-    once for the module, as each direct solve of it costs ~7 s of CPU."""
-    return solve(200, 0.5, prepared=eighth)
+def eighth_200_50(coarse_eighth):
+    """The eighth model's 200 µm / 50 % case, the reference of the symmetry checks."""
+    return coarse_eighth.solve(200, 0.5)
 
 
 def test_no_film_gives_zero_sag(eighth):
@@ -50,9 +49,9 @@ def test_film_response_is_linear_in_mismatch(eighth):
     assert b == pytest.approx(0.5 * a, rel=1e-9)
 
 
-def test_solid_block_with_uniform_film_has_no_quilting():
+def test_solid_block_with_uniform_film_has_no_quilting(coarse_eighth):
     solid = Blank(n_holes_x=0, n_holes_y=0)
-    light = solve(200, 0.75, mesh=COARSE).sag.sag_map(1.0)
+    light = coarse_eighth.solve(200, 0.75).sag.sag_map(1.0)
     flat = solve(200, 0.75, blank=solid, mesh=COARSE).sag.sag_map(1.0)
     def quilt(m):
         f = fit_fourier(m, harmonics=2, aperture="center")
