@@ -33,23 +33,24 @@ SHARED_SCOPES = {
 # own order is by number of tests, which puts these few-test modules last). The first two start
 # together on the two workers; the others follow by their time on one worker (``pytest
 # --durations=0 -n 2``, one BLAS thread: scenarios ~200 s, paper claims and tables ~165 s,
-# reduced campaign ~135 s with its own two worker processes, fea_blank ~130 s, bow ~125 s,
-# fea_reduced ~100 s, surrogate_sweep ~70 s, quilt ~55 s, psf ~50 s, fea_layer ~40 s,
-# mesh_convergence ~40 s). Re-rank when a heavy module is added.
+# reduced campaign ~135 s with its own two worker processes, bow ~125 s, fea_blank ~120 s,
+# fea_reduced ~90 s, surrogate_sweep ~70 s, quilt ~55 s, psf ~50 s, mesh_convergence ~40 s,
+# diagnosis and study_dataset ~30 s, fea_layer ~15 s, plating ~10 s). Re-rank when a heavy
+# module is added.
 HEAVY_FIRST = (
     "tests/test_diagnosis_scenarios.py",
     "tests/test_paper_claims.py+tests/test_paper_tables.py",
     "tests/test_diagnosis_campaign_reduced.py",
-    "tests/test_fea_blank.py",
     "tests/test_diagnosis_bow.py",
+    "tests/test_fea_blank.py",
     "tests/test_fea_reduced.py",
     "tests/test_surrogate_sweep.py",
     "tests/test_diagnosis_quilt.py",
     "tests/test_diagnosis_psf.py",
-    "tests/test_fea_layer.py",
     "tests/test_fea_mesh_convergence.py",
     "tests/test_diagnosis.py",
     "tests/test_study_dataset.py",
+    "tests/test_fea_layer.py",
     "tests/test_diagnosis_plating.py",
     "tests/test_optics_on_fea.py",
 )
