@@ -33,23 +33,24 @@ SHARED_SCOPES = {
 # own order is by number of tests, which puts these few-test modules last). The first two start
 # together on the two workers; the others follow by their time on one worker (``pytest
 # --durations=0 -n 2``, one BLAS thread: scenarios ~200 s, paper claims and tables ~165 s,
-# reduced campaign ~135 s with its own two worker processes, fea_blank ~130 s, bow ~125 s,
-# fea_reduced ~100 s, surrogate_sweep ~70 s, quilt ~55 s, psf ~50 s, fea_layer ~40 s,
-# mesh_convergence ~40 s). Re-rank when a heavy module is added.
+# reduced campaign ~135 s with its own two worker processes, bow ~125 s, fea_blank ~120 s,
+# fea_reduced ~90 s, surrogate_sweep ~70 s, quilt ~55 s, psf ~50 s, mesh_convergence ~40 s,
+# diagnosis and study_dataset ~30 s, fea_layer ~15 s, plating ~10 s). Re-rank when a heavy
+# module is added.
 HEAVY_FIRST = (
     "tests/test_diagnosis_scenarios.py",
     "tests/test_paper_claims.py+tests/test_paper_tables.py",
     "tests/test_diagnosis_campaign_reduced.py",
-    "tests/test_fea_blank.py",
     "tests/test_diagnosis_bow.py",
+    "tests/test_fea_blank.py",
     "tests/test_fea_reduced.py",
     "tests/test_surrogate_sweep.py",
     "tests/test_diagnosis_quilt.py",
     "tests/test_diagnosis_psf.py",
-    "tests/test_fea_layer.py",
     "tests/test_fea_mesh_convergence.py",
     "tests/test_diagnosis.py",
     "tests/test_study_dataset.py",
+    "tests/test_fea_layer.py",
     "tests/test_diagnosis_plating.py",
     "tests/test_optics_on_fea.py",
 )
@@ -97,6 +98,44 @@ def nominal_fea_cache(tmp_path_factory):
     path = root / "nominal-fea-cache"
     path.mkdir(exist_ok=True)
     return path
+
+
+class CoarseEighth:
+    """The eighth model of the default blank on the tests' coarse mesh (5 mm walls, 10 mm
+    bulk), built on first use, and its cases at the calibrated stress, each solved once."""
+
+    def __init__(self):
+        self._model = None
+        self._results: dict = {}
+
+    @property
+    def model(self):
+        """The :class:`fea.model.PreparedBlank` (mesh and bulk stiffness)."""
+        if self._model is None:
+            from fea.api import prepare
+            from fea.mesh import MeshSpec
+
+            self._model = prepare(mesh=MeshSpec.coarse())
+        return self._model
+
+    def solve(self, t0_um: float, polish: float):
+        """The :class:`fea.model.FEAResult` of ``fea.api.solve(t0_um, polish)`` (µm, fraction)
+        on :attr:`model`; callers share it, so they must not change its arrays."""
+        key = (float(t0_um), float(polish))
+        if key not in self._results:
+            from fea.api import solve
+
+            self._results[key] = solve(t0_um, polish, prepared=self.model)
+        return self._results[key]
+
+
+@pytest.fixture(scope="session")
+def coarse_eighth():
+    """One :class:`CoarseEighth` per test process: several modules solve the same coarse
+    cases (200 µm at 50 % and at 75 % polish), a direct solve costing ~7 s of CPU each.
+    The model's solves are direct (a small mesh), so a case gives the same arrays whichever
+    module solves it first."""
+    return CoarseEighth()
 
 
 @pytest.fixture(autouse=True, scope="module")

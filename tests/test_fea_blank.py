@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fea.api import prepare, solve
+from fea.api import solve
 from fea.coating import Coating
 from fea.geometry import Blank
 from fea.mesh import MeshSpec
@@ -19,8 +19,14 @@ COARSE = MeshSpec(size_mm=5.0, size_bulk_mm=10.0)
 
 
 @pytest.fixture(scope="module")
-def eighth():
-    return prepare(mesh=COARSE)
+def eighth(coarse_eighth):
+    return coarse_eighth.model
+
+
+@pytest.fixture(scope="module")
+def eighth_200_50(coarse_eighth):
+    """The eighth model's 200 µm / 50 % case, the reference of the symmetry checks."""
+    return coarse_eighth.solve(200, 0.5)
 
 
 def test_no_film_gives_zero_sag(eighth):
@@ -43,9 +49,9 @@ def test_film_response_is_linear_in_mismatch(eighth):
     assert b == pytest.approx(0.5 * a, rel=1e-9)
 
 
-def test_solid_block_with_uniform_film_has_no_quilting():
+def test_solid_block_with_uniform_film_has_no_quilting(coarse_eighth):
     solid = Blank(n_holes_x=0, n_holes_y=0)
-    light = solve(200, 0.75, mesh=COARSE).sag.sag_map(1.0)
+    light = coarse_eighth.solve(200, 0.75).sag.sag_map(1.0)
     flat = solve(200, 0.75, blank=solid, mesh=COARSE).sag.sag_map(1.0)
     def quilt(m):
         f = fit_fourier(m, harmonics=2, aperture="center")
@@ -56,14 +62,14 @@ def test_solid_block_with_uniform_film_has_no_quilting():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("symmetry", ["quarter", "full"])
-def test_symmetric_parts_agree_with_the_full_model(eighth, symmetry):
+def test_symmetric_parts_agree_with_the_full_model(eighth_200_50, symmetry):
     """The eighth model (default) equals the quarter and full models up to discretisation.
 
     Different unstructured meshes of 5 mm: the P/V agrees within 3 % and the RMS of the
     map difference over the centre is below 2 % of the P/V. Piston and tilt are removed
     first: the full model's 3-2-1 point constraints leave an arbitrary rigid tilt.
     """
-    ref = solve(200, 0.5, prepared=eighth)
+    ref = eighth_200_50
     other = solve(200, 0.5, mesh=replace(COARSE, symmetry=symmetry))
     assert other.sag.pv_um("center") == pytest.approx(ref.sag.pv_um("center"), rel=0.03)
     m_ref = ref.sag.sag_map(1.0).remove_piston_tilt("center")
@@ -74,10 +80,10 @@ def test_symmetric_parts_agree_with_the_full_model(eighth, symmetry):
 
 
 @pytest.mark.slow  # several FEA solves compared, among the slowest tests of the fast tier: the full tier
-def test_asymmetric_polish_uses_a_quarter_model_and_tilts_nothing():
+def test_asymmetric_polish_uses_a_quarter_model_and_tilts_nothing(eighth_200_50):
     r = solve(200, 0.5, polish_back=1.0, mesh=COARSE)
     assert "sym_z" not in r.info["symmetry_planes"]
-    sym = solve(200, 0.5, mesh=COARSE)
+    sym = eighth_200_50
     assert r.sag.pv_um("center") != pytest.approx(sym.sag.pv_um("center"), rel=1e-3)
 
 

@@ -290,7 +290,7 @@ def _enclosing_radius(tri_xy):
 
 
 @pytest.mark.slow  # 15-30 s on 2 shared cores: the coarse-mesh solve
-def test_own_fea_written_to_vtu_reads_back_to_its_own_sag(tmp_path):
+def test_own_fea_written_to_vtu_reads_back_to_its_own_sag(tmp_path, coarse_eighth):
     """The coarse-mesh eighth model (P2 tetrahedra) written as tetra10 VTU and read back.
 
     (1) On the flat front face the tetra10 faces are straight-sided triangle6 cells, so the
@@ -304,14 +304,12 @@ def test_own_fea_written_to_vtu_reads_back_to_its_own_sag(tmp_path):
     """
     from scipy.spatial import Delaunay
 
-    from fea.api import prepare, solve
     from fea.face_interp import evaluate_face
     from fea.fe_face import parse_surface, select_face
-    from fea.mesh import MeshSpec
     from pipeline.io.fe import read_fe_result
 
-    model = prepare(mesh=MeshSpec(size_mm=5.0, size_bulk_mm=10.0))
-    r = solve(200, 0.5, prepared=model)
+    model = coarse_eighth.model
+    r = coarse_eighth.solve(200, 0.5)
     path = write_vtu(tmp_path / "own.vtu", r.coords_mm.T, "tetra10", model.basis.element_dofs.T,
                      r.displacement_mm.T)
     z_front = float(r.coords_mm[2].max())

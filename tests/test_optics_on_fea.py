@@ -12,8 +12,6 @@ linear in the film stress). Measured (docs/physics.md):
 """
 import pytest
 
-from fea.api import solve
-from fea.mesh import MeshSpec
 from optics.fitting import fit_fourier
 from optics.lineprofile import line_profile
 from optics.metrics import find_profile_peaks
@@ -22,8 +20,8 @@ pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")
-def fea_map():
-    r = solve(200, 0.5, mesh=MeshSpec(size_mm=5.0, size_bulk_mm=10.0))
+def fea_map(coarse_eighth):
+    r = coarse_eighth.solve(200, 0.5)
     return r.sag.sag_map(0.5), r.sag.pv_um("center")
 
 

@@ -13,7 +13,6 @@ import matplotlib.image as mpimg
 import numpy as np
 import pytest
 
-from fea.api import prepare, solve
 from fea.geometry import Blank
 from fea.mesh import MeshSpec
 from pipeline.study import render3d, render_geometry, render_scene
@@ -22,9 +21,8 @@ COARSE = MeshSpec(5.0, 10.0)
 
 
 @pytest.fixture(scope="module")
-def coarse_case():
-    model = prepare(mesh=COARSE)
-    return model, solve(t0_um=200, polish=0.75, prepared=model)
+def coarse_case(coarse_eighth):
+    return coarse_eighth.model, coarse_eighth.solve(200, 0.75)
 
 
 def _edges_twice(tri: np.ndarray) -> bool:
