@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 __all__ = ["coupling_kernel", "pixel_values", "coupled", "coupled_image", "correlated_noise", "subtract_background",
-           "measure_profile", "measure_image", "box_along"]
+           "measure_profile", "measure_image", "image_reach_um", "box_along"]
 
 
 def coupling_kernel(c: float) -> np.ndarray:
@@ -143,6 +143,13 @@ def box_along(axis_um: np.ndarray, image: np.ndarray, width_um: float, axis: int
     return np.take(out, np.arange(pad, pad + image.shape[axis]), axis=axis)
 
 
+def image_reach_um(pixel_um: float = 0.0, half_range_um: float = 30.0, max_centre_um: float = 5.0) -> float:
+    """How far from the image's centre (µm, on both axes) :func:`measure_image` reads the
+    image it is given: the lattice's half range, moved by the drawn centre, plus half the
+    pixel it integrates over."""
+    return half_range_um + max_centre_um + 0.5 * max(pixel_um, 0.0)
+
+
 def measure_image(x_um: np.ndarray, y_um: np.ndarray, image: np.ndarray, rng: np.random.Generator, *,
                   step_um: float = 1.0, half_range_um: float = 30.0, pixel_um: float = 0.0,
                   max_centre_um: float = 5.0, peak_counts: tuple[float, float] = (5e3, 2e4),
@@ -160,7 +167,7 @@ def measure_image(x_um: np.ndarray, y_um: np.ndarray, image: np.ndarray, rng: np
     if not (math.isfinite(step_um) and step_um > 0 and math.isfinite(half_range_um) and half_range_um >= step_um):
         raise ValueError(f"measure_image: step_um={step_um!r} must be > 0 and half_range_um={half_range_um!r} >= it")
     img = np.asarray(image, float)
-    reach = half_range_um + max_centre_um + 0.5 * max(pixel_um, 0.0)
+    reach = image_reach_um(pixel_um, half_range_um, max_centre_um)
     extent = min(np.abs(x_um[[0, -1]]).min(), np.abs(y_um[[0, -1]]).min())
     if extent < reach:
         # a sample beyond the image would read zero where the true image has wings

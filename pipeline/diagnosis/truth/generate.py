@@ -21,7 +21,7 @@ from ..effect_draws import DRAWS
 from ..manifest import NOMINAL_SIMULATION
 from ..nominal import thermal_factor
 from .abbe import GRATINGS, RELATIVE_NA, AbbeSettings, abbe_line_profile, point_image, zernike_noll
-from .detector import measure_image, measure_profile
+from .detector import image_reach_um, measure_image, measure_profile
 from .families import PROFILE_OOL, SURFACE_OOL, draw_profile_ool, draw_surface_ool
 from .gratings import GratingTruth, fundamental_x_ratio, mixed_grating, sag_function
 from .lattice import pocket_jitter, sharp_ribs
@@ -192,9 +192,9 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, nominal, fea, ou
     if getattr(cfg, "psf_image", None) is not None:
         # Drawn last: the profiles (and map) are those of the campaign without the image.
         gr, wl, order, pix = cfg.psf_image
-        # beyond the ±30 µm lattice by the drawn centre's 5 µm and half a pixel, plus a margin
+        # as far as the measured lattice reads, plus 2 µm for the cubic interpolation's stencil
         ux, uy, img = point_image(gr, wl, order, sag, pupil_shift_mm=shift, collimator_um=coll, camera_um=camera,
-                                  settings=settings, half_range_um=37.0 + 0.5 * pix)
+                                  settings=settings, half_range_um=image_reach_um(pix) + 2.0)
         x, y, counts, _ = measure_image(ux, uy, img, rng, pixel_um=pix)
         write_psf_image_csv(out / "psf.csv", x, y, counts)
         meas.append({"kind": "psf_image", "file": "psf.csv", "name": f"{gr}_{wl}_psf", "grating": gr, "order": order,
