@@ -16,11 +16,14 @@ mesh parameter, the gmsh version and :data:`FORMAT_VERSION`), :func:`recipe_key`
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import datetime
 import hashlib
 import io
 import json
 import os
+import signal
+import threading
 import uuid
 from pathlib import Path
 from typing import Callable
@@ -57,6 +60,30 @@ def recipe_key(recipe: dict) -> str:
 
 
 # --- gmsh ------------------------------------------------------------------
+def reapply_python_sigpipe() -> None:
+    """Give SIGPIPE back the disposition Python believes it has (call after ``gmsh.initialize``).
+
+    ``gmsh.initialize`` resets SIGPIPE to the default action, terminate the process, in C and
+    behind Python's back: ``signal.getsignal`` still reports ``SIG_IGN``. From then on a write
+    to a pipe whose reader has gone kills the process with no traceback instead of raising
+    ``BrokenPipeError``: a sweep whose worker process dies (segfault, OOM kill) took the
+    parent with it, exit status 141. Dispositions are process-wide; ``signal.signal`` may only
+    be called from the main thread, so other threads restore the startup ``SIG_IGN`` through
+    libc.
+    """
+    if not hasattr(signal, "SIGPIPE"):
+        return
+    handler = signal.getsignal(signal.SIGPIPE)
+    if handler is None:  # installed outside Python: not ours to change
+        return
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGPIPE, handler)
+    elif handler == signal.SIG_IGN:
+        libc_signal = ctypes.CDLL(None).signal
+        libc_signal.restype = ctypes.c_void_p
+        libc_signal(int(signal.SIGPIPE), ctypes.c_void_p(int(signal.SIG_IGN)))
+
+
 @contextlib.contextmanager
 def gmsh_session(progress: bool = False, n_threads: int = 1):
     """Initialise gmsh (if needed), open a fresh model, always clean up.
@@ -73,6 +100,7 @@ def gmsh_session(progress: bool = False, n_threads: int = 1):
         # interruptible=False: gmsh must not install a SIGINT handler when
         # called from worker threads (pytest-xdist, notebooks)
         gmsh.initialize(readConfigFiles=False, interruptible=False)
+        reapply_python_sigpipe()
     try:
         gmsh.option.setNumber("General.Terminal", 1 if progress else 0)
         gmsh.option.setNumber("General.Verbosity", 5 if progress else 1)

@@ -27,7 +27,7 @@ from skfem import (Basis, ElementTetP2, ElementVector, FacetBasis,
 from fea.verification.cell import cell_mesh, cell_volumes_mm3
 from fea.geometry import Blank
 from fea.mesh import MeshSpec, blank_mesh, blank_recipe, write_vtu
-from fea.mesh_cache import recipe_key
+from fea.mesh_cache import reapply_python_sigpipe, recipe_key
 
 
 @Functional
@@ -361,6 +361,7 @@ def test_gmsh_is_left_clean(tmp_path):
     assert not gmsh.isInitialized()
     # a caller's own gmsh session and model survive our call
     gmsh.initialize(readConfigFiles=False, interruptible=False)
+    reapply_python_sigpipe()  # this test process goes on to run sweeps whose workers die
     try:
         gmsh.model.add("callers-model")
         cell_mesh(size_mm=0.5, size_bulk_mm=1.0, cache_dir=tmp_path)
@@ -368,6 +369,45 @@ def test_gmsh_is_left_clean(tmp_path):
         assert gmsh.model.getCurrent() == "callers-model"
     finally:
         gmsh.finalize()
+
+
+SIGPIPE_CHECK = """
+import os, sys, threading
+sys.path.insert(0, {repo!r})
+from fea.mesh_cache import gmsh_session
+
+def closed_pipe_write():
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        os.write(w, b"x")  # SIGPIPE at its default action ends the process here, status 141
+    except BrokenPipeError:
+        return "BrokenPipeError"
+
+def open_and_close():
+    with gmsh_session():
+        pass
+
+if sys.argv[1] == "thread":
+    t = threading.Thread(target=open_and_close)
+    t.start(); t.join()
+else:
+    open_and_close()
+print(closed_pipe_write())
+"""
+
+
+@pytest.mark.parametrize("where", ["main", "thread"])
+def test_gmsh_session_leaves_sigpipe_ignored(tmp_path, where):
+    """gmsh.initialize sets SIGPIPE to terminate the process; after our session a write to a
+    closed pipe must still raise BrokenPipeError (else a dying sweep worker kills its parent)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    script = tmp_path / "check.py"
+    script.write_text(SIGPIPE_CHECK.format(repo=str(Path(__file__).resolve().parents[1])))
+    run = subprocess.run([sys.executable, str(script), where], capture_output=True, text=True, timeout=120)
+    assert (run.returncode, run.stdout.strip()) == (0, "BrokenPipeError"), run.stderr
 
 
 def test_gmsh_failure_is_a_clear_runtime_error(tmp_path, monkeypatch):
