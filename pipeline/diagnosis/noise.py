@@ -548,8 +548,8 @@ class RssTraces:
     Attributes
     ----------
     free : float
-        ``tr M = n - k``, the samples left after the design's ``k`` columns (``Q`` has ``k``
-        orthonormal columns).
+        ``tr M = n - min(n, k)``, the samples left after the design's ``k`` columns (the reduced
+        QR's ``Q`` has ``min(n, k)`` orthonormal columns).
     mk, mkmk : float
         ``tr(MK)`` and ``tr(MKMK)`` (the correlated noise's units squared and to the fourth).
     """
@@ -566,7 +566,7 @@ class RssTraces:
         if K.ndim != 2 or K.shape[0] != K.shape[1] or D.ndim != 2 or D.shape[0] != K.shape[0]:
             raise ValueError(f"RssTraces.of: correlated {K.shape} must be n x n and design {D.shape} n x k")
         MK = _residual_maker_times(K, D)
-        return cls(float(K.shape[0] - D.shape[1]), float(np.trace(MK)), float(np.sum(MK * MK.T)))
+        return cls(float(K.shape[0] - min(D.shape)), float(np.trace(MK)), float(np.sum(MK * MK.T)))
 
     def moments(self, sigma_w: float) -> tuple[float, float]:
         """(mean, variance) of the residual sum of squares with white noise ``sigma_w`` added."""
