@@ -47,6 +47,11 @@ class Criteria:
     heldout_top: int = 3
     companion_top: int = 2
     companion_bic: float = 6.0
+    #: The best rescaling single (``amplitude_scale`` or ``temperature``) is also tried as a
+    #: companion of every finding that does not rescale (a real quilt's amplitude is never
+    #: the simulation's, as its shape is not); a finding that adopts it ranks as a pair
+    #: (:func:`.ranking.best_rescaling`; ``benchmarks/results_rescaling_companion.md``).
+    rescaling_companion: bool = True
     absorb_test_bic: float = 25.0
     n_eff_from: str = "nominal"
     #: "n_eff": effective-sample counts (``n_eff_from``); "two_part": white noise plus a
@@ -82,6 +87,8 @@ class Criteria:
                   "companion_top": (0, 20), "companion_bic": (0.0, math.inf), "absorb_test_bic": (0.0, math.inf)}
         if not isinstance(self.map_in_optics, bool):
             raise ValueError(f"Criteria: map_in_optics={self.map_in_optics!r} must be True or False")
+        if not isinstance(self.rescaling_companion, bool):
+            raise ValueError(f"Criteria: rescaling_companion={self.rescaling_companion!r} must be True or False")
         if not isinstance(self.pair_forward, bool):
             raise ValueError(f"Criteria: pair_forward={self.pair_forward!r} must be True or False")
         for name, (lo, hi) in ranges.items():

@@ -281,7 +281,8 @@ def _best_starts(starts, z0, n_par, params, slots, fixed, problem, masks, fws, n
 
 def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = None,
         max_starts: int = 30, max_nfev: int | None = None, fixed: dict | None = None,
-        start: dict | None = None, n_local: int = 3, regrid: tuple = ()) -> FitOutcome:
+        start: dict | None = None, n_local: int = 3, regrid: tuple = (),
+        start_deltas_um: dict | None = None) -> FitOutcome:
     """Fit ``params`` (plus every profile's offset shift) to the data under ``masks``.
 
     Parameters
@@ -307,6 +308,10 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
         alone can sit in the wrong basin that the other member would have left (measured:
         the paper's J scenario under the two-part weights, a 4 mm pupil shift fitted alone
         at the -10 mm bound, and the pair with the amplitude kept it there).
+    start_deltas_um : dict {measurement name: µm or (µm, µm)}, optional
+        With ``start``: the position nuisances' warm start (``FitOutcome.deltas_um`` of the
+        fit ``start`` comes from), so the local fit starts at that fit's optimum, not at
+        the nominal positions.
     n_local : int
         Multi-start: the local least-squares fit is run from the ``n_local`` best grid
         points and the lowest cost wins. Grid points are ranked with every profile's
@@ -333,6 +338,10 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
         for i, q in enumerate(params):
             if q.name in start:
                 z0[i] = np.clip((start[q.name] - q.null) / q.width, lo[i], hi[i])
+        for j, (f, k) in enumerate(slots):
+            if start_deltas_um and f.name in start_deltas_um:
+                i = len(params) + j
+                z0[i] = np.clip(np.ravel(start_deltas_um[f.name])[k] / _DELTA_SCALE_UM, lo[i], hi[i])
         if regrid:
             warm = [[z0[i]] if q.name not in regrid else g for i, (q, g) in enumerate(zip(params, grids))]
             inits = [z0.copy()] + _best_starts(list(itertools.product(*warm))[:max_starts], z0, len(params), params,

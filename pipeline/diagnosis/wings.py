@@ -59,7 +59,7 @@ import math
 from dataclasses import dataclass, replace
 
 from .criteria import Criteria
-from .effects import applicable_effects
+from .effects import LIBRARY, applicable_effects
 from .effects.instrument_wings import INSTRUMENT_WINGS
 from .finding import Finding, all_effects
 from .fitting import FitOutcome, Problem, fit
@@ -130,8 +130,13 @@ def wings_check(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria) ->
         raise ValueError(f"wings_check: finding {finding.effect!r} is not on data holding a line profile")
     background = tuple(e.name for e in applicable_effects({f.kind for f in prob.forwards}) if e.background)
     wings = tuple(replace(q, starts=_STARTS[q.name]) for q in WINGS_PARAMETERS)
-    base = parameters_of(tuple(n for n in background if n not in finding.effects), prob.forwards)
-    alt = fit(prob, base + wings, start={q.name: q.null for q in base} | {q.name: q.null for q in wings},
+    # a rescaling the finding adopted as a companion is the quilt's, not the finding's: the
+    # detector side gets it too, so both are judged beside the same rescaled, reshaped quilt
+    rescaled = tuple(n for n in finding.companions if LIBRARY[n].rescales)
+    base = parameters_of(tuple(n for n in background + rescaled if n not in finding.effects), prob.forwards)
+    kept = {q.name for q in parameters_of(rescaled, prob.forwards)} & set(fo.parameters)
+    alt_start = {q.name: fo.parameters[q.name] if q.name in kept else q.null for q in base}
+    alt = fit(prob, base + wings, start=alt_start | {q.name: q.null for q in wings},
               regrid=tuple(q.name for q in wings))
     own = parameters_of(tuple(dict.fromkeys(all_effects(finding) + background)), prob.forwards)
     b_a, b_f = alt.bic(prob.weights), fo.bic(prob.weights)
