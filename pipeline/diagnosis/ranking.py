@@ -176,8 +176,10 @@ def _rescales(f: Finding) -> bool:
 def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict, cands, c: Criteria,
                      joint_fits: dict | None = None, memo: dict | None = None) -> list:
     """Refit the ``c.companion_top`` best findings (and every significant single where a
-    companion alone is significant) jointly with the companion effects
-    (``docs/diagnosis.md``, step 5); ``findings`` ranked best first, ``fits`` updated in place;
+    companion alone is significant) jointly with the companion effects, and, beside a finding
+    that does not rescale, with the best rescaling (:func:`best_rescaling`, with
+    ``c.rescaling_companion``) (``docs/diagnosis.md``, step 5); ``findings`` ranked best
+    first, ``fits`` updated in place;
     every joint fit (adopted or not) is appended to ``joint_fits[effect]`` as
     ``(names, fit)`` for the sign test.
 
