@@ -23,8 +23,9 @@ checked. Three fits, all with every profile's nuisances:
 * the **alternative**: the detector terms (:data:`WINGS_PARAMETERS`, grid-started over
   their ``Parameter.starts``) beside the background effects the data can see
   (``Effect.background``: ``quilt_shape``, present on every real grating) that are not the
-  finding's own effect, and no other effect (a ``quilt_shape`` finding is checked against
-  the detector terms alone);
+  finding's own effect, the rescaling the finding adopted as a companion (the quilt's
+  amplitude, not the finding's), and no other effect (a ``quilt_shape`` finding is checked
+  against the detector terms alone);
 * the **reference**: the finding's effects and companions with the background effects (the
   finding's own fit where it already holds them);
 * the **joint** fit: the reference's parameters and the detector terms, started from the
