@@ -8,13 +8,14 @@ from __future__ import annotations
 import numpy as np
 
 from optics.sagmap import quilt_sag_map
+from pipeline.diagnosis.finding import Finding
 from pipeline.diagnosis.nominal import thermal_factor
 from pipeline.diagnosis.synth import synthetic_profile, synthetic_psf_image, synthetic_surface
 from pipeline.io.measured import write_line_profile_csv, write_psf_image_csv
 from pipeline.io.registry import write_sag_map
 
 __all__ = ["nominal_map", "sag_function_of", "abbe_profiles_manifest", "gaussian_profile_data", "other_quilt_truth",
-           "surface_manifest", "surface_case", "profile_image_case", "FakeFinding", "FakeDiagnosis"]
+           "surface_manifest", "surface_case", "profile_image_case", "single_finding", "FakeFinding", "FakeDiagnosis"]
 
 
 def nominal_map(tmp_path):
@@ -131,6 +132,13 @@ def profile_image_case(tmp_path, params, psf=True, pixel_um=0.0, seed=3, scale=1
     p = tmp_path / "m.toml"
     p.write_text("\n".join(lines))
     return p
+
+
+def single_finding(effect, score, significant=True, companions=()):
+    """A single-effect :class:`~pipeline.diagnosis.finding.Finding` whose BIC and delta BIC
+    are both ``score`` (for the ranking rules, which read only these and the effects)."""
+    return Finding(effect, (effect,), {}, {}, score, score, 1.0, 1.0, 0.0, 0.0, significant=significant,
+                   companions=companions)
 
 
 class FakeFinding:

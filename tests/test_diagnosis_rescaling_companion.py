@@ -17,29 +17,24 @@ from pipeline.diagnosis.forward import deformation_factor
 from pipeline.diagnosis.ranking import NESTED_RTOL, best_rescaling, rank_key, restart_from_nested
 from pipeline.diagnosis.truth.generate import COLLIMATOR_UM
 
-from diagnosis_cases import abbe_profiles_manifest
-
-
-def _single(effect, delta_bic, companions=()):
-    return Finding(effect, (effect,), {}, {}, delta_bic, delta_bic, 1.0, 1.0, 0.0, 0.0, significant=delta_bic <= -10,
-                   companions=companions)
+from diagnosis_cases import abbe_profiles_manifest, single_finding
 
 
 def test_best_rescaling_is_the_rescaling_single_with_the_lowest_bic_that_lowers_it():
-    findings = [_single("pupil_shift", -300.0), _single("temperature", -40.0), _single("amplitude_scale", -45.0),
+    findings = [single_finding("pupil_shift", -300.0), single_finding("temperature", -40.0), single_finding("amplitude_scale", -45.0),
                 Finding("amplitude_scale+pupil_shift", ("amplitude_scale", "pupil_shift"), {}, {}, -400.0, -400.0,
                         1.0, 1.0, 0.0, 0.0)]
     assert best_rescaling(findings) == "amplitude_scale"
-    findings[1] = _single("temperature", -50.0)
+    findings[1] = single_finding("temperature", -50.0)
     assert best_rescaling(findings) == "temperature"
-    assert best_rescaling([_single("pupil_shift", -300.0), _single("temperature", 3.0)]) is None  # raises the BIC
-    assert best_rescaling([_single("pupil_shift", -300.0)]) is None
+    assert best_rescaling([single_finding("pupil_shift", -300.0), single_finding("temperature", 3.0)]) is None  # raises the BIC
+    assert best_rescaling([single_finding("pupil_shift", -300.0)]) is None
 
 
 def test_a_rescaling_companion_ranks_as_a_second_claimed_change():
     c = Criteria()
-    plain = _single("collimator_wfe", -100.0, companions=("quilt_shape",))
-    rescaled = _single("collimator_wfe", -100.0, companions=("quilt_shape", "amplitude_scale"))
+    plain = single_finding("collimator_wfe", -100.0, companions=("quilt_shape",))
+    rescaled = single_finding("collimator_wfe", -100.0, companions=("quilt_shape", "amplitude_scale"))
     pair = Finding("amplitude_scale+collimator_wfe", ("amplitude_scale", "collimator_wfe"), {}, {}, -100.0, -100.0,
                    1.0, 1.0, 0.0, 0.0)
     assert rank_key(plain, c) == -100.0

@@ -17,11 +17,10 @@ from pipeline.diagnosis import diagnose
 from pipeline.diagnosis.campaign import recovery_errors
 from pipeline.diagnosis.criteria import Criteria
 from pipeline.diagnosis.effects import parameter_spec
-from pipeline.diagnosis.finding import Finding
 from pipeline.diagnosis.forward import profile_curve
 from pipeline.diagnosis.ranking import pair_singles, pairs_to_fit
 
-from diagnosis_cases import FakeDiagnosis, FakeFinding, profile_image_case
+from diagnosis_cases import FakeDiagnosis, FakeFinding, profile_image_case, single_finding
 
 #: The extra Z(2,-2) at which the total vanishes: the default collimator's term, negated.
 ASTIG_ORIGIN_UM = -DEFAULT_COLLIMATOR_ZERNIKE_UM[(2, -2)]
@@ -73,22 +72,18 @@ def test_campaign_scores_an_undetermined_sign_by_the_total_magnitude():
     assert not silent["within_2sigma"]
 
 
-def _single(effect, score, significant=True):
-    return Finding(effect, (effect,), {}, {}, score, score, 1.0, 1.0, 0.0, 0.0, significant=significant)
-
-
 def test_pair_slots_keep_one_rescaling_effect():
     """temperature and amplitude_scale rescale the same deformation (their pair is never
     fitted): with both among the three best singles, only the better one takes a slot and
     the next effect gets the third, so a real pair can be formed. Background-only and
     not-significant singles take none."""
-    findings = [_single("temperature", -120.0), _single("amplitude_scale", -119.0), _single("pupil_shift", -90.0),
-                _single("collimator_wfe", -80.0), _single("slit_width", -200.0, significant=False),
-                _single("quilt_shape", -300.0)]
+    findings = [single_finding("temperature", -120.0), single_finding("amplitude_scale", -119.0), single_finding("pupil_shift", -90.0),
+                single_finding("collimator_wfe", -80.0), single_finding("slit_width", -200.0, significant=False),
+                single_finding("quilt_shape", -300.0)]
     chosen = [f.effect for f in pair_singles(findings, 3)]
     assert chosen == ["temperature", "pupil_shift", "collimator_wfe"]
     assert [f.effect for f in pair_singles(findings, 1)] == ["temperature"]
-    findings[1] = _single("amplitude_scale", -130.0)  # the better rescaling one is kept, whichever it is
+    findings[1] = single_finding("amplitude_scale", -130.0)  # the better rescaling one is kept, whichever it is
     assert [f.effect for f in pair_singles(findings, 3)] == ["amplitude_scale", "pupil_shift", "collimator_wfe"]
 
 
@@ -96,9 +91,9 @@ def test_pairs_are_formed_among_the_best_and_from_the_best_with_every_other():
     """Pairs among the ``n`` best eligible singles, and the best one with each further
     eligible single (one forward-selection step), better single first; none for n < 2;
     the second rescaling effect, background-only and not-significant singles never pair."""
-    findings = [_single("temperature", -120.0), _single("amplitude_scale", -130.0), _single("pupil_shift", -40.0),
-                _single("collimator_wfe", -80.0), _single("slit_width", -90.0), _single("quilt_shape", -500.0),
-                _single("blank_bow", -10.0, significant=False)]
+    findings = [single_finding("temperature", -120.0), single_finding("amplitude_scale", -130.0), single_finding("pupil_shift", -40.0),
+                single_finding("collimator_wfe", -80.0), single_finding("slit_width", -90.0), single_finding("quilt_shape", -500.0),
+                single_finding("blank_bow", -10.0, significant=False)]
     pairs = [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2, forward=True)]
     assert pairs == [("amplitude_scale", "slit_width"), ("amplitude_scale", "collimator_wfe"),
                      ("amplitude_scale", "pupil_shift")]
@@ -110,10 +105,10 @@ def test_pairs_are_formed_among_the_best_and_from_the_best_with_every_other():
     assert [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 3)] == pairs3[:3]  # default: no forward step
     # The forward step adds no rescaling: it pairs the best single with a rescaling only
     # from among the n best.
-    findings[2] = _single("pupil_shift", -140.0)
+    findings[2] = single_finding("pupil_shift", -140.0)
     assert [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2, forward=True)] == [
         ("pupil_shift", "amplitude_scale"), ("pupil_shift", "slit_width"), ("pupil_shift", "collimator_wfe")]
-    findings[0], findings[1] = _single("temperature", -20.0), _single("amplitude_scale", -60.0)
+    findings[0], findings[1] = single_finding("temperature", -20.0), single_finding("amplitude_scale", -60.0)
     assert [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2, forward=True)] == [
         ("pupil_shift", "slit_width"), ("pupil_shift", "collimator_wfe")]
 
@@ -122,10 +117,10 @@ def test_the_forward_step_can_pair_the_best_with_every_single_that_lowers_the_bi
     """``pair_second = "improving"``: the best single is also paired with each further single
     that lowers the BIC at all, significant or not (best first, each pair once); a single
     that raises it, a rescaling and a background-only single still never pair."""
-    findings = [_single("amplitude_scale", -130.0), _single("slit_width", -90.0),
-                _single("pupil_shift", -4.6, significant=False), _single("collimator_wfe", -80.0),
-                _single("temperature", -129.0), _single("plating_gradient", 3.0, significant=False),
-                _single("quilt_shape", -7.0, significant=False), _single("registration", -2.0, significant=False)]
+    findings = [single_finding("amplitude_scale", -130.0), single_finding("slit_width", -90.0),
+                single_finding("pupil_shift", -4.6, significant=False), single_finding("collimator_wfe", -80.0),
+                single_finding("temperature", -129.0), single_finding("plating_gradient", 3.0, significant=False),
+                single_finding("quilt_shape", -7.0, significant=False), single_finding("registration", -2.0, significant=False)]
     significant = [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2, forward=True)]
     assert significant == [("amplitude_scale", "slit_width"), ("amplitude_scale", "collimator_wfe")]
     improving = [(a.effect, b.effect) for a, b in pairs_to_fit(findings, 2, forward=True, second="improving")]
