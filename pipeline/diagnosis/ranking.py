@@ -15,7 +15,7 @@ from .fitting import FitOutcome, Problem, fit
 from .gap import excesses, noise_per_dof, recount
 
 __all__ = ["parameters_of", "in_library_order", "fit_effects", "rank", "pair_singles", "pairs_to_fit", "predictions",
-           "mismatch_errors", "best_rescaling", "rank_key",
+           "mismatch_errors", "best_rescaling", "rescaling_companions", "rank_key",
            "restart_from_nested", "NESTED_RTOL"]
 
 
@@ -168,6 +168,12 @@ def pairs_to_fit(findings, n: int, forward: bool = False, second: str = "signifi
     return pairs + [(eligible[0], b) for b in further if not _rescales(b)]
 
 
+def rescaling_companions(f: Finding) -> tuple:
+    """The companions of ``f`` that rescale the deformation (``Effect.rescales``): the quilt's
+    amplitude adopted beside it (``Criteria.rescaling_companion``)."""
+    return tuple(n for n in f.companions if LIBRARY[n].rescales)
+
+
 def _rescales(f: Finding) -> bool:
     """Whether one of ``f``'s effects rescales the deformation (``Effect.rescales``)."""
     return any(LIBRARY[e].rescales for e in f.effects)
@@ -304,7 +310,7 @@ def rank_key(f: Finding, c: Criteria) -> float:
     """The score ``f`` is ranked by: its BIC plus ``pair_extra_bic`` per claimed change beyond
     the first (an effect, or a rescaling companion)."""
     # a rescaling companion is a second claimed change, so it ranks as a pair member does
-    claims = len(f.effects) + sum(LIBRARY[e].rescales for e in f.companions)
+    claims = len(f.effects) + len(rescaling_companions(f))
     return f.score + (c.pair_extra_bic * (claims - 1))
 
 

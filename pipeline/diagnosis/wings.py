@@ -60,11 +60,11 @@ import math
 from dataclasses import dataclass, replace
 
 from .criteria import Criteria
-from .effects import LIBRARY, applicable_effects
+from .effects import applicable_effects
 from .effects.instrument_wings import INSTRUMENT_WINGS
 from .finding import Finding, all_effects
 from .fitting import FitOutcome, Problem, fit
-from .ranking import parameters_of
+from .ranking import parameters_of, rescaling_companions
 
 __all__ = ["WINGS_LABEL", "WINGS_PARAMETERS", "WingsCheck", "checks", "wings_check", "with_check"]
 
@@ -133,7 +133,7 @@ def wings_check(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria) ->
     wings = tuple(replace(q, starts=_STARTS[q.name]) for q in WINGS_PARAMETERS)
     # a rescaling the finding adopted as a companion is the quilt's, not the finding's: the
     # detector side gets it too, so both are judged beside the same rescaled, reshaped quilt
-    rescaled = tuple(n for n in finding.companions if LIBRARY[n].rescales)
+    rescaled = rescaling_companions(finding)
     base = parameters_of(tuple(n for n in background + rescaled if n not in finding.effects), prob.forwards)
     kept = {q.name for q in parameters_of(rescaled, prob.forwards)} & set(fo.parameters)
     alt_start = {q.name: fo.parameters[q.name] if q.name in kept else q.null for q in base}
