@@ -42,6 +42,20 @@ def test_a_rescaling_companion_ranks_as_a_second_claimed_change():
     assert all(LIBRARY[e].rescales for e in ("amplitude_scale", "temperature"))
 
 
+def test_a_single_beside_a_rescaling_and_the_pair_with_it_are_one_model_listed_once():
+    # slit width on a 1.127x quilt (rescaling companion's frozen run, case 26): the pair and the
+    # single beside the amplitude companion fit the same four parameters
+    pair = Finding("amplitude_scale+slit_width", ("amplitude_scale", "slit_width"), {}, {}, -90.0, -90.0,
+                   1.0, 1.0, 0.0, 0.0, companions=("quilt_shape",))
+    same = single_finding("slit_width", -89.5, companions=("quilt_shape", "amplitude_scale"))
+    other = single_finding("slit_width", -60.0, companions=("quilt_shape", "temperature"))
+    plain = single_finding("pupil_shift", -70.0, companions=("quilt_shape",))
+    assert ranking.model_of(pair) == ranking.model_of(same) == {"amplitude_scale", "slit_width", "quilt_shape"}
+    kept = ranking.one_model_each([pair, plain, same, other])
+    assert kept == [pair, plain, other]  # the better-ranked of the two kept, order unchanged
+    assert ranking.one_model_each([same, pair]) == [same]
+
+
 def test_rescaling_companion_is_checked():
     with pytest.raises(ValueError, match="rescaling_companion=1"):
         Criteria(rescaling_companion=1)

@@ -16,7 +16,7 @@ from .gap import excesses, noise_per_dof, recount
 
 __all__ = ["parameters_of", "in_library_order", "fit_effects", "rank", "pair_singles", "pairs_to_fit", "predictions",
            "mismatch_errors", "best_rescaling", "rescaling_companions", "rank_key",
-           "restart_from_nested", "NESTED_RTOL"]
+           "restart_from_nested", "NESTED_RTOL", "model_of", "one_model_each"]
 
 
 def in_library_order(effects) -> tuple:
@@ -109,7 +109,29 @@ def rank(prob: Problem, nom: FitOutcome, cands, criteria: Criteria, memo: dict) 
     joint_fits = {}
     findings = _with_companions(prob, nom, findings, fits, cands, criteria, joint_fits, memo)
     findings.sort(key=lambda f: rank_key(f, criteria))
-    return findings, fits, joint_fits
+    return one_model_each(findings), fits, joint_fits
+
+
+def model_of(f: Finding) -> frozenset:
+    """The effects ``f`` fits: its own and its companions'."""
+    return frozenset(f.effects) | frozenset(f.companions)
+
+
+def one_model_each(findings) -> list:
+    """``findings`` (ranked best first) without those whose model (:func:`model_of`) is that
+    of a finding ranked above them.
+
+    Why: a single that adopts the rescaling companion (step 5) is the same model as the pair
+    of that rescaling and the single (step 2), fitted from another start; listed twice, each
+    is found degenerate with the other, and a reader (and the campaign's strict score) takes
+    the pair as naming its member on its own. The better-ranked fit is the one kept."""
+    seen, out = set(), []
+    for f in findings:
+        m = model_of(f)
+        if m not in seen:
+            seen.add(m)
+            out.append(f)
+    return out
 
 
 def pair_singles(findings, n: int) -> list:
