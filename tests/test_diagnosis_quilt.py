@@ -169,7 +169,8 @@ def _sample_profile(u, y, rng, noise_rel=0.01):
     return x, 5000.0 * (v + 0.03 * peak + rng.normal(0.0, noise_rel * peak, x.size))
 
 
-@pytest.mark.parametrize("harmonics", [0.0, pytest.param(2.0, marks=pytest.mark.slow)])
+@pytest.mark.slow
+@pytest.mark.parametrize("harmonics", [0.0, 2.0])
 def test_profiles_of_another_quilt_shape_are_named_quilt_shape(tmp_path, harmonics):
     """Line profiles (J, 1.25 µm at 250 and 25 mas, 1.175 µm at 25 mas) of a blank whose
     quilt is sum-form (no harmonics) or carries twice the nominal's harmonics, made with
