@@ -22,6 +22,7 @@ from scipy.interpolate import RegularGridInterpolator
 from optics.triangulation import linear_on_grid
 
 __all__ = [
+    "is_uniform_axis",
     "Region",
     "REGIONS",
     "SagMap",
@@ -120,6 +121,13 @@ def _checked_sag(s: np.ndarray, ny: int, nx: int) -> np.ndarray:
     return s
 
 
+def is_uniform_axis(v: np.ndarray) -> bool:
+    """Whether the 1-D coordinates ``v`` (mm) are strictly increasing and uniformly spaced
+    as a :class:`SagMap` needs them: every step within 1e-6 (relative) of the first."""
+    d = np.diff(np.asarray(v, dtype=float))
+    return bool(d.size and np.all(d > 0) and np.allclose(d, d[0], rtol=1e-6, atol=1e-9))
+
+
 @dataclass(frozen=True)
 class SagMap:
     """A surface sag map on a regular grid.
@@ -152,7 +160,7 @@ class SagMap:
             d = np.diff(v)
             if not np.all(d > 0):
                 raise ValueError(f"SagMap.{name} must be strictly increasing")
-            if not np.allclose(d, d[0], rtol=1e-6, atol=1e-9):
+            if not is_uniform_axis(v):
                 raise ValueError(f"SagMap.{name} must be uniformly spaced (spacing {d.min()}..{d.max()} mm)")
         object.__setattr__(self, "x_mm", x)
         object.__setattr__(self, "y_mm", y)

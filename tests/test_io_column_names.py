@@ -184,14 +184,26 @@ def test_profile_on_pixels_or_wavelengths_with_an_intensity_alias(tmp_path):
     np.testing.assert_array_equal(y, COUNTS)
 
 
-@pytest.mark.parametrize("header", [("offset_um", "brightness"), ("offset_um", "flux [erg/s]"),
-                                    ("offset_um", "flux_err")])
+@pytest.mark.parametrize("header", [("offset_um", "brightness"), ("offset_um", "flux_err"),
+                                    ("offset_um", "Flux (sigma)"), ("offset_um", "counts_bkg")])
 def test_profile_without_an_intensity_column_lists_the_accepted_names(tmp_path, header):
+    # an error, a background or a quantity the table does not name is not the intensity
     f = _table(tmp_path / "p.csv", header, (OFFSET_UM, COUNTS))
     with pytest.raises(ValueError, match=r"p\.csv, line 1: missing column\(s\) \['intensity'\].*accepted intensity: "
                                          r"'intensity', 'flux', 'counts', 'signal', 'data', 'value', with or without a "
-                                         r"unit \(.*units counts, .*adu"):
+                                         r"unit \(.*any unit"):
         ic.read_measured("line profile", f, pixel_um=18.0)
+
+
+@pytest.mark.parametrize("name", ["flux [erg/s]", "Flux [e-/s]", "Intensity [ADU/s]", "flux [erg/s/cm2/A]",
+                                  "intensity (W)"])
+def test_an_intensity_in_any_unit_is_read_beside_its_error(tmp_path, name):
+    # the intensity's unit is irrelevant (flux is fitted); its error column comes first
+    f = _table(tmp_path / "p.csv", ("offset_um", f"{name.split()[0]}_err", name),
+               (OFFSET_UM, np.sqrt(COUNTS), COUNTS))
+    x, y = ic.read_measured("line profile", f, normalise=False, pixel_um=18.0)
+    np.testing.assert_array_equal(x, OFFSET_UM)
+    np.testing.assert_array_equal(y, COUNTS)
 
 
 def test_psf_image_intensity_alias(tmp_path):

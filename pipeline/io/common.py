@@ -10,8 +10,11 @@
 * :func:`read_text` / :func:`read_csv_columns` — a file's text (UTF-8, or UTF-16/32 with
   a byte-order mark) and the numeric columns of a delimited table with a header, errors by
   line; lines before the header (an export's title, date, exposure) are skipped. Tables other code writes are taken as they come: comma, semicolon, tab or
-  whitespace delimited (told from the header line), and a column in another length unit
-  than the one asked for (``x [m]``, ``sag_nm``, ``Offset (mm)``) converted to it. Decimal
+  whitespace delimited (told from the header line and the first data row), a header
+  commented out (``# offset_um intensity``, as ``numpy.savetxt`` writes it), a column in
+  another length unit than the one asked for (``x [m]``, ``sag_nm``, ``Offset (mm)``,
+  ``Offset / µm``) converted to it, missing-value cells (:data:`MISSING_CELLS`) as NaN,
+  Fortran exponents, a trailing delimiter or comment on a row, Windows-1252 text. Decimal
   commas (a European locale's export: ``-60,5;0,013``) are read where the delimiter is not a
   comma and the table says which separator it uses (:func:`decimal_commas`); a table where a
   comma could be a thousands separator (``1,250`` is 1.25 or 1250 by the writer's locale) is
@@ -32,10 +35,12 @@ from typing import Callable
 import numpy as np
 
 from fea.atomic import atomic_path, atomic_write
+from pipeline.io.columns import ANY_UNIT, matches
 from pipeline.io.gridding import SAG_UNITS_TO_UM
 
 __all__ = ["atomic_write", "atomic_path", "parse_error", "numbered_lines", "read_text",
-           "decode_text", "read_csv_columns", "read_csv_choices", "decimal_commas", "PREAMBLE_LINES"]
+           "decode_text", "read_csv_columns", "read_csv_choices", "decimal_commas", "PREAMBLE_LINES",
+           "MISSING_CELLS"]
 
 
 def parse_error(path: str | Path, line: int | None, message: str) -> ValueError:
@@ -60,8 +65,9 @@ def decode_text(raw: bytes, path: str | Path, what: str, strict: bool = False) -
     """Text of a file's bytes: UTF-8 (a byte-order mark is dropped), or UTF-16/32 when
     the file starts with their byte-order mark (Windows tools write these).
 
-    Undecodable bytes become U+FFFD unless ``strict``, which raises a ``ValueError``
-    naming the file and the byte offset."""
+    A file that is not UTF-8 is read as Windows-1252 (a Windows export's code page, whose
+    bytes all decode; Latin-1 text reads the same but for 0x80-0x9F) unless ``strict``,
+    which raises a ``ValueError`` naming the file and the byte offset."""
     for bom, enc in ((codecs.BOM_UTF32_LE, "utf-32"), (codecs.BOM_UTF32_BE, "utf-32"),
                      (codecs.BOM_UTF8, "utf-8-sig"), (codecs.BOM_UTF16_LE, "utf-16"), (codecs.BOM_UTF16_BE, "utf-16")):
         if raw.startswith(bom):
@@ -69,16 +75,25 @@ def decode_text(raw: bytes, path: str | Path, what: str, strict: bool = False) -
     else:
         enc = "utf-8"
     try:
-        text = raw.decode(enc, errors="strict" if strict else "replace")
+        text = raw.decode(enc)
     except UnicodeDecodeError as exc:
-        raise ValueError(f"{what} {path}: is not {enc.upper()} text (undecodable byte at offset {exc.start}); "
-                         "save it as UTF-8") from None
+        if strict:
+            raise ValueError(f"{what} {path}: is not {enc.upper()} text (undecodable byte at offset {exc.start}); "
+                             "save it as UTF-8") from None
+        # not UTF-8: a Windows export in its code page ("Offset [µm]" with µ as byte 0xB5)
+        text = raw.decode("cp1252" if enc == "utf-8" else enc, errors="replace")
     return text.replace("\r\n", "\n").replace("\r", "\n")  # universal newlines, as open() in text mode
 
 
-def _delimiter(header_line: str) -> str | None:
-    """The table's delimiter, told from its header line: ``,`` ``;`` tab, else None
-    (runs of whitespace)."""
+def _delimiter(header_line: str, data_line: str | None = None) -> str | None:
+    """The table's delimiter: tab, ``;`` or ``,``, the first that the header line and the
+    first data row ``data_line`` both hold (a tab-delimited table may have a comma inside a
+    column's name, ``Intensity, counts``); without one in both, the header's alone (``,``
+    ``;`` tab, in that order); else None (runs of whitespace)."""
+    if data_line is not None:
+        for d in ("\t", ";", ","):
+            if d in header_line and d in data_line:
+                return d
     for d in (",", ";", "\t"):
         if d in header_line:
             return d
@@ -92,11 +107,32 @@ def _split(line: str, delimiter: str | None) -> list[str]:
 
 
 def _canonical_header(h: str) -> str:
-    """``"X [mm]"``, ``"x (mm)"``, ``"x mm"`` -> ``"x_mm"``; lower case, unit brackets and
-    spaces turned into one underscore."""
+    """``"X [mm]"``, ``"x (mm)"``, ``"x mm"``, ``"x / mm"`` -> ``"x_mm"``; lower case, unit
+    brackets, the quantity-calculus slash and spaces turned into one underscore."""
     h = h.strip().lower()
     h = re.sub(r"\s*[\[(]\s*([^\])]*?)\s*[\])]\s*$", r"_\1", h)
+    h = re.sub(r"^([^\s/]+)\s+/\s+(\S+)$", r"\1_\2", h)  # "Offset / µm" (ISO 80000-1)
+    h = re.sub(r"\s*,\s*", "_", h)  # "Intensity, counts" (a comma in a name: the table is not comma-delimited)
     return re.sub(r"\s+", "_", h)
+
+
+#: Cells that mark a missing value (a bad pixel, a masked point): read as NaN, which each
+#: reader then masks or refuses by name (a coordinate must be finite).
+MISSING_CELLS = frozenset({"", "na", "n/a", "nan", "-", "--", "null", "none", "missing"})
+
+
+def _number(cell: str) -> float:
+    """A cell's number: a :data:`MISSING_CELLS` marker is NaN, a Fortran exponent
+    (``1.5D+03``) is read as ``1.5E+03``; a ValueError otherwise."""
+    c = cell.strip()
+    if c.lower() in MISSING_CELLS:
+        return float("nan")
+    try:
+        return float(c)
+    except ValueError:
+        if re.fullmatch(r"[+-]?(\d+\.?\d*|\.\d+)[dD][+-]?\d+", c):
+            return float(c.replace("d", "e").replace("D", "E"))
+        raise
 
 
 def _column(header: list[str], name: str) -> tuple[int, float] | None:
@@ -104,6 +140,8 @@ def _column(header: list[str], name: str) -> tuple[int, float] | None:
     itself, or ``<base>_<unit>`` in another length unit when ``name`` is ``<base>_<unit>``."""
     if name in header:
         return header.index(name), 1.0
+    if name.endswith("_" + ANY_UNIT):
+        return next(((i, 1.0) for i, h in enumerate(header) if matches(name, h)), None)
     base, _, unit = name.rpartition("_")
     if not base or unit not in SAG_UNITS_TO_UM:
         return None
@@ -136,9 +174,10 @@ def decimal_commas(fields: list[str]) -> bool | None:
 PREAMBLE_LINES = 50
 
 
-def _header(line: str) -> list[str]:
-    """A header line's column names, canonical (:func:`_canonical_header`)."""
-    return [_canonical_header(h) for h in _split(line, _delimiter(line))]
+def _header(line: str, data_line: str | None = None) -> list[str]:
+    """A header line's column names, canonical (:func:`_canonical_header`), split at the
+    delimiter it shares with the data row after it (:func:`_delimiter`)."""
+    return [_canonical_header(h) for h in _split(line, _delimiter(line, data_line))]
 
 
 def _found(header: list[str], alts: tuple[str, ...]):
@@ -202,7 +241,9 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
     ``hint(missing, header)`` of the missing columns' first names and the header's names
     (:mod:`pipeline.io.columns` words what each quantity accepts)."""
     text = read_text(path, what)
-    lines_ = [(n, t) for n, t in numbered_lines(text) if t.strip() and not t.lstrip().startswith("#")]
+    numbered = numbered_lines(text)
+    # a data row's trailing comment ("-4.0,1.0  # hot pixel") is dropped
+    lines_ = [(n, re.sub(r"\s+#.*$", "", t)) for n, t in numbered if t.strip() and not t.lstrip().startswith("#")]
     names = [alts[0] for alts in choices]
     if not lines_:
         raise parse_error(path, None, f"file is empty; expected a header with columns {names}")
@@ -210,12 +251,21 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
     # (an instrument's or a program's export: date, exposure, title lines), skipped.
     start = 0
     for k, (_, t) in enumerate(lines_[:PREAMBLE_LINES + 1]):
-        if all(_found(_header(t), alts) is not None for alts in choices):
+        after = lines_[k + 1][1] if k + 1 < len(lines_) else None
+        if all(_found(_header(t, after), alts) is not None for alts in choices):
             start = k
             break
     hline, htext = lines_[start]
-    delim = _delimiter(htext)
-    header = _header(htext)
+    if _numeric(htext, _delimiter(htext)):
+        # no header line: numpy's savetxt and astropy's commented_header write it as the
+        # last comment line before the data ("# offset_um intensity")
+        commented = [(n, t.lstrip()[1:]) for n, t in numbered[:hline - 1] if t.lstrip().startswith("#")]
+        if commented and all(_found(_header(commented[-1][1]), alts) is not None for alts in choices):
+            hline, htext = commented[-1]
+            lines_ = [(hline, htext)] + lines_[start:]
+            start = 0
+    delim = _delimiter(htext, lines_[start + 1][1] if len(lines_) > start + 1 else None)
+    header = [_canonical_header(h) for h in _split(htext, delim)]
     found = [_found(header, alts) for alts in choices]
     missing = [n for n, f in zip(names, found) if f is None]
     if callable(hint):
@@ -244,12 +294,14 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
     for n, t, r in rows:
         if comma_decimal:
             r = [f.replace(",", ".") for f in r]
+        if len(r) == len(header) + 1 and not r[-1].strip():
+            r = r[:-1]  # a delimiter after each row's last value
         if len(r) != len(header):
             extra = delim == "," and len(r) > len(header)
             comma = "; if the table uses decimal commas, they split its numbers: export with decimal points" if extra else ""
             raise parse_error(path, n, f"expected {len(header)} values like the header, found {len(r)}{comma}")
         try:
-            vals.append([float(r[i]) for i in idx])
+            vals.append([_number(r[i]) for i in idx])
         except ValueError:
             comma = next((f for f in r if _DECIMAL_COMMA.match(f.strip())), None)
             if comma is not None:

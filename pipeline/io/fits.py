@@ -62,8 +62,10 @@ _WAVELENGTH_CTYPES = ("WAVE", "AWAV", "VWAV", "LAMBDA", "WAVELEN")
 _WAVELENGTH_UNITS = frozenset({"angstrom", "a", "aa", "nm", "nanometer", "nanometre"})
 #: CTYPE prefixes of spectral axes that are not a wavelength (refused on a profile's axis).
 _OTHER_SPECTRAL_CTYPES = ("FREQ", "ENER", "WAVN", "VRAD", "VOPT", "ZOPT", "VELO", "BETA")
-#: Length units (to µm): the project's spellings, Angstrom, and the FITS ``um``.
-_LENGTH_TO_UM = {**SAG_UNITS_TO_UM, "angstrom": 1e-4, "aa": 1e-4}
+#: Length units (to µm): the project's spellings (Angstrom among them) and the FITS ``um``.
+_LENGTH_TO_UM = dict(SAG_UNITS_TO_UM)
+#: CTYPE prefixes of an axis in detector pixels.
+_PIXEL_CTYPES = ("PIXEL", "PIX", "PX")
 #: Header keywords that put an axis ``i`` under a WCS (without any of them it is in pixels).
 _WCS_KEYS = ("CTYPE{i}", "CUNIT{i}", "CRVAL{i}", "CDELT{i}", "CD{i}_{i}")
 
@@ -108,7 +110,7 @@ def _image(path: Path, hdul, ndim: int, what: str) -> tuple[np.ndarray, object, 
     raise parse_error(path, None, f"no {ndim}-D image for a {what} (found {found})")
 
 
-def _image_2d(path: Path, what: str) -> tuple[np.ndarray, list, object]:
+def _image_2d(path: Path, what: str, unit_needed: bool = True) -> tuple[np.ndarray, list, object]:
     """The first 2-D image of a FITS file: (data[y, x] as float, masked values NaN;
     [(pixel-or-WCS values, the same in µm or None where the axis is in pixels)] for x and
     y; its header)."""
@@ -117,7 +119,7 @@ def _image_2d(path: Path, what: str) -> tuple[np.ndarray, list, object]:
         naxis = header.get("NAXIS", 2)
         out = []
         for k, n in zip(axes, (data.shape[1], data.shape[0])):
-            v, unit, _ = _axis(path, header, k, n, naxis)
+            v, unit, _ = _axis(path, header, k, n, naxis, unit_needed)
             try:
                 f = _unit_to_um(unit)
             except ValueError as exc:
@@ -145,9 +147,12 @@ def _unit_to_um(unit: str) -> float | None:
     return float(q.to(au.um))
 
 
-def _axis(path: Path, header, axis: int, n: int, naxis: int) -> tuple[np.ndarray, str, str]:
+def _axis(path: Path, header, axis: int, n: int, naxis: int, unit_needed: bool = True) -> tuple[np.ndarray, str, str]:
     """Values of FITS axis ``axis`` (1-based) of ``n`` samples: (values, unit, ctype). The
-    unit is "" for an axis without a WCS (pixel numbers 1..n)."""
+    unit is "" for an axis without a WCS (pixel numbers 1..n). A WCS without a unit (no
+    ``CUNIT``, none in IRAF's ``WAT`` cards) whose values are not the pixel numbers is
+    refused where ``unit_needed`` (a profile's or an image's axis, which would otherwise be
+    read as pixels; a sag map's axes in pixels need ``spacing_mm`` anyway)."""
     from astropy.wcs import WCS
 
     if not any(k.format(i=axis) in header for k in _WCS_KEYS):
@@ -170,7 +175,31 @@ def _axis(path: Path, header, axis: int, n: int, naxis: int) -> tuple[np.ndarray
         raise parse_error(path, None, f"axis {axis}: WCS not readable ({exc})") from None
     if not np.isfinite(values).all():
         raise parse_error(path, None, f"axis {axis}: the WCS gives non-finite coordinates")
+    if not unit and f"CUNIT{axis}" not in header:
+        wat = _iraf_unit(header, axis)
+        if wat is not None:  # IRAF writes the unit in its WAT cards, not in CUNIT
+            return values, wat, ctype if ctype and ctype != "LINEAR" else "WAVE"
+        if (unit_needed and ctype.split("-")[0] not in _PIXEL_CTYPES
+                and not np.array_equal(values, np.arange(1.0, n + 1.0))):
+            keys = ", ".join(f"{k.format(i=axis)}={header[k.format(i=axis)]!r}" for k in _WCS_KEYS
+                             if k.format(i=axis) in header)
+            raise parse_error(path, None, f"axis {axis} has a WCS ({keys}) but no unit, so its coordinates "
+                                          f"({values[0]:g}, {values[1] if n > 1 else values[0]:g}, ...) could be "
+                                          f"a wavelength, a length or pixels; add CUNIT{axis} (Angstrom, nm, um, "
+                                          "mm, or pixel)")
     return values, unit, ctype
+
+
+def _iraf_unit(header, axis: int) -> str | None:
+    """The length unit IRAF's ``WAT<axis>_nnn`` cards give (``units=angstroms``), else None."""
+    wat = "".join(str(header[k]) for k in sorted(k for k in header if k.startswith(f"WAT{axis}_")))
+    for word in wat.split():
+        key, _, value = word.partition("=")
+        if key.lower() == "units":
+            u = value.strip().lower()
+            u = {"angstroms": "angstrom", "nanometers": "nm", "nanometres": "nm", "microns": "um"}.get(u, u)
+            return u if u in _LENGTH_TO_UM else None
+    return None
 
 
 def _is_wavelength(ctype: str, unit: str) -> bool:
@@ -284,6 +313,10 @@ def _table_profile(path: Path, hdul) -> tuple[np.ndarray, np.ndarray, str, str] 
         if not unit and aname.lower() != kind and suffix in _LENGTH_TO_UM:  # wave_nm, offset_mm
             unit = suffix
         ctype = "WAVE" if kind == "wavelength_um" else ("PIXEL" if kind == "pixel" else "")
+        if not unit and kind == "offset_um":
+            raise parse_error(path, None, f"table column {aname!r} has no unit (TUNIT), so its values could be "
+                                          "µm, mm or pixels; give its TUNIT (um, mm) or name it offset_um, or "
+                                          "put the axis in a pixel column")
         return a.ravel(), y.ravel(), unit, ctype
     return None
 
@@ -384,7 +417,7 @@ def read_sag_fits(path: str | Path, spacing_mm=None, extent_mm=None, wavelength_
         Naming the file: no 2-D image, no or unknown ``BUNIT``, a rotated WCS.
     """
     path = Path(path)
-    data, axes, header = _image_2d(path, "sag map")
+    data, axes, header = _image_2d(path, "sag map", unit_needed=False)
     bunit = str(header.get("BUNIT", "")).strip()
     axes_mm = [None if um is None else um * 1e-3 for _, um in axes]
     units = [str(header.get(f"CUNIT{k}", "")) for k in (1, 2)]

@@ -31,10 +31,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from optics.sagmap import is_uniform_axis
 from optics.triangulation import linear_on_grid, weight_square_sums
 
 __all__ = ["GRID_TOLERANCE", "MAX_GRID_NODES", "SAG_UNITS_TO_UM", "WAVE_UNITS", "LENGTH_UNITS_TO_MM", "grid_points",
-           "detect_axis", "sag_unit_factor", "length_unit_factor", "GridUnknownError", "grid_from_options",
+           "detect_axis", "uniform_axis", "sag_unit_factor", "length_unit_factor", "GridUnknownError", "grid_from_options",
            "node_noise_factor", "ScatteredPoints", "scattered_points"]
 
 #: A coordinate is on the grid if it lies within this fraction of the step of a node:
@@ -49,9 +50,11 @@ SAG_UNITS_TO_UM = {"nm": 1e-3, "nanometer": 1e-3, "nanometers": 1e-3, "nanometre
                    "um": 1.0, "µm": 1.0, "μm": 1.0, "micron": 1.0, "microns": 1.0, "micrometer": 1.0,
                    "micrometers": 1.0, "micrometre": 1.0, "micrometres": 1.0,
                    "mm": 1e3, "millimeter": 1e3, "millimeters": 1e3, "millimetre": 1e3, "millimetres": 1e3,
-                   "m": 1e6, "meter": 1e6, "meters": 1e6, "metre": 1e6, "metres": 1e6}
+                   "m": 1e6, "meter": 1e6, "meters": 1e6, "metre": 1e6, "metres": 1e6,
+                   # spectroscopy's unit: a wavelength axis "wavelength [A]", "Wavelength (Angstrom)"
+                   "angstrom": 1e-4, "angstroms": 1e-4, "å": 1e-4, "aa": 1e-4, "a": 1e-4}
 #: Spellings of a sag in waves (one wave is ``wavelength_um``).
-WAVE_UNITS = ("waves", "wave", "wv", "lambda")
+WAVE_UNITS = ("waves", "wave", "wv", "lambda", "λ")
 #: Accepted length units of coordinates and their factor to mm.
 LENGTH_UNITS_TO_MM = {k: v * 1e-3 for k, v in SAG_UNITS_TO_UM.items()}
 
@@ -80,7 +83,7 @@ def sag_unit_factor(units: str, wavelength_um: float | None = None) -> float:
         if wavelength_um is None or not (np.isfinite(wavelength_um) and wavelength_um > 0):
             raise ValueError(f"units={units!r} needs wavelength_um (µm, > 0); got wavelength_um={wavelength_um!r}")
         return float(wavelength_um)
-    raise ValueError(f"units={units!r} is not a known sag unit; valid: nm, um (µm, micron), mm, m, "
+    raise ValueError(f"units={units!r} is not a known sag unit; valid: nm, um (µm, micron), mm, m, Angstrom, "
                      "waves (with wavelength_um)")
 
 
@@ -88,7 +91,7 @@ def length_unit_factor(units: str) -> float:
     """Factor that turns coordinates in ``units`` (nm, µm, mm, m) into mm."""
     u = str(units).strip().lower()
     if u not in LENGTH_UNITS_TO_MM:
-        raise ValueError(f"units={units!r} is not a known length unit; valid: nm, um (µm), mm, m")
+        raise ValueError(f"units={units!r} is not a known length unit; valid: nm, um (µm), mm, m, Angstrom")
     return LENGTH_UNITS_TO_MM[u]
 
 
@@ -128,8 +131,25 @@ def detect_axis(v: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         return None
     ki = ki.astype(int)
     n = int(ki.max()) + 1
-    nodes = centres if centres.size == n else origin + step * np.arange(n)
+    # the file's own values where they are a map's axis already; else the fitted uniform
+    # axis (a 1/3 mm step printed to 6 digits, float32 coordinates: steps that differ by
+    # more than a SagMap allows, though every value is on its node)
+    nodes = centres if centres.size == n and is_uniform_axis(centres) else origin + step * np.arange(n)
     return nodes, ki
+
+
+def uniform_axis(v: np.ndarray) -> np.ndarray:
+    """Increasing 1-D coordinates ``v`` as a uniform axis: ``v`` itself where it is one
+    (:func:`optics.sagmap.is_uniform_axis`), the least-squares uniform axis through it where
+    every value lies within :data:`GRID_TOLERANCE` of a step of it (rounding, float32
+    storage), else ``v`` unchanged (for :class:`optics.sagmap.SagMap` to refuse by name)."""
+    v = np.asarray(v, float)
+    if v.ndim != 1 or v.size < 3 or is_uniform_axis(v) or not np.all(np.diff(v) > 0):
+        return v
+    found = detect_axis(v)
+    if found is None or found[0].size != v.size or not np.array_equal(found[1], np.arange(v.size)):
+        return v
+    return found[0]
 
 
 @dataclass(frozen=True, eq=False)
@@ -337,13 +357,21 @@ def grid_from_options(nx: int, ny: int, extent_mm=None, spacing_mm=None) -> tupl
         None when neither option is given (the caller then raises :class:`GridUnknownError`).
     """
     if extent_mm is not None:
-        x0, x1, y0, y1 = (float(v) for v in extent_mm)
+        try:
+            x0, x1, y0, y1 = (float(v) for v in extent_mm)
+        except (TypeError, ValueError):
+            raise ValueError(f"extent_mm={extent_mm!r} must be four numbers (xmin, xmax, ymin, ymax) in mm, the "
+                             "first and last sample centres") from None
         if not (x1 > x0 and y1 > y0):
             raise ValueError(f"extent_mm={tuple(extent_mm)} must be (xmin, xmax, ymin, ymax) with max > min")
         return np.linspace(x0, x1, nx), np.linspace(y0, y1, ny), "extent_mm argument"
     if spacing_mm is not None:
-        dx, dy = (spacing_mm, spacing_mm) if np.isscalar(spacing_mm) else tuple(spacing_mm)
-        if not (dx > 0 and dy > 0):
+        try:
+            dx, dy = (float(spacing_mm),) * 2 if np.isscalar(spacing_mm) else (float(v) for v in spacing_mm)
+        except (TypeError, ValueError):
+            raise ValueError(f"spacing_mm={spacing_mm!r} must be a number > 0 or a pair (dx, dy) of them, "
+                             "in mm") from None
+        if not (np.isfinite(dx) and np.isfinite(dy) and dx > 0 and dy > 0):
             raise ValueError(f"spacing_mm={spacing_mm!r} must be > 0 (one value or (dx, dy))")
         hx, hy = 0.5 * (nx - 1) * dx, 0.5 * (ny - 1) * dy
         return np.linspace(-hx, hx, nx), np.linspace(-hy, hy, ny), "spacing_mm argument, centred"

@@ -30,7 +30,7 @@ from optics.sagmap import SagMap
 from pipeline.io import columns
 from pipeline.io.common import atomic_path, atomic_write, parse_error, read_csv_choices
 from pipeline.io.gridding import (SAG_UNITS_TO_UM, ScatteredPoints, grid_points, length_unit_factor, sag_unit_factor,
-                                  scattered_points)
+                                  scattered_points, uniform_axis)
 
 __all__ = ["write_sag_csv", "read_sag_csv", "read_sag_csv_points", "write_sag_netcdf", "read_sag_netcdf", "write_sag_npz", "read_sag_npz"]
 
@@ -152,7 +152,7 @@ def _axes_map(path: Path, field: str, x, y, sag, label: str, meta: dict) -> SagM
         x, sag = x[::-1], sag[:, ::-1]
     if y.ndim == 1 and y.size > 1 and y[0] > y[-1]:
         y, sag = y[::-1], sag[::-1]
-    return _sagmap(path, x, y, sag, label, meta)
+    return _sagmap(path, uniform_axis(x), uniform_axis(y), sag, label, meta)
 
 
 def write_sag_netcdf(sagmap: SagMap, path: str | Path) -> Path:
