@@ -58,7 +58,8 @@ def test_a_fits_axis_with_a_wcs_but_no_unit_is_refused_by_name(tmp_path):
 def test_a_fits_table_offset_without_a_unit_is_refused_by_name(tmp_path, name):
     from astropy.io import fits
 
-    cols = [fits.Column(name=name, format="D", array=OFFSET_UM), fits.Column(name="INTENSITY", format="D", array=COUNTS)]
+    cols = [fits.Column(name=name, format="D", array=OFFSET_UM),
+            fits.Column(name="INTENSITY", format="D", array=COUNTS)]
     fits.BinTableHDU.from_columns(cols).writeto(tmp_path / "t.fits")
     with pytest.raises(ValueError, match=rf"t\.fits: table column '{name}' has no unit \(TUNIT\).*give its TUNIT"):
         _profile(tmp_path / "t.fits")
@@ -175,3 +176,16 @@ def test_a_windows_code_page_header(tmp_path):
                           delimiter=";", encoding="cp1252"))
     np.testing.assert_array_equal(x, OFFSET_UM)
     np.testing.assert_array_equal(y, COUNTS)
+
+
+def test_an_image_in_detector_pixels(tmp_path):
+    X, Y = np.meshgrid(np.arange(-3.0, 3.01), np.arange(-3.0, 3.01))
+    counts = 20.0 + 500.0 * np.exp(-0.5 * (X**2 + Y**2))
+    f = _text(tmp_path / "img.csv", "X [px],Y [px],Counts",
+              [tuple(repr(float(q)) for q in r) for r in zip(X.ravel(), Y.ravel(), counts.ravel())])
+    x, y, v = ic.read_measured("psf image", f, pixel_um=18.0)
+    np.testing.assert_array_equal(x, 18.0 * X.ravel())
+    np.testing.assert_array_equal(y, 18.0 * Y.ravel())
+    np.testing.assert_array_equal(v, counts.ravel())
+    with pytest.raises(ValueError, match=r"img\.csv: offsets in detector pixels \(column 'x_px'\) need pixel_um"):
+        ic.read_measured("psf image", f)

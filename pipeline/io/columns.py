@@ -34,8 +34,8 @@ from typing import Iterable
 
 from pipeline.io.gridding import SAG_UNITS_TO_UM, WAVE_UNITS
 
-__all__ = ["Quantity", "SAG", "X", "Y", "INTENSITY", "INTENSITY_UNITS", "QUALIFIERS", "ANY_UNIT", "matches", "PIXEL_OFFSET_COLUMNS",
-           "WAVELENGTH_COLUMNS", "TABLE_AXIS_STEMS", "split_unit", "names_table"]
+__all__ = ["Quantity", "SAG", "X", "Y", "INTENSITY", "INTENSITY_UNITS", "QUALIFIERS", "ANY_UNIT", "matches",
+           "PIXEL_OFFSET_COLUMNS", "WAVELENGTH_COLUMNS", "TABLE_AXIS_STEMS", "split_unit", "names_table"]
 
 #: Units an intensity column may carry; all are read alike (any normalisation is data), and so
 #: is any other unit (``Flux [e-/s]``, ``flux [erg/s/cm2/A]``): these are only preferred.

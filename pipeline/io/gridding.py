@@ -35,8 +35,8 @@ from optics.sagmap import is_uniform_axis
 from optics.triangulation import linear_on_grid, weight_square_sums
 
 __all__ = ["GRID_TOLERANCE", "MAX_GRID_NODES", "SAG_UNITS_TO_UM", "WAVE_UNITS", "LENGTH_UNITS_TO_MM", "grid_points",
-           "detect_axis", "uniform_axis", "sag_unit_factor", "length_unit_factor", "GridUnknownError", "grid_from_options",
-           "node_noise_factor", "ScatteredPoints", "scattered_points"]
+           "detect_axis", "uniform_axis", "sag_unit_factor", "length_unit_factor", "GridUnknownError",
+           "grid_from_options", "node_noise_factor", "ScatteredPoints", "scattered_points"]
 
 #: A coordinate is on the grid if it lies within this fraction of the step of a node:
 #: far above print noise (6 significant digits of a 100 mm coordinate: 5e-5 mm), far

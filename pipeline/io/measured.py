@@ -17,7 +17,7 @@ import numpy as np
 from pipeline.io.columns import INTENSITY, PIXEL_OFFSET_COLUMNS, WAVELENGTH_COLUMNS
 from pipeline.io.common import atomic_write, parse_error, read_csv_choices
 
-__all__ = ["PIXEL_OFFSET_COLUMNS", "WAVELENGTH_COLUMNS", "profile_offsets_um", "checked_profile",
+__all__ = ["PIXEL_OFFSET_COLUMNS", "WAVELENGTH_COLUMNS", "IMAGE_PIXEL_COLUMNS", "profile_offsets_um", "checked_profile",
            "checked_psf_image", "read_line_profile", "read_psf_image", "write_line_profile_csv", "write_psf_image_csv"]
 
 
@@ -212,13 +212,25 @@ def _load_npz_columns(path: Path, names: tuple[str, ...]) -> np.ndarray:
     return np.column_stack([c.astype(float) for c in cols])
 
 
-def read_psf_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+#: Table columns of an image's coordinates in detector pixels (after ``[px]`` -> ``_px``).
+IMAGE_PIXEL_COLUMNS = {"x": ("x_px", "x_pixel", "x_pixels", "x_pix"), "y": ("y_px", "y_pixel", "y_pixels", "y_pix")}
+
+
+def read_psf_image(path: str | Path, pixel_um: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Read a measured point-source image: CSV ``x_um,y_um,intensity`` (header, any
-    column order, other columns ignored) or ``.npz`` with arrays ``x_um``, ``y_um``,
-    ``intensity`` (which may be named as a profile's, e.g. ``counts``, ``Flux [ADU]``).
-    ``x`` is along the dispersion, ``y`` along the slit (detector µm).
+    column order, other columns ignored; the coordinates in another length unit, or in
+    detector pixels, ``x_px``/``X [px]``, times ``pixel_um``) or ``.npz`` with arrays
+    ``x_um``, ``y_um``, ``intensity`` (which may be named as a profile's, e.g. ``counts``,
+    ``Flux [ADU]``). ``x`` is along the dispersion, ``y`` along the slit (detector µm).
     Like line profiles: counts, negative (background-subtracted) samples, a pedestal and
     any grid are accepted; a point whose intensity is ``nan`` is a masked pixel, left out.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV (or other delimited text) or ``.npz`` file.
+    pixel_um : float, optional
+        Detector pixel pitch (µm), for coordinates in pixels.
 
     Returns
     -------
@@ -237,9 +249,14 @@ def read_psf_image(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray
         v = _load_npz_columns(path, ("x_um", "y_um", "intensity"))
         lines = np.zeros(v.shape[0], int)
     else:
-        v, lines, _ = read_csv_choices(path, "PSF image", (("x_um",), ("y_um",), INTENSITY.names()),
-                                       lambda missing, header: INTENSITY.refusal(header) if "intensity" in missing
-                                       else "")
+        v, lines, (xn, yn, _) = read_csv_choices(
+            path, "PSF image", (("x_um", *IMAGE_PIXEL_COLUMNS["x"]), ("y_um", *IMAGE_PIXEL_COLUMNS["y"]),
+                                INTENSITY.names()),
+            lambda missing, header: INTENSITY.refusal(header) if "intensity" in missing else
+            "coordinates in detector pixels may be columns x_px, y_px (with pixel_um)")
+        for k, name in enumerate((xn, yn)):
+            if name != ("x_um", "y_um")[k]:
+                v[:, k] = profile_offsets_um(v[:, k], "pixel", path, pixel_um, None, f"column {name!r}")
     return checked_psf_image(path, v, lines)
 
 
