@@ -189,3 +189,12 @@ def test_an_image_in_detector_pixels(tmp_path):
     np.testing.assert_array_equal(v, counts.ravel())
     with pytest.raises(ValueError, match=r"img\.csv: offsets in detector pixels \(column 'x_px'\) need pixel_um"):
         ic.read_measured("psf image", f)
+
+
+@pytest.mark.parametrize("names,units", [("Offset,Intensity", "(um),(counts)"), ("offset,intensity", "um,counts"),
+                                         ("offset_um,intensity", "[um],[ADU]")])
+def test_units_in_a_second_header_line(tmp_path, names, units):
+    # a spreadsheet's export: the names on one line, their units under them
+    x, y = _profile(_text(tmp_path / "p.csv", f"{names}\n{units}", _rows()))
+    np.testing.assert_array_equal(x, OFFSET_UM)
+    np.testing.assert_array_equal(y, COUNTS)

@@ -266,6 +266,10 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
             start = 0
     delim = _delimiter(htext, lines_[start + 1][1] if len(lines_) > start + 1 else None)
     header = [_canonical_header(h) for h in _split(htext, delim)]
+    units = _units_row(lines_[start + 1:start + 3], delim, len(header))
+    if units is not None:  # a spreadsheet's second header line: "(um),(counts)" under "Offset,Intensity"
+        header = [h if "_" in h or not u else _canonical_header(f"{h} [{u}]") for h, u in zip(header, units)]
+        lines_ = lines_[:start + 1] + lines_[start + 2:]
     found = [_found(header, alts) for alts in choices]
     missing = [n for n, f in zip(names, found) if f is None]
     if callable(hint):
@@ -313,6 +317,18 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
             raise parse_error(path, n, f"non-numeric value in {t.strip()!r}") from None
         lines.append(n)
     return np.array(vals, dtype=float).reshape(-1, len(choices)) * factor, np.array(lines, dtype=int), chosen
+
+
+def _units_row(after: list, delimiter: str | None, n: int) -> list[str] | None:
+    """The units of a table's second header line, the first of ``after`` (the two lines after
+    the header): ``n`` fields, none a number, each a unit or empty (``um``, ``(um)``,
+    ``[counts]``), followed by a data row; else None."""
+    if len(after) < 2 or not _numeric(after[1][1], delimiter) or _numeric(after[0][1], delimiter):
+        return None
+    fields = [f.strip() for f in _split(after[0][1], delimiter)]
+    if len(fields) != n or any(re.search(r"\d\.\d|^[+-]?\d+$", f) for f in fields):
+        return None
+    return [re.sub(r"^[\[(]\s*(.*?)\s*[\])]$", r"\1", f).lower() for f in fields]
 
 
 def numbered_lines(text: str) -> list[tuple[int, str]]:
