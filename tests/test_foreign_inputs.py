@@ -198,3 +198,9 @@ def test_units_in_a_second_header_line(tmp_path, names, units):
     x, y = _profile(_text(tmp_path / "p.csv", f"{names}\n{units}", _rows()))
     np.testing.assert_array_equal(x, OFFSET_UM)
     np.testing.assert_array_equal(y, COUNTS)
+
+
+def test_a_cut_out_keeps_its_detector_pixel_numbers(tmp_path):
+    # a unitless WCS of step one is pixel numbers, wherever it starts
+    x, _ = _profile(_spectrum(tmp_path / "cut.fits", CRVAL1=1024.0, CDELT1=1.0, CRPIX1=1.0))
+    np.testing.assert_allclose(x, 18.0 * np.arange(1024, 1033))

@@ -150,7 +150,7 @@ def _unit_to_um(unit: str) -> float | None:
 def _axis(path: Path, header, axis: int, n: int, naxis: int, unit_needed: bool = True) -> tuple[np.ndarray, str, str]:
     """Values of FITS axis ``axis`` (1-based) of ``n`` samples: (values, unit, ctype). The
     unit is "" for an axis without a WCS (pixel numbers 1..n). A WCS without a unit (no
-    ``CUNIT``, none in IRAF's ``WAT`` cards) whose values are not the pixel numbers is
+    ``CUNIT``, none in IRAF's ``WAT`` cards) whose step is not one (pixel numbers) is
     refused where ``unit_needed`` (a profile's or an image's axis, which would otherwise be
     read as pixels; a sag map's axes in pixels need ``spacing_mm`` anyway)."""
     from astropy.wcs import WCS
@@ -179,8 +179,10 @@ def _axis(path: Path, header, axis: int, n: int, naxis: int, unit_needed: bool =
         wat = _iraf_unit(header, axis)
         if wat is not None:  # IRAF writes the unit in its WAT cards, not in CUNIT
             return values, wat, ctype if ctype and ctype != "LINEAR" else "WAVE"
+        # a step of one is pixel numbers (a cut-out keeps the detector's: CRVAL 1024); any
+        # other step is a physical axis whose unit the file does not say
         if (unit_needed and ctype.split("-")[0] not in _PIXEL_CTYPES
-                and not np.array_equal(values, np.arange(1.0, n + 1.0))):
+                and not np.allclose(np.abs(np.diff(values)), 1.0, rtol=0.0, atol=1e-9)):
             keys = ", ".join(f"{k.format(i=axis)}={header[k.format(i=axis)]!r}" for k in _WCS_KEYS
                              if k.format(i=axis) in header)
             raise parse_error(path, None, f"axis {axis} has a WCS ({keys}) but no unit, so its coordinates "
