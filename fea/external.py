@@ -130,6 +130,10 @@ def face_sag_map(points_mm: np.ndarray, displacement_mm: np.ndarray, face: FaceM
     lo, hi = P[idx, :2].min(axis=0), P[idx, :2].max(axis=0)
     gx = spacing_mm * np.arange(np.ceil(lo[0] / spacing_mm - 1e-9), np.floor(hi[0] / spacing_mm + 1e-9) + 1)
     gy = spacing_mm * np.arange(np.ceil(lo[1] / spacing_mm - 1e-9), np.floor(hi[1] / spacing_mm + 1e-9) + 1)
+    if gx.size < 2 or gy.size < 2:
+        raise ValueError(f"spacing_mm={spacing_mm:g} leaves fewer than two grid lines across the face, which spans "
+                         f"{hi[0] - lo[0]:.4g} x {hi[1] - lo[1]:.4g} mm: give a smaller spacing_mm, or check the "
+                         "model's length unit (a model in metres read as mm is 1000 times too small)")
     grid = interpolate_face(P[:, :2], sag, face, gx, gy)
     types = sorted({t for t, _ in face.blocks})
     meta = {"interpolation": ("quadratic" if face.order == 2 else "linear") + " shape functions of the face cells "

@@ -120,6 +120,19 @@ def evaluate_face(xy: np.ndarray, values: np.ndarray, face: FaceMesh, px_mm: np.
                          f"({exc}); is the optical z axis the face's normal?") from None
     px, py = np.asarray(px_mm, float).ravel(), np.asarray(py_mm, float).ravel()
     found = np.asarray(finder(px, py))
+    miss = np.flatnonzero(found < 0)
+    if miss.size:
+        # a grid point on the face's edge can lie outside it by round-off (a model in inches:
+        # an edge at 0.787401574803 in is 19.999999999996 mm): moved inward by 1e-9 of the
+        # face's size, it is found; a point truly outside stays outside
+        c, size = xy[used].mean(axis=0), float(np.ptp(xy[used], axis=0).max())
+        d = np.column_stack([c[0] - px[miss], c[1] - py[miss]])
+        d *= 1e-9 * size / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-300)[:, None]
+        again = np.asarray(finder(px[miss] + d[:, 0], py[miss] + d[:, 1]))
+        px, py = px.copy(), py.copy()
+        px[miss[again >= 0]] += d[again >= 0, 0]
+        py[miss[again >= 0]] += d[again >= 0, 1]
+        found[miss] = again
     out = np.full(px.size, np.nan)
     inside = found >= 0
     blk, cell = owner[found[inside], 0], owner[found[inside], 1]

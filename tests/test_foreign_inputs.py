@@ -204,3 +204,125 @@ def test_a_cut_out_keeps_its_detector_pixel_numbers(tmp_path):
     # a unitless WCS of step one is pixel numbers, wherever it starts
     x, _ = _profile(_spectrum(tmp_path / "cut.fits", CRVAL1=1024.0, CDELT1=1.0, CRPIX1=1.0))
     np.testing.assert_allclose(x, 18.0 * np.arange(1024, 1033))
+
+
+# ------------------------------------------------------------------ another FE solver's displacements
+def _fe_block(tmp_path):
+    import meshio
+
+    pts = np.array([[x, y, z] for z in (0.0, 10.0) for y in (0.0, 5.0) for x in (0.0, 5.0)])
+    meshio.write(tmp_path / "b.vtu", meshio.Mesh(pts, [("hexahedron", np.array([[0, 1, 3, 2, 4, 5, 7, 6]]))]))
+    u = np.column_stack([np.zeros(8), 1e-3 * np.arange(8), 2e-3 * np.arange(8) - 0.005])
+    return tmp_path / "b.vtu", u
+
+
+@pytest.mark.parametrize("header,columns", [
+    ("Node Label,U-Magnitude,U-U1,U-U2,U-U3", lambda i, u: [i, np.linalg.norm(u), *u]),  # Abaqus report
+    ("node_id,x,y,z,ux,uy,uz", lambda i, u: [i, 1.0, 2.0, 3.0, *u]),
+    ("node_id;uz;uy;ux", lambda i, u: [i, *u[::-1]]),
+    ("NODE UX UY UZ", lambda i, u: [i, *u])])
+def test_fe_displacement_columns_are_read_by_their_names(tmp_path, header, columns):
+    from pipeline.io.fe import read_fe_result
+
+    mesh, u = _fe_block(tmp_path)
+    sep = ";" if ";" in header else " " if " " in header and "," not in header else ","
+    rows = [sep.join(repr(float(v)) if k else str(v) for k, v in enumerate(columns(i + 1, u[i]))) for i in range(8)]
+    (tmp_path / "u.csv").write_text(header + "\n" + "\n".join(rows[::-1]) + "\n")
+    r = read_fe_result(mesh, displacement_csv=tmp_path / "u.csv")
+    np.testing.assert_allclose(r.displacement_mm, u, atol=1e-15)
+
+
+def test_fe_displacements_without_a_header_or_with_a_node_twice_are_refused(tmp_path):
+    from pipeline.io.fe import read_fe_result
+
+    mesh, u = _fe_block(tmp_path)
+    (tmp_path / "u5.csv").write_text("\n".join(f"{i + 1},1.0,{u[i, 0]},{u[i, 1]},{u[i, 2]}" for i in range(8)))
+    with pytest.raises(ValueError, match=r"u5\.csv:1: 5 values and no header line; .*exactly node_id,ux,uy,uz"):
+        read_fe_result(mesh, displacement_csv=tmp_path / "u5.csv")
+    rows = [f"{i + 1},{u[i, 0]},{u[i, 1]},{u[i, 2]}" for i in range(8)] + ["3,0,0,0"]
+    (tmp_path / "dup.csv").write_text("node_id,ux,uy,uz\n" + "\n".join(rows))
+    with pytest.raises(ValueError, match=r"dup\.csv: node 3 is listed twice \(lines 4 and 10\)"):
+        read_fe_result(mesh, displacement_csv=tmp_path / "dup.csv")
+
+
+# ------------------------------------------------------------------ manifests
+def test_a_grating_named_in_lower_case_is_one_blank_with_its_profiles(tmp_path):
+    from pipeline.diagnosis.manifest import parse_manifest
+
+    (tmp_path / "m.csv").write_text("x_mm,y_mm,sag_um\n0,0,0\n1,0,0\n0,1,0\n1,1,0\n")
+    (tmp_path / "p.csv").write_text("offset_um,intensity\n" + "\n".join(f"{a},{b}" for a, b in _rows()) + "\n")
+    surface = {"kind": "surface", "file": "m.csv", "temperature_K": 128, "grating": "j"}
+    profile = {"kind": "line_profile", "file": "p.csv", "grating": "J", "wavelength_um": 1.25, "pixel_scale_mas": 250}
+    man = parse_manifest({"measurement": [surface, profile]}, tmp_path)
+    assert [(m.grating, m.blank) for m in man.measurements] == [("J", "J"), ("J", "J")]
+    assert parse_manifest({"measurement": [{**surface, "grating": None, "blank": "h+k"}]},
+                          tmp_path).measurements[0].blank == "HK"
+    with pytest.raises(ValueError, match=r"measurement 'm'.*grating.*'X'.*is unknown; valid: \['H', 'HK', 'J', 'K'\]"):
+        parse_manifest({"measurement": [{**surface, "grating": "X"}]}, tmp_path)
+
+
+# ------------------------------------------------------------------ Zemax files with a writer's comments
+def test_zemax_files_with_a_comment_line_and_a_float_term_count(tmp_path):
+    from pipeline.io.zemax import read_zemax_zernike
+
+    sag_mm = np.arange(30.0).reshape(6, 5) * 1e-4  # rows along y, unitflag 0: mm
+    rows = [f"{v:.6e} 0 0 0 0" for v in sag_mm.ravel()]
+    (tmp_path / "g.dat").write_text("! Grid sag written by MATLAB\n5 6 0.5 0.5 0 0 0\n" + "\n".join(rows) + "\n")
+    m = ic.read_sag_map(tmp_path / "g.dat")
+    np.testing.assert_allclose(m.x_mm, [-1.0, -0.5, 0.0, 0.5, 1.0])
+    np.testing.assert_allclose(np.sort(m.sag_um.ravel()), np.sort(sag_mm.ravel() * 1e3), atol=1e-9)
+    (tmp_path / "z.dat").write_text("! Zernike Fringe Sag extra data\n9.000000E+000\n6.250000E+001\n"
+                                    + "\n".join(f"{c:.6E}" for c in np.arange(1, 10) * 1e-5) + "\n")
+    coeffs, info = read_zemax_zernike(tmp_path / "z.dat", "fringe", False)
+    assert info["n_terms"] == 9 and info["radius_mm"] == 62.5
+    np.testing.assert_allclose(sorted(coeffs.values()), np.arange(1, 10) * 1e-2)  # mm -> µm
+
+
+@pytest.mark.parametrize("data,message", [
+    ({"simulation": [{"cold_K": 80}]}, r"\[simulation\] is a list .*not a table.*not \[\[simulation\]\]"),
+    ({"simulation": "x"}, r"\[simulation\] is a str .*not a table"),
+    ({"measurement": [{"kind": "surface", "file": ["a.csv"]}]}, r"#1: file=\['a\.csv'\] must be one path, a string"),
+])
+def test_a_manifest_of_the_wrong_shape_is_named(data, message):
+    from pipeline.diagnosis.manifest import parse_manifest
+
+    with pytest.raises(ValueError, match=message):
+        parse_manifest({"measurement": [{"kind": "surface", "file": "m.csv"}], **data})
+
+
+def test_a_model_in_inches_keeps_its_face_edge(tmp_path):
+    # the face's edge at 20 mm is 0.787401574803... in: back in mm it misses the grid's edge line by round-off
+    import meshio
+
+    from pipeline.io.fe import import_fe
+
+    g = np.array([-20.0, 0.0, 20.0])
+    pts = np.array([[x, y, z] for z in (0.0, 10.0) for y in g for x in g]) * (1 / 25.4)  # as a converter writes it
+    idx = np.arange(18).reshape(2, 3, 3)  # [z, y, x]
+    hexes = [[idx[0, j, i], idx[0, j, i + 1], idx[0, j + 1, i + 1], idx[0, j + 1, i]] for j in range(2) for i in range(2)]
+    hexes = [h + [v + 9 for v in h] for h in hexes]  # the top face's nodes are the bottom's + 9
+    u = np.zeros_like(pts)
+    u[:, 2] = 1e-4 * (pts[:, 0] * 25.4) ** 2 / 25.4  # 0.1 µm/mm² of x², in inches
+    meshio.write(tmp_path / "in.vtu", meshio.Mesh(pts, [("hexahedron", np.array(hexes))], point_data={"U": u}))
+    m = import_fe(tmp_path / "in.vtu", f"z={float(pts[:, 2].max())!r}", length_unit="in", spacing_mm=5.0).sag_map
+    np.testing.assert_allclose(m.x_mm, np.arange(-20.0, 20.01, 5.0), atol=1e-9)
+    assert np.isfinite(m.sag_um).all()
+
+
+def test_a_grid_coarser_than_the_face_names_the_spacing_and_the_unit(tmp_path):
+    from pipeline.io.fe import import_fe
+
+    mesh, _ = _fe_block(tmp_path)  # a 5 x 5 mm face
+    with pytest.raises(ValueError, match=r"spacing_mm=100 leaves fewer than two grid lines across the face, which "
+                                         r"spans 5 x 5 mm.*length unit"):
+        import_fe(_with_displacement(mesh), "z=10", spacing_mm=100.0)
+
+
+def _with_displacement(path):
+    import meshio
+
+    m = meshio.read(path)
+    m.point_data["U"] = np.zeros_like(m.points)
+    out = path.with_name("u_" + path.name)
+    meshio.write(out, m)
+    return out

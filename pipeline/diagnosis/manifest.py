@@ -432,7 +432,11 @@ def resolve_data_path(raw, base: Path, contained: bool, what: str) -> Path:
 def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -> Measurement:
     if not isinstance(entry, dict):
         raise ValueError(f"[[measurement]] #{index + 1} is a {type(entry).__name__}, not a table")
-    name = str(entry.get("name", Path(str(entry.get("file", f"#{index}"))).stem))
+    file = entry.get("file", f"#{index}")
+    if not isinstance(file, str):
+        raise ValueError(f"[[measurement]] #{index + 1}: file={file!r} must be one path, a string "
+                         "(one measurement per [[measurement]] table)")
+    name = str(entry.get("name", Path(file).stem))
     kind = entry.get("kind")
     if kind not in _KINDS:
         raise _err(name, "kind", kind, f"is unknown; valid: {list(_KINDS)}")
@@ -467,8 +471,8 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
         ap = _number(entry, "aperture_diameter_mm", name, 137.0)
         if not 0 < ap <= 300:
             raise _err(name, "aperture_diameter_mm", ap, "must be in (0, 300] mm")
-        grating = entry.get("grating")
-        blank = str(entry.get("blank", grating or "spare"))
+        grating = _grating_key(entry, name, required=False)
+        blank = _blank(entry, grating or "spare")
         spacing, extent = _grid_options(entry, name)
         wl = _number(entry, "wavelength_um", name)
         if wl is not None and not wl > 0:
@@ -486,10 +490,7 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
                            sag_sign=int(sign))
     from optics.grating import GRATINGS
 
-    g = entry.get("grating")
-    key = str(g).upper().replace("+", "") if g is not None else None
-    if key not in GRATINGS:
-        raise _err(name, "grating", g, f"is unknown; valid: {sorted(GRATINGS)}")
+    key = _grating_key(entry, name, required=True)
     wl = _number(entry, "wavelength_um", name, required=True)
     order = entry.get("order", GRATINGS[key].order)
     if isinstance(order, bool) or not isinstance(order, int) or order == 0:
@@ -506,7 +507,7 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
         if ipc is not None and pix == 0:
             raise _err(name, "interpixel_coupling", ipc, "needs a detector pixel: pixel_um = 0 is a focal-plane "
                        "image, which no detector's pixels couple (give pixel_um > 0, or leave the coupling out)")
-        return Measurement(name, kind, path, str(entry.get("blank", key)), grating=key, order=int(order),
+        return Measurement(name, kind, path, _blank(entry, key), grating=key, order=int(order),
                            wavelength_um=float(wl), noise_rel=noise_rel, noise_counts=noise_counts, pixel_um=float(pix),
                            interpixel_coupling=ipc)
     corr = _correlated_noise(entry, name)
@@ -516,9 +517,33 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
     sp = _number(entry, "slit_position", name, 0.0)
     if not -1 <= sp <= 1:
         raise _err(name, "slit_position", sp, "must be in [-1, 1]")
-    return Measurement(name, kind, path, str(entry.get("blank", key)), grating=key, order=int(order),
+    return Measurement(name, kind, path, _blank(entry, key), grating=key, order=int(order),
                        wavelength_um=float(wl), pixel_scale_mas=int(ps), slit_position=float(sp),
                        noise_rel=noise_rel, noise_counts=noise_counts, interpixel_coupling=ipc, **corr)
+
+
+def _grating_key(entry: dict, name: str, required: bool) -> str | None:
+    """The measurement's ``grating`` as :data:`optics.grating.GRATINGS` spells it (``"j"``,
+    ``"H+K"`` -> ``"J"``, ``"HK"``); None if absent and not ``required``; an unknown one refused."""
+    from optics.grating import GRATINGS
+
+    g = entry.get("grating")
+    if g is None and not required:
+        return None
+    key = str(g).upper().replace("+", "") if isinstance(g, str) else None
+    if key not in GRATINGS:
+        raise _err(name, "grating", g, f"is unknown; valid: {sorted(GRATINGS)}")
+    return key
+
+
+def _blank(entry: dict, default: str) -> str:
+    """The grating blank a measurement sees: ``blank``, else ``default``; a blank named as a
+    grating is spelled as the grating is (``"j"`` is blank ``"J"``: one blank, one amplitude)."""
+    from optics.grating import GRATINGS
+
+    b = str(entry.get("blank", default))
+    key = b.upper().replace("+", "")
+    return key if key in GRATINGS else b
 
 
 def _correlated_noise(entry: dict, name: str) -> dict:
@@ -571,7 +596,11 @@ def parse_manifest(data: dict, base_dir: str | Path | None = None, source: str =
     top = set(data) - {"simulation", "measurement"}
     if top:
         raise unknown_keys_error("manifest", top, ("simulation", "measurement"))
-    sim = dict(data.get("simulation", {}))
+    sim = data.get("simulation", {})
+    if not isinstance(sim, dict):
+        raise ValueError(f"[simulation] is a {type(sim).__name__} ({sim!r:.60}), not a table: write it as "
+                         "[simulation] followed by key = value lines (once, not [[simulation]])")
+    sim = dict(sim)
     unknown = set(sim) - set(SIMULATION_KEYS)
     if unknown:
         raise unknown_keys_error("[simulation]", unknown, SIMULATION_KEYS)

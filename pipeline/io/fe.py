@@ -3,7 +3,8 @@
 Formats (read with meshio): VTU/VTK, XDMF (XML data; HDF5 data needs h5py), Exodus II
 (``.exo``/``.e``), gmsh ``.msh`` — with the displacement as point data — and Abaqus
 ``.inp`` / Nastran ``.bdf``/``.nas`` meshes with the displacements in a CSV
-``node_id,ux,uy,uz`` (header optional, ``#`` comments) keyed by the solver's node IDs.
+``node_id,ux,uy,uz`` (columns found by their header names, other columns ignored; without
+a header exactly these four; ``#`` comments) keyed by the solver's node IDs.
 A CSV next to another format is keyed by 1-based point number.
 
 The displacement field is the point-data array named ``field``, or, by default, the one
@@ -95,25 +96,65 @@ def _node_ids(path: Path) -> np.ndarray | None:
     return np.array(ids, dtype=np.int64)
 
 
+#: Header names of a displacement CSV's columns (lower case, spaces, dots and dashes read as
+#: underscores): Abaqus's report ("Node Label", "U-U1"), Ansys's ("UX"), generic ones.
+_CSV_COLUMNS = {
+    "node_id": ("node_id", "node", "id", "nodeid", "node_label", "label", "node_number", "nid"),
+    "ux": ("ux", "u_x", "u1", "u_u1", "dx", "disp_x", "displacement_x", "x_displacement"),
+    "uy": ("uy", "u_y", "u2", "u_u2", "dy", "disp_y", "displacement_y", "y_displacement"),
+    "uz": ("uz", "u_z", "u3", "u_u3", "dz", "disp_z", "displacement_z", "z_displacement"),
+}
+
+
+def _csv_fields(line: str) -> list[str]:
+    for d in (",", ";", "\t"):
+        if d in line:
+            return [p.strip() for p in line.split(d)]
+    return line.split()
+
+
 def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    rows = []
-    with path.open(encoding="utf-8") as fh:
+    """(node IDs, displacements (n, 3)) of a displacement CSV: columns found by their
+    header names (:data:`_CSV_COLUMNS`, other columns such as a magnitude or the
+    coordinates ignored), or, without a header, exactly ``node_id,ux,uy,uz``; comma,
+    semicolon, tab or whitespace delimited; a node listed twice is refused."""
+    rows, lines, cols = [], [], None
+    with path.open(encoding="utf-8", errors="replace") as fh:
         for lineno, line in enumerate(fh, 1):
             s = line.split("#", 1)[0].strip()
             if not s:
                 continue
-            parts = [p.strip() for p in s.split(",")]
+            parts = _csv_fields(s)
             try:
-                rows.append((int(float(parts[0])), *map(float, parts[1:4])))
-                if len(parts) < 4:
-                    raise ValueError
-            except (ValueError, IndexError):
-                if rows:  # a header is allowed on the first data line only
-                    raise ValueError(f"{path}:{lineno}: expected 'node_id,ux,uy,uz', got {s!r}") from None
+                values = [float(p) for p in parts]
+            except ValueError:
+                if rows or cols is not None:  # one header line, before the data
+                    raise ValueError(f"{path}:{lineno}: non-numeric value in {s!r}") from None
+                names = [re.sub(r"[\s.\-]+", "_", p.strip().lower()) for p in parts]
+                cols = [next((i for i, n in enumerate(names) if n in alts), None) for alts in _CSV_COLUMNS.values()]
+                if None in cols:
+                    missing = [k for k, c in zip(_CSV_COLUMNS, cols) if c is None]
+                    raise ValueError(f"{path}:{lineno}: header {parts} has no column for {missing}; accepted names: "
+                                     + "; ".join(f"{k}: {', '.join(v)}" for k, v in _CSV_COLUMNS.items())) from None
+                continue
+            if cols is None and len(values) != 4:
+                raise ValueError(f"{path}:{lineno}: {len(values)} values and no header line; a CSV without a header "
+                                 "must hold exactly node_id,ux,uy,uz (add a header naming the columns)")
+            take = cols if cols is not None else [0, 1, 2, 3]
+            if max(take) >= len(values):
+                raise ValueError(f"{path}:{lineno}: expected {max(take) + 1} values, got {s!r}")
+            rows.append([values[i] for i in take])
+            lines.append(lineno)
     if not rows:
         raise ValueError(f"{path}: no rows 'node_id,ux,uy,uz'")
     a = np.array(rows)
-    return a[:, 0].astype(np.int64), a[:, 1:4]
+    ids = a[:, 0].astype(np.int64)
+    order = np.argsort(ids, kind="stable")
+    dup = np.flatnonzero(np.diff(ids[order]) == 0)
+    if dup.size:
+        i, j = order[dup[0]], order[dup[0] + 1]
+        raise ValueError(f"{path}: node {ids[i]} is listed twice (lines {lines[i]} and {lines[j]})")
+    return ids, a[:, 1:4]
 
 
 def _pick_field(point_data: dict, name: str | None, source: str) -> np.ndarray:

@@ -133,6 +133,12 @@ def write_zemax_grid_sag(sagmap: SagMap, path: str | Path) -> Path:
     return path
 
 
+def _uncommented(text: str) -> list[tuple[int, str]]:
+    """``(line number, line)`` of a Zemax data file with ``!`` comments (a writer's title
+    line: ``! Grid sag written by MATLAB``) removed."""
+    return [(n, s.split("!", 1)[0]) for n, s in numbered_lines(text)]
+
+
 def read_zemax_grid_sag(path: str | Path) -> SagMap:
     """Read a Zemax Grid Sag ``.dat`` file into a :class:`SagMap`.
 
@@ -153,7 +159,7 @@ def read_zemax_grid_sag(path: str | Path) -> SagMap:
         columns, a bad ``nodata`` flag, or a truncated / over-long file.
     """
     path = Path(path)
-    lines = [(n, s) for n, s in numbered_lines(read_text(path, "Zemax grid sag")) if s.strip()]
+    lines = [(n, s) for n, s in _uncommented(read_text(path, "Zemax grid sag")) if s.strip()]
     if not lines:
         raise parse_error(path, None, "file is empty; expected header 'nx ny delx dely unitflag xdec ydec'")
     n0, head = lines[0]
@@ -290,15 +296,18 @@ def read_zemax_zernike(path: str | Path, convention: str, normalised: bool) -> t
     convention = _zernike_convention(convention)
     surface, to_nm, _, file_norm, max_terms = ZEMAX_ZERNIKE[convention]
     path = Path(path)
-    values = [(n, t) for n, s in numbered_lines(read_text(path, f"{surface} coefficients")) for t in s.split()]
+    values = [(n, t) for n, s in _uncommented(read_text(path, f"{surface} coefficients")) for t in s.split()]
     if len(values) < 2:
         raise parse_error(path, values[-1][0] if values else None,
                           "file ends early; expected the number of terms, the normalisation radius and coefficients")
     (n0, t0), (n1, t1) = values[:2]
     try:
-        n_terms = int(t0)
+        n_terms = float(t0)  # "9" or, as some writers print every number, "9.000000E+000"
     except ValueError:
-        raise parse_error(path, n0, f"number of terms {t0!r} is not an integer") from None
+        n_terms = None
+    if n_terms is None or not n_terms.is_integer():
+        raise parse_error(path, n0, f"number of terms {t0!r} is not an integer")
+    n_terms = int(n_terms)
     if not 1 <= n_terms <= max_terms:
         raise parse_error(path, n0, f"number of terms {n_terms} must be in 1..{max_terms} for {surface}")
     radius = parse_radius(path, n1, t1, "normalisation radius")
