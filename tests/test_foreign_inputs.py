@@ -326,3 +326,18 @@ def _with_displacement(path):
     out = path.with_name("u_" + path.name)
     meshio.write(out, m)
     return out
+
+
+def test_a_wavefront_file_in_a_manifest_takes_its_factor(tmp_path):
+    from pipeline.diagnosis.manifest import load_data, parse_manifest
+
+    counts = np.arange(400).reshape(20, 20) - 200  # OPD = counts / SSZ * WVL
+    (tmp_path / "w.int").write_text("interferometer export\nGRD 20 20 WFR WVL 0.6328 SSZ 1000 NDA 32767\n"
+                                    + "\n".join(" ".join(str(c) for c in row) for row in counts) + "\n")
+    entry = {"kind": "surface", "file": "w.int", "temperature_K": 128, "spacing_mm": 5.0}
+    with pytest.raises(ValueError, match=r"WFR is a wavefront .*pass wfr_to_sag_factor"):
+        load_data(parse_manifest({"measurement": [entry]}, tmp_path))
+    (sd,) = load_data(parse_manifest({"measurement": [{**entry, "wfr_to_sag_factor": -0.5}]}, tmp_path))
+    np.testing.assert_allclose(np.sort(sd.sagmap.sag_um.ravel()), np.sort(-0.5 * counts.ravel() / 1000 * 0.6328))
+    with pytest.raises(ValueError, match=r"wfr_to_sag_factor.*0.*must be a finite non-zero number"):
+        parse_manifest({"measurement": [{**entry, "wfr_to_sag_factor": 0}]}, tmp_path)

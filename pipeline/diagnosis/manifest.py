@@ -116,7 +116,7 @@ _COMMON_KEYS = ("name", "kind", "file", "blank")
 #: Valid fields of a [[measurement]] table, per kind.
 MEASUREMENT_KEYS = {
     "surface": _COMMON_KEYS + ("grating", "temperature_K", "aperture_diameter_mm", "noise_um", "spacing_mm",
-                               "extent_mm", "wavelength_um", "centre_mm", "sag_sign"),
+                               "extent_mm", "wavelength_um", "centre_mm", "sag_sign", "wfr_to_sag_factor"),
     "line_profile": _COMMON_KEYS + ("grating", "order", "wavelength_um", "pixel_scale_mas", "slit_position",
                                     "noise_rel", "noise_counts", "interpixel_coupling", "correlated_noise_rel",
                                     "correlated_noise_counts", "correlation_length_um"),
@@ -229,6 +229,9 @@ class Measurement:
     #: +1, or -1 for a map whose heights are measured the other way (surface height along
     #: -z, the grating's sag along +z): multiplies the file's values.
     sag_sign: int = 1
+    #: ``sag = factor * wavefront`` for a CODE V ``WFR`` file (a grating measured in
+    #: reflection: ``-1 / (cos alpha + cos beta)`` of the test's angles); None: a sag file.
+    wfr_to_sag_factor: float | None = None
 
     @property
     def correlated_noise(self) -> CorrelatedNoise | None:
@@ -242,7 +245,8 @@ class Measurement:
         """Keyword options for :func:`pipeline.io.registry.read_sag_map` (surfaces)."""
         if self.kind != "surface":
             return {}
-        opts = {"spacing_mm": self.spacing_mm, "extent_mm": self.extent_mm, "wavelength_um": self.wavelength_um}
+        opts = {"spacing_mm": self.spacing_mm, "extent_mm": self.extent_mm, "wavelength_um": self.wavelength_um,
+                "wfr_to_sag_factor": self.wfr_to_sag_factor}
         return {k: v for k, v in opts.items() if v is not None}
 
 
@@ -483,11 +487,15 @@ def _measurement(entry: dict, index: int, base: Path, contained: bool = False) -
         sign = entry.get("sag_sign", 1)
         if isinstance(sign, bool) or sign not in (1, -1):
             raise _err(name, "sag_sign", sign, "must be 1 or -1 (-1: the file's heights are along -z)")
+        wfr = _number(entry, "wfr_to_sag_factor", name)
+        if wfr is not None and not (math.isfinite(wfr) and wfr != 0):
+            raise _err(name, "wfr_to_sag_factor", wfr, "must be a finite non-zero number (sag = factor x "
+                       "wavefront; a reflective grating: -1 / (cos alpha + cos beta) of the test's angles)")
         return Measurement(name, kind, path, blank, temperature_K=float(t), aperture_diameter_mm=float(ap),
                            grating=grating, noise_um=noise_um, spacing_mm=spacing, extent_mm=extent,
                            wavelength_um=None if wl is None else float(wl),
                            centre_mm=None if centre is None else (float(centre[0]), float(centre[1])),
-                           sag_sign=int(sign))
+                           sag_sign=int(sign), wfr_to_sag_factor=None if wfr is None else float(wfr))
     from optics.grating import GRATINGS
 
     key = _grating_key(entry, name, required=True)
