@@ -341,3 +341,13 @@ def test_a_wavefront_file_in_a_manifest_takes_its_factor(tmp_path):
     np.testing.assert_allclose(np.sort(sd.sagmap.sag_um.ravel()), np.sort(-0.5 * counts.ravel() / 1000 * 0.6328))
     with pytest.raises(ValueError, match=r"wfr_to_sag_factor.*0.*must be a finite non-zero number"):
         parse_manifest({"measurement": [{**entry, "wfr_to_sag_factor": 0}]}, tmp_path)
+
+
+def test_a_codev_grid_option_that_contradicts_the_files_title_is_refused(tmp_path):
+    counts = np.arange(25).reshape(5, 5)
+    (tmp_path / "m.int").write_text("map EXTENT_MM -8 8 -8 8\nGRD 5 5 SUR WVL 1.0 SSZ 1000 NDA 32767\n"
+                                    + "\n".join(" ".join(str(c) for c in row) for row in counts) + "\n")
+    assert ic.read_sag_map(tmp_path / "m.int", spacing_mm=4.0).x_mm[1] == pytest.approx(-4.0)  # agrees
+    with pytest.raises(ValueError, match=r"m\.int: the title's 'EXTENT_MM -8 8 -8 8' gives a 4 x 4 mm step but the "
+                                         r"spacing_mm argument, centred gives 2 x 2 mm"):
+        ic.read_sag_map(tmp_path / "m.int", spacing_mm=2.0)

@@ -179,9 +179,20 @@ def write_codev_int(
 
 def _grid_coordinates(path, nx, ny, title, extent_mm, spacing_mm):
     given = grid_from_options(nx, ny, extent_mm, spacing_mm)
-    if given is not None:
-        return given
     m = _EXTENT_RE.search(title)
+    if given is not None:
+        if m:  # the file says its grid too: a contradiction is not settled by silently taking one
+            try:
+                own = np.array([float(g) for g in m.groups()])
+            except ValueError:
+                own = None
+            steps = [(own[1] - own[0]) / (nx - 1), (own[3] - own[2]) / (ny - 1)] if own is not None else None
+            got = [given[0][1] - given[0][0], given[1][1] - given[1][0]]
+            if steps is not None and not np.allclose(steps, got, rtol=1e-6):
+                raise parse_error(path, None, f"the title's {m.group(0)!r} gives a {steps[0]:g} x {steps[1]:g} mm "
+                                              f"step but the {given[2]} gives {got[0]:g} x {got[1]:g} mm; leave "
+                                              "the option out, or correct the file's title")
+        return given
     if m:
         try:
             x0, x1, y0, y1 = (float(g) for g in m.groups())
@@ -306,10 +317,11 @@ def read_codev_int(
     path : str or Path
         The ``.int`` file.
     extent_mm : (xmin, xmax, ymin, ymax), optional
-        Coordinates of the first/last sample centres (mm). Overrides the title.
+        Coordinates of the first/last sample centres (mm), for a file whose title has no
+        ``EXTENT_MM``; where it has one, its step must agree (the origin is the option's).
     spacing_mm : float or (dx, dy), optional
         Sample spacing (mm); the grid is then centred on the origin. Used when
-        ``extent_mm`` is not given; overrides the title.
+        ``extent_mm`` is not given; a title's ``EXTENT_MM`` step must agree with it.
     quantity : {"sag", "wavefront"}
         What the returned ``sag_um`` holds. ``"sag"`` (default): surface height; a
         ``WFR`` file is refused unless ``wfr_to_sag_factor`` is given.
