@@ -351,3 +351,9 @@ def test_a_codev_grid_option_that_contradicts_the_files_title_is_refused(tmp_pat
     with pytest.raises(ValueError, match=r"m\.int: the title's 'EXTENT_MM -8 8 -8 8' gives a 4 x 4 mm step but the "
                                          r"spacing_mm argument, centred gives 2 x 2 mm"):
         ic.read_sag_map(tmp_path / "m.int", spacing_mm=2.0)
+
+
+def test_a_codev_wavelength_in_nanometres_is_refused(tmp_path):
+    (tmp_path / "m.int").write_text("GRD 3 3 SUR WVL 632.8 SSZ 1000 NDA 32767\n1 2 3 4 5 6 7 8 9\n")
+    with pytest.raises(ValueError, match=r"m\.int, line 1: WVL 632\.8 is outside 0\.1\.\.30: the wavelength is in µm"):
+        ic.read_sag_map(tmp_path / "m.int", spacing_mm=1.0)

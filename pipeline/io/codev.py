@@ -77,6 +77,9 @@ MAX_COUNT = 32766
 #: No-data value written, and assumed for files without ``NDA``.
 CODEV_NDA = 32767
 _MARKERS = (32767, -32768)  # 16-bit values that only ever mean "no data"
+#: Wavelengths (µm) a test interferometer works at: UV to thermal infrared. A WVL outside is
+#: a unit slip (632.8 for a HeNe's 0.6328 µm), which would scale every height 1000 times.
+WVL_RANGE_UM = (0.1, 30.0)
 _LINE_MAX = 80
 _VALUED = {"WVL": float, "SSZ": float, "NDA": int, "XSC": float, "YSC": float}
 _OTHER_FILE_TYPES = ("ZFR", "ZRN", "DEF", "FIL", "ZSD")  # other INT variants, not grids
@@ -223,6 +226,9 @@ def _parse_header(path, lineno: int, line: str) -> dict:
     for key in ("WVL", "SSZ"):
         if key not in hdr:
             raise parse_error(path, lineno, f"header has no {key} (needed to convert counts to um)")
+    if not WVL_RANGE_UM[0] <= hdr["WVL"] <= WVL_RANGE_UM[1]:
+        raise parse_error(path, lineno, f"WVL {hdr['WVL']:g} is outside {WVL_RANGE_UM[0]:g}..{WVL_RANGE_UM[1]:g}: "
+                                        "the wavelength is in µm (a 632.8 is nm, 0.6328 µm)")
     return hdr
 
 
