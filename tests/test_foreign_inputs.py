@@ -357,3 +357,23 @@ def test_a_codev_wavelength_in_nanometres_is_refused(tmp_path):
     (tmp_path / "m.int").write_text("GRD 3 3 SUR WVL 632.8 SSZ 1000 NDA 32767\n1 2 3 4 5 6 7 8 9\n")
     with pytest.raises(ValueError, match=r"m\.int, line 1: WVL 632\.8 is outside 0\.1\.\.30: the wavelength is in µm"):
         ic.read_sag_map(tmp_path / "m.int", spacing_mm=1.0)
+
+
+def test_an_xdmf_time_series_gives_its_last_step(tmp_path, monkeypatch):
+    # dolfinx's write_function and meshio's TimeSeriesWriter write one grid per step
+    pytest.importorskip("h5py")
+    import meshio
+
+    from pipeline.io.fe import read_fe_result
+
+    path, u = _fe_block(tmp_path)
+    mesh = meshio.read(path)
+    monkeypatch.chdir(tmp_path)  # the writer puts its .h5 beside the working directory
+    with meshio.xdmf.TimeSeriesWriter(tmp_path / "ts.xdmf") as w:
+        w.write_points_cells(mesh.points, mesh.cells)
+        w.write_data(0.0, point_data={"u": 0.0 * u})
+        w.write_data(1.0, point_data={"u": u})
+    monkeypatch.chdir("/")
+    r = read_fe_result(tmp_path / "ts.xdmf")
+    np.testing.assert_allclose(r.displacement_mm, u)
+    assert r.field_data["time_step"] == 1.0

@@ -113,6 +113,27 @@ def _csv_fields(line: str) -> list[str]:
     return line.split()
 
 
+#: Why meshio's Abaqus reader fails with a KeyError on a node ID, and what to do.
+_INP_HINT = ("meshio's Abaqus reader takes the nodes of one *NODE block (several blocks, or an *INCLUDE, leave "
+             "elements referring to nodes it has not read): merge the *NODE blocks into one")
+
+
+def _xdmf_last_step(path: Path):
+    """The last time step of an XDMF time series (dolfinx ``write_function``, meshio's
+    ``TimeSeriesWriter``) as one mesh with its point data, or None if ``path`` is not one."""
+    import meshio
+
+    try:
+        with meshio.xdmf.TimeSeriesReader(path) as reader:
+            points, cells = reader.read_points_cells()
+            if reader.num_steps < 1:
+                return None
+            t, point_data, _ = reader.read_data(reader.num_steps - 1)
+    except Exception:  # not a time series either: the caller's error stands
+        return None
+    return meshio.Mesh(points, cells, point_data=point_data, field_data={"time_step": t})
+
+
 def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """(node IDs, displacements (n, 3)) of a displacement CSV: columns found by their
     header names (:data:`_CSV_COLUMNS`, other columns such as a magnitude or the
@@ -213,10 +234,16 @@ def read_fe_result(path, *, displacement_csv=None, field: str | None = None,
         raise ValueError(f"{path}: reading this format needs the Python package {exc.name!r} "
                          "(pip install 'cryograting[xdmf]' for h5py)") from None
     except Exception as exc:  # meshio raises many types (ReadError, KeyError, ...) for files it cannot read
-        raise ValueError(f"{path}: meshio cannot read it as an FE mesh ({type(exc).__name__}: {exc})") from None
+        mesh = _xdmf_last_step(path) if path.suffix.lower() == ".xdmf" else None
+        if mesh is None:
+            raise ValueError(f"{path}: meshio cannot read it as an FE mesh ({type(exc).__name__}: {exc})"
+                             + (f"; {_INP_HINT}" if path.suffix.lower() == ".inp" and isinstance(exc, KeyError)
+                                else "")) from None
     except SystemExit:  # meshio ends the process (sys.exit(1)) when no reader of the suffix can read the file
-        why = " ".join(said.getvalue().split()) or "no reader of its suffix's format could read it"
-        raise ValueError(f"{path}: meshio cannot read it as an FE mesh ({why})") from None
+        mesh = _xdmf_last_step(path) if path.suffix.lower() == ".xdmf" else None
+        if mesh is None:
+            why = " ".join(said.getvalue().split()) or "no reader of its suffix's format could read it"
+            raise ValueError(f"{path}: meshio cannot read it as an FE mesh ({why})") from None
     points = np.asarray(mesh.points, float)
     if points.shape[1] == 2:
         points = np.column_stack([points, np.zeros(len(points))])
