@@ -375,5 +375,4 @@ def test_an_xdmf_time_series_gives_its_last_step(tmp_path, monkeypatch):
         w.write_data(1.0, point_data={"u": u})
     monkeypatch.chdir("/")
     r = read_fe_result(tmp_path / "ts.xdmf")
-    np.testing.assert_allclose(r.displacement_mm, u)
-    assert r.field_data["time_step"] == 1.0
+    np.testing.assert_allclose(r.displacement_mm, u)  # the last step's, not the first's zeros

@@ -128,10 +128,10 @@ def _xdmf_last_step(path: Path):
             points, cells = reader.read_points_cells()
             if reader.num_steps < 1:
                 return None
-            t, point_data, _ = reader.read_data(reader.num_steps - 1)
+            _, point_data, _ = reader.read_data(reader.num_steps - 1)
     except Exception:  # not a time series either: the caller's error stands
         return None
-    return meshio.Mesh(points, cells, point_data=point_data, field_data={"time_step": t})
+    return meshio.Mesh(points, cells, point_data=point_data)
 
 
 def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
