@@ -31,6 +31,7 @@ import difflib
 import hashlib
 import json
 import math
+import re
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 
@@ -313,7 +314,10 @@ class FEACase:
             objects = self.to_objects()
         except ParameterError as exc:
             key = _FIELD_TO_KEY.get(exc.parameter, exc.parameter)
-            raise ParameterError(key, exc.value, str(exc)) from None
+            msg = str(exc)
+            for f, k in _FIELD_TO_KEY.items():  # the message names the keys the user wrote
+                msg = re.sub(rf"\b{f}=", f"{k}=", msg)
+            raise ParameterError(key, exc.value, msg) from None
         for name in _BLANK_KEYS:
             PARAMETERS[name].check_range(getattr(self, name))
         blank, spec = objects.blank, objects.mesh

@@ -134,7 +134,7 @@ def test_python_construction_and_mesh_override():
     assert coarse.cases()[0].params == {"coverage": "all", "t0_um": 100.0, "polish": 0.75,
                                         "mesh_size_mm": 5.0, "mesh_bulk_mm": 10.0}
     assert [j.deformation for j in coarse.profile_jobs()] == ["100/75"] * 3
-    with pytest.raises(ConfigError, match=r"mesh_bulk_mm = 1.0: .*size_bulk_mm=1.0: valid range is >= size_mm"):
+    with pytest.raises(ConfigError, match=r"mesh_bulk_mm = 1.0: .*mesh_bulk_mm=1.0: valid range is >= mesh_size_mm"):
         cfg.with_mesh(5, 1)
 
 
@@ -149,7 +149,7 @@ def test_python_construction_and_mesh_override():
     ("[fea]\npolish = {start = 0.5, stop = 1, steps = 0.1}\n", r"fea\.polish\.steps: unknown key; did you mean 'step'"),
     ("[fea]\nt0_um = [200, 200.0]\n", r"fea\.t0_um = .*repeats the value 200.0"),
     ("[fea]\nt0_um = -10\n", r"fea\.t0_um = -10\.0: t0_um=-10\.0 is outside the valid range \(0, 2000\] µm"),
-    ("[fea]\npolish = 1.5\n", r"fea\.polish = 1\.5: polish_front=1\.5 is outside the valid range \(0, 1\]"),
+    ("[fea]\npolish = 1.5\n", r"fea\.polish = 1\.5: polish=1\.5 is outside the valid range \(0, 1\]"),
     ("[fea]\ncold_K = 500\n", r"fea\.cold_K = 500\.0: cold_K=500\.0 K is outside .* \(4\.\.300 K\)"),
     ("[fea]\nsubstrate = 'steel'\n", r"fea\.substrate = 'steel': unknown value.*allowed: one of Al6061-T6, AlSi40, NiP"),
     ("[fea]\ncoverage = 'hole'\n", r"fea\.coverage = 'hole': unknown value; did you mean 'holes'\?"),
@@ -159,7 +159,7 @@ def test_python_construction_and_mesh_override():
     ("[fea]\nthickness_mm = 10\n[[fea.cases]]\nname = 'a'\n",
      r"fea\.cases\[0\]: invalid case thickness_mm=10\.0: hole_diameter_mm=15\.0: .*breaks through"),
     ("[fea]\npolish = 0.5\npolish_front = 0.5\n", r"fea\.polish_front: give either polish"),
-    ("[fea]\nmesh_size_mm = 0\n", r"fea\.mesh_size_mm = 0\.0: size_mm=0\.0: valid range"),
+    ("[fea]\nmesh_size_mm = 0\n", r"fea\.mesh_size_mm = 0\.0: mesh_size_mm=0\.0: valid range"),
     ("[[fea.cases]]\nname = 'a'\n[[fea.cases]]\nname = 'a'\nsubstrate = 'AlSi40'\n",  # labels would clash
      r"fea\.cases: two different cases get the label '200/75 a'; give the \[\[fea\.cases\]\] tables distinct"),
     ("[[profiles]]\ngrating = 'Q'\n", r"profiles\[0\]\.grating = 'Q': unknown value"),

@@ -101,7 +101,7 @@ def test_eighth_model_refuses_asymmetric_coating(eighth):
 
 @pytest.mark.parametrize("axes, match", [
     (dict(t0_um=[-10]), r"t0_um=-10.0 is outside the valid range"),
-    (dict(polish=[1.5]), r"polish_front=1.5 is outside the valid range"),
+    (dict(polish=[1.5]), r"polish=1.5 is outside the valid range"),
     (dict(coverage=["inside"]), r"coverage='inside' is unknown"),
     (dict(hole_diameter_mm=[21]), r"hole_diameter_mm"),
     (dict(cold_K=[500]), None),
@@ -143,4 +143,4 @@ def test_cli_reports_bad_input_without_traceback(tmp_path, capsys):
     from pipeline.cli import main
 
     assert main(["sweep", "--polish", "0", "--out", str(tmp_path)]) == 2
-    assert "polish_front=0.0 is outside the valid range (0, 1]" in capsys.readouterr().err
+    assert "--polish 0.0 is outside the valid range (0, 1]" in capsys.readouterr().err

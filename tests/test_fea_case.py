@@ -66,7 +66,7 @@ BIG = 2e30  # a memory budget nothing exceeds: these refusals are about the valu
     ({"substrate": "steel"}, "substrate", r"substrate='steel' is unknown; valid values are \['Al6061-T6'"),
     ({"film": 3}, "film", r"film=3 must be a string"),
     ({"t0_um": -10}, "t0_um", r"t0_um=-10\.0 is outside the valid range \(0, 2000\] µm"),
-    ({"polish": 1.5}, "polish", r"polish_front=1\.5 is outside the valid range \(0, 1\]"),
+    ({"polish": 1.5}, "polish", r"polish=1\.5 is outside the valid range \(0, 1\]"),
     ({"polish_back": 0}, "polish_back", r"polish_back=0\.0 is outside the valid range \(0, 1\]"),
     ({"cold_K": 500}, "cold_K", r"cold_K=500\.0 K is outside the thermal-strain data range of Al6061-T6 \(4\.\.300 K\)"),
     ({"cold_K": 290, "warm_K": 200}, "cold_K", r"cold_K=290 K must be below warm_K=200 K"),
@@ -81,7 +81,7 @@ BIG = 2e30  # a memory budget nothing exceeds: these refusals are about the valu
      r"n_holes_x=101 is outside the valid range \[0, 100\]"),
     ({"n_holes_y": -1}, "n_holes_y", r"n_holes_y=-1: valid range is integers >= 0"),
     ({"mesh_size_mm": 0}, "mesh_size_mm", r"size_mm=0\.0: valid range is a finite number > 0 mm"),
-    ({"mesh_size_mm": 2, "mesh_bulk_mm": 1}, "mesh_bulk_mm", r"size_bulk_mm=1\.0: valid range is >= size_mm=2\.0"),
+    ({"mesh_size_mm": 2, "mesh_bulk_mm": 1}, "mesh_bulk_mm", r"mesh_bulk_mm=1\.0: valid range is >= mesh_size_mm=2\.0"),
     ({"mesh_size_mm": 30, "mesh_bulk_mm": 40}, "mesh_size_mm", r"mesh_size_mm=30 is larger than the blank's "
      r"thickness_mm=20; valid range is 0 < mesh_size_mm <= thickness_mm"),
     ({"mesh_bulk_mm": 200}, "mesh_bulk_mm", r"mesh_bulk_mm=200 is larger than the blank \(160 mm\); valid range"),
