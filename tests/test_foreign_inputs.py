@@ -376,3 +376,31 @@ def test_an_xdmf_time_series_gives_its_last_step(tmp_path, monkeypatch):
     monkeypatch.chdir("/")
     r = read_fe_result(tmp_path / "ts.xdmf")
     np.testing.assert_allclose(r.displacement_mm, u)  # the last step's, not the first's zeros
+
+
+# ------------------------------------------------------------------ what the project writes for other programs
+def test_a_label_from_another_file_keeps_the_headers_ascii(tmp_path):
+    from optics.sagmap import SagMap
+
+    m = SagMap(np.arange(4.0), np.arange(3.0), np.ones((3, 4)), "Δsag µm 20 K\nsecond line " + "x" * 80)
+    ic.write_sag_map(m, tmp_path / "m.int")
+    title = (tmp_path / "m.int").read_bytes().split(b"\n")[0]
+    assert len(title) <= 80 and title.isascii() and title.startswith(b"dsag um 20 K second line")
+    ic.write_sag_map(m, tmp_path / "m.fits")  # astropy refuses a non-ASCII or multi-line card
+    from astropy.io import fits
+
+    assert fits.getheader(tmp_path / "m.fits")["OBJECT"].startswith("dsag um 20 K second line")
+
+
+def test_a_netcdf_map_says_cf_and_its_coordinates_have_no_fill_value(tmp_path):
+    import netCDF4
+
+    from optics.sagmap import SagMap
+
+    sag = np.ones((3, 4))
+    sag[1, 1] = np.nan
+    ic.write_sag_map(SagMap(np.arange(4.0), np.arange(3.0), sag, "m"), tmp_path / "m.nc")
+    with netCDF4.Dataset(tmp_path / "m.nc") as ds:
+        assert ds.Conventions == "CF-1.8"
+        assert "_FillValue" not in ds["x_mm"].ncattrs() and ds["x_mm"].axis == "X" and ds["x_mm"].units == "mm"
+        assert np.isnan(ds["sag_um"]._FillValue) and ds["sag_um"].units == "um"

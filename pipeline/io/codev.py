@@ -66,7 +66,7 @@ import numpy as np
 from optics.sagmap import SagMap
 from pipeline.io.codev_header import DATA_TYPES, parse_keywords, split_int_file
 from pipeline.io.codev_quantity import check_request, grating_wfr_to_sag_factor, sag_factor
-from pipeline.io.common import atomic_write, parse_error
+from pipeline.io.common import ascii_label, atomic_write, parse_error
 from pipeline.io.gridding import GridUnknownError, grid_from_options
 
 __all__ = ["GridUnknownError", "write_codev_int", "read_codev_int", "grating_wfr_to_sag_factor", "choose_ssz",
@@ -106,7 +106,7 @@ def _title(label: str, x_mm: np.ndarray, y_mm: np.ndarray) -> str:
             break
     room = _LINE_MAX - len(ext) - 1
     # '!' starts a comment for CODE V and for our reader: never put one in the title
-    clean = " ".join((label or "cryograting").replace("!", " ").split())[:room] or "cryograting"
+    clean = ascii_label((label or "cryograting").replace("!", " "), room) or "cryograting"  # 80-byte records
     return f"{clean} {ext}".strip()
 
 

@@ -38,9 +38,26 @@ from fea.atomic import atomic_path, atomic_write
 from pipeline.io.columns import ANY_UNIT, matches
 from pipeline.io.gridding import SAG_UNITS_TO_UM
 
-__all__ = ["atomic_write", "atomic_path", "parse_error", "numbered_lines", "read_text",
+__all__ = ["atomic_write", "atomic_path", "ascii_label", "parse_error", "numbered_lines", "read_text",
            "decode_text", "read_csv_columns", "read_csv_choices", "decimal_commas", "PREAMBLE_LINES",
            "MISSING_CELLS"]
+
+
+#: Spellings of the non-ASCII characters a label of ours or a user's may carry.
+_ASCII_FOR = {"µ": "u", "μ": "u", "Δ": "d", "°": "deg", "Å": "A", "λ": "lambda", "±": "+-", "×": "x"}
+
+
+def ascii_label(text: str, max_len: int) -> str:
+    """``text`` as printable ASCII of at most ``max_len`` characters (bytes), whitespace and
+    control characters collapsed to single spaces: for headers that formats define as ASCII
+    records (a CODE V title line, a FITS card), which a label read from a file (``µ``, a
+    newline) must not break."""
+    import unicodedata
+
+    t = "".join(_ASCII_FOR.get(c, c) for c in str(text))
+    t = unicodedata.normalize("NFKD", t).encode("ascii", "ignore").decode("ascii")
+    t = "".join(c if c.isprintable() else " " for c in t)
+    return " ".join(t.split())[:max_len]
 
 
 def parse_error(path: str | Path, line: int | None, message: str) -> ValueError:

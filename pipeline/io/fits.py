@@ -48,7 +48,7 @@ import numpy as np
 
 from optics.sagmap import SagMap
 from pipeline.io.columns import INTENSITY, TABLE_AXIS_STEMS
-from pipeline.io.common import atomic_path, parse_error
+from pipeline.io.common import ascii_label, atomic_path, parse_error
 from pipeline.io.gridding import SAG_UNITS_TO_UM, GridUnknownError, grid_from_options, sag_unit_factor
 from pipeline.io.measured import checked_profile, checked_psf_image, profile_offsets_um
 
@@ -467,7 +467,7 @@ def write_sag_fits(sagmap: SagMap, path: str | Path) -> Path:
         h[f"CRPIX{i}"] = 1.0
         h[f"CRVAL{i}"] = float(a[0])
         h[f"CDELT{i}"] = step
-    h["OBJECT"] = str(sagmap.label)[:68]
+    h["OBJECT"] = ascii_label(sagmap.label, 68)  # a FITS card is printable ASCII
     path = Path(path)
     with atomic_path(path) as tmp:
         hdu.writeto(tmp, overwrite=True)

@@ -162,14 +162,17 @@ def write_sag_netcdf(sagmap: SagMap, path: str | Path) -> Path:
     ds = xr.Dataset(
         {"sag_um": (("y_mm", "x_mm"), sagmap.sag_um,
                     {"units": "um", "long_name": "surface sag along +z (NaN = no data)"})},
-        coords={"x_mm": ("x_mm", sagmap.x_mm, {"units": "mm", "long_name": "x, dispersion direction"}),
-                "y_mm": ("y_mm", sagmap.y_mm, {"units": "mm", "long_name": "y, ruling direction"})},
-        attrs={"label": sagmap.label, "conventions": "cryograting optics.sagmap frame",
+        coords={"x_mm": ("x_mm", sagmap.x_mm, {"units": "mm", "long_name": "x, dispersion direction", "axis": "X"}),
+                "y_mm": ("y_mm", sagmap.y_mm, {"units": "mm", "long_name": "y, ruling direction", "axis": "Y"})},
+        attrs={"Conventions": "CF-1.8", "label": sagmap.label,
+               "comment": "cryograting optics.sagmap frame: x along the dispersion, y along the rulings, sag along "
+                          "the outward normal +z",
                "meta_json": json.dumps(sagmap.meta, default=str)},
     )
     path = Path(path)
     with atomic_path(path) as tmp:
-        ds.to_netcdf(tmp)  # engine left to xarray: h5netcdf needs h5py, absent here; netCDF4 is used
+        # CF: coordinates have no missing values (xarray would give them a NaN _FillValue)
+        ds.to_netcdf(tmp, encoding={"x_mm": {"_FillValue": None}, "y_mm": {"_FillValue": None}})
     return path
 
 

@@ -27,7 +27,7 @@ cross derivative is the NaN-aware y difference of ``dz/dx``. On reading they are
 ignored (the sag column is the data).
 
 Values are written with 12 significant digits (``%.12g``), i.e. a relative round-off
-of 5e-13: far below anything physical.
+of up to 5e-12: far below anything physical.
 
 Zernike Standard Sag / Zernike Fringe Sag coefficient files
 -----------------------------------------------------------

@@ -239,7 +239,8 @@ def study_dataset(cases, outputs: dict, maps: dict, zfits: list, ffits: list, pr
                                                           "case = -(cos alpha + cos beta) h")
     ds = xr.Dataset(data, coords=coords,
                     attrs={"title": "cryograting study: FEA cases, sag maps, fits, line profiles",
-                           "conventions": "sag along the outward normal +z; x dispersion, y ruling (optics.sagmap)",
+                           "Conventions": "CF-1.8",
+                           "comment": "sag along the outward normal +z; x dispersion, y ruling (optics.sagmap)",
                            **(attrs or {})})
     if profiles_ds is not None:
         ds = ds.merge(profiles_ds, combine_attrs="drop_conflicts")
