@@ -52,8 +52,10 @@ def test_a_single_beside_a_rescaling_and_the_pair_with_it_are_one_model_listed_o
     plain = single_finding("pupil_shift", -70.0, companions=("quilt_shape",))
     assert ranking.model_of(pair) == ranking.model_of(same) == {"amplitude_scale", "slit_width", "quilt_shape"}
     kept = ranking.one_model_each([pair, plain, same, other])
-    assert kept == [pair, plain, other]  # the better-ranked of the two kept, order unchanged
+    assert kept == [plain, same, other]  # the single with its companion kept, wherever it ranks; order unchanged
     assert ranking.one_model_each([same, pair]) == [same]
+    twin = single_finding("slit_width", -89.0, companions=("amplitude_scale", "quilt_shape"))
+    assert ranking.one_model_each([same, twin]) == [same]  # among equals, the better-ranked
 
 
 def test_rescaling_companion_is_checked():
