@@ -299,7 +299,8 @@ def test_a_model_in_inches_keeps_its_face_edge(tmp_path):
     g = np.array([-20.0, 0.0, 20.0])
     pts = np.array([[x, y, z] for z in (0.0, 10.0) for y in g for x in g]) * (1 / 25.4)  # as a converter writes it
     idx = np.arange(18).reshape(2, 3, 3)  # [z, y, x]
-    hexes = [[idx[0, j, i], idx[0, j, i + 1], idx[0, j + 1, i + 1], idx[0, j + 1, i]] for j in range(2) for i in range(2)]
+    hexes = [[idx[0, j, i], idx[0, j, i + 1], idx[0, j + 1, i + 1], idx[0, j + 1, i]]
+             for j in range(2) for i in range(2)]
     hexes = [h + [v + 9 for v in h] for h in hexes]  # the top face's nodes are the bottom's + 9
     u = np.zeros_like(pts)
     u[:, 2] = 1e-4 * (pts[:, 0] * 25.4) ** 2 / 25.4  # 0.1 µm/mm² of x², in inches
