@@ -405,3 +405,15 @@ def test_a_netcdf_map_says_cf_and_its_coordinates_have_no_fill_value(tmp_path):
         assert ds.Conventions == "CF-1.8"
         assert "_FillValue" not in ds["x_mm"].ncattrs() and ds["x_mm"].axis == "X" and ds["x_mm"].units == "mm"
         assert np.isnan(ds["sag_um"]._FillValue) and ds["sag_um"].units == "um"
+
+
+def test_fe_displacements_under_four_names_of_their_own_are_read_in_order(tmp_path):
+    from pipeline.io.fe import read_fe_result
+
+    mesh, u = _fe_block(tmp_path)
+    rows = [f"{i + 1},{u[i, 0]:.17g},{u[i, 1]:.17g},{u[i, 2]:.17g}" for i in range(8)]
+    (tmp_path / "u.csv").write_text("n,dx_mm,dy_mm,dz_mm\n" + "\n".join(rows) + "\n")
+    np.testing.assert_allclose(read_fe_result(mesh, displacement_csv=tmp_path / "u.csv").displacement_mm, u)
+    (tmp_path / "u6.csv").write_text("n,a,b,c,d,e\n" + "\n".join(r + ",0,0" for r in rows) + "\n")
+    with pytest.raises(ValueError, match=r"u6\.csv:1: header .* has no column for \['node_id', 'ux', 'uy', 'uz'\]"):
+        read_fe_result(mesh, displacement_csv=tmp_path / "u6.csv")

@@ -137,7 +137,8 @@ def _xdmf_last_step(path: Path):
 def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """(node IDs, displacements (n, 3)) of a displacement CSV: columns found by their
     header names (:data:`_CSV_COLUMNS`, other columns such as a magnitude or the
-    coordinates ignored), or, without a header, exactly ``node_id,ux,uy,uz``; comma,
+    coordinates ignored), or, without a header or with four columns of other names, exactly
+    ``node_id,ux,uy,uz``; comma,
     semicolon, tab or whitespace delimited; a node listed twice is refused."""
     rows, lines, cols = [], [], None
     with path.open(encoding="utf-8", errors="replace") as fh:
@@ -153,6 +154,8 @@ def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
                     raise ValueError(f"{path}:{lineno}: non-numeric value in {s!r}") from None
                 names = [re.sub(r"[\s.\-]+", "_", p.strip().lower()) for p in parts]
                 cols = [next((i for i, n in enumerate(names) if n in alts), None) for alts in _CSV_COLUMNS.values()]
+                if None in cols and len(parts) == 4:  # names of its own ("n,dx_mm,dy_mm,dz_mm"): by position
+                    cols = [0, 1, 2, 3]
                 if None in cols:
                     missing = [k for k, c in zip(_CSV_COLUMNS, cols) if c is None]
                     raise ValueError(f"{path}:{lineno}: header {parts} has no column for {missing}; accepted names: "
