@@ -216,16 +216,15 @@ def _fe_block(tmp_path):
     return tmp_path / "b.vtu", u
 
 
-@pytest.mark.parametrize("header,columns", [
-    ("Node Label,U-Magnitude,U-U1,U-U2,U-U3", lambda i, u: [i, np.linalg.norm(u), *u]),  # Abaqus report
-    ("node_id,x,y,z,ux,uy,uz", lambda i, u: [i, 1.0, 2.0, 3.0, *u]),
-    ("node_id;uz;uy;ux", lambda i, u: [i, *u[::-1]]),
-    ("NODE UX UY UZ", lambda i, u: [i, *u])])
-def test_fe_displacement_columns_are_read_by_their_names(tmp_path, header, columns):
+@pytest.mark.parametrize("header,sep,columns", [
+    ("Node Label,U-Magnitude,U-U1,U-U2,U-U3", ",", lambda i, u: [i, np.linalg.norm(u), *u]),  # Abaqus report
+    ("node_id,x,y,z,ux,uy,uz", ",", lambda i, u: [i, 1.0, 2.0, 3.0, *u]),
+    ("node_id;uz;uy;ux", ";", lambda i, u: [i, *u[::-1]]),
+    ("NODE UX UY UZ", " ", lambda i, u: [i, *u])])
+def test_fe_displacement_columns_are_read_by_their_names(tmp_path, header, sep, columns):
     from pipeline.io.fe import read_fe_result
 
     mesh, u = _fe_block(tmp_path)
-    sep = ";" if ";" in header else " " if " " in header and "," not in header else ","
     rows = [sep.join(repr(float(v)) if k else str(v) for k, v in enumerate(columns(i + 1, u[i]))) for i in range(8)]
     (tmp_path / "u.csv").write_text(header + "\n" + "\n".join(rows[::-1]) + "\n")
     r = read_fe_result(mesh, displacement_csv=tmp_path / "u.csv")

@@ -183,24 +183,23 @@ def write_codev_int(
 def _grid_coordinates(path, nx, ny, title, extent_mm, spacing_mm):
     given = grid_from_options(nx, ny, extent_mm, spacing_mm)
     m = _EXTENT_RE.search(title)
+    try:
+        own = None if m is None else [float(g) for g in m.groups()]
+    except ValueError:
+        own = None
     if given is not None:
-        if m:  # the file says its grid too: a contradiction is not settled by silently taking one
-            try:
-                own = np.array([float(g) for g in m.groups()])
-            except ValueError:
-                own = None
-            steps = [(own[1] - own[0]) / (nx - 1), (own[3] - own[2]) / (ny - 1)] if own is not None else None
+        if own is not None:  # the file says its grid too: a contradiction is not settled by silently taking one
+            steps = [(own[1] - own[0]) / (nx - 1), (own[3] - own[2]) / (ny - 1)]
             got = [given[0][1] - given[0][0], given[1][1] - given[1][0]]
-            if steps is not None and not np.allclose(steps, got, rtol=1e-6):
+            if not np.allclose(steps, got, rtol=1e-6):
                 raise parse_error(path, None, f"the title's {m.group(0)!r} gives a {steps[0]:g} x {steps[1]:g} mm "
                                               f"step but the {given[2]} gives {got[0]:g} x {got[1]:g} mm; leave "
                                               "the option out, or correct the file's title")
         return given
     if m:
-        try:
-            x0, x1, y0, y1 = (float(g) for g in m.groups())
-        except ValueError:
-            raise parse_error(path, None, f"title EXTENT_MM {m.group(0)!r} is not four numbers") from None
+        if own is None:
+            raise parse_error(path, None, f"title EXTENT_MM {m.group(0)!r} is not four numbers")
+        x0, x1, y0, y1 = own
         if not (x1 > x0 and y1 > y0):
             raise parse_error(path, None, f"title EXTENT_MM {m.group(0)!r} must have max > min")
         return np.linspace(x0, x1, nx), np.linspace(y0, y1, ny), "title EXTENT_MM"

@@ -40,7 +40,7 @@ from pipeline.io.gridding import SAG_UNITS_TO_UM
 
 __all__ = ["atomic_write", "atomic_path", "ascii_label", "parse_error", "numbered_lines", "read_text",
            "decode_text", "read_csv_columns", "read_csv_choices", "decimal_commas", "PREAMBLE_LINES",
-           "MISSING_CELLS"]
+           "MISSING_CELLS", "split_fields"]
 
 
 #: Spellings of the non-ASCII characters a label of ours or a user's may carry.
@@ -115,6 +115,12 @@ def _delimiter(header_line: str, data_line: str | None = None) -> str | None:
         if d in header_line:
             return d
     return None
+
+
+def split_fields(line: str) -> list[str]:
+    """The stripped fields of one delimited line, split at the delimiter it holds
+    (:func:`_delimiter`: comma, semicolon, tab, else runs of whitespace)."""
+    return [f.strip() for f in _split(line, _delimiter(line))]
 
 
 def _split(line: str, delimiter: str | None) -> list[str]:

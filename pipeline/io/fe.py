@@ -25,6 +25,7 @@ import numpy as np
 
 from fea.external import face_sag_map
 from fea.fe_face import parse_surface, select_face
+from pipeline.io.common import numbered_lines, read_text, split_fields
 
 __all__ = ["LENGTH_UNITS_MM", "FEResultData", "read_fe_result", "import_fe"]
 
@@ -106,13 +107,6 @@ _CSV_COLUMNS = {
 }
 
 
-def _csv_fields(line: str) -> list[str]:
-    for d in (",", ";", "\t"):
-        if d in line:
-            return [p.strip() for p in line.split(d)]
-    return line.split()
-
-
 #: Why meshio's Abaqus reader fails with a KeyError on a node ID, and what to do.
 _INP_HINT = ("meshio's Abaqus reader takes the nodes of one *NODE block (several blocks, or an *INCLUDE, leave "
              "elements referring to nodes it has not read): merge the *NODE blocks into one")
@@ -138,37 +132,36 @@ def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """(node IDs, displacements (n, 3)) of a displacement CSV: columns found by their
     header names (:data:`_CSV_COLUMNS`, other columns such as a magnitude or the
     coordinates ignored), or, without a header or with four columns of other names, exactly
-    ``node_id,ux,uy,uz``; comma,
-    semicolon, tab or whitespace delimited; a node listed twice is refused."""
+    ``node_id,ux,uy,uz``; comma, semicolon, tab or whitespace delimited
+    (:func:`pipeline.io.common.split_fields`); a node listed twice is refused."""
     rows, lines, cols = [], [], None
-    with path.open(encoding="utf-8", errors="replace") as fh:
-        for lineno, line in enumerate(fh, 1):
-            s = line.split("#", 1)[0].strip()
-            if not s:
-                continue
-            parts = _csv_fields(s)
-            try:
-                values = [float(p) for p in parts]
-            except ValueError:
-                if rows or cols is not None:  # one header line, before the data
-                    raise ValueError(f"{path}:{lineno}: non-numeric value in {s!r}") from None
-                names = [re.sub(r"[\s.\-]+", "_", p.strip().lower()) for p in parts]
-                cols = [next((i for i, n in enumerate(names) if n in alts), None) for alts in _CSV_COLUMNS.values()]
-                if None in cols and len(parts) == 4:  # names of its own ("n,dx_mm,dy_mm,dz_mm"): by position
-                    cols = [0, 1, 2, 3]
-                if None in cols:
-                    missing = [k for k, c in zip(_CSV_COLUMNS, cols) if c is None]
-                    raise ValueError(f"{path}:{lineno}: header {parts} has no column for {missing}; accepted names: "
-                                     + "; ".join(f"{k}: {', '.join(v)}" for k, v in _CSV_COLUMNS.items())) from None
-                continue
-            if cols is None and len(values) != 4:
-                raise ValueError(f"{path}:{lineno}: {len(values)} values and no header line; a CSV without a header "
-                                 "must hold exactly node_id,ux,uy,uz (add a header naming the columns)")
-            take = cols if cols is not None else [0, 1, 2, 3]
-            if max(take) >= len(values):
-                raise ValueError(f"{path}:{lineno}: expected {max(take) + 1} values, got {s!r}")
-            rows.append([values[i] for i in take])
-            lines.append(lineno)
+    for lineno, line in numbered_lines(read_text(path, "displacement CSV")):
+        s = line.split("#", 1)[0].strip()
+        if not s:
+            continue
+        parts = split_fields(s)
+        try:
+            values = [float(p) for p in parts]
+        except ValueError:
+            if rows or cols is not None:  # one header line, before the data
+                raise ValueError(f"{path}:{lineno}: non-numeric value in {s!r}") from None
+            names = [re.sub(r"[\s.\-]+", "_", p.lower()) for p in parts]
+            cols = [next((i for i, n in enumerate(names) if n in alts), None) for alts in _CSV_COLUMNS.values()]
+            if None in cols and len(parts) == 4:  # names of its own ("n,dx_mm,dy_mm,dz_mm"): by position
+                cols = [0, 1, 2, 3]
+            if None in cols:
+                missing = [k for k, c in zip(_CSV_COLUMNS, cols) if c is None]
+                raise ValueError(f"{path}:{lineno}: header {parts} has no column for {missing}; accepted names: "
+                                 + "; ".join(f"{k}: {', '.join(v)}" for k, v in _CSV_COLUMNS.items())) from None
+            continue
+        if cols is None and len(values) != 4:
+            raise ValueError(f"{path}:{lineno}: {len(values)} values and no header line; a CSV without a header "
+                             "must hold exactly node_id,ux,uy,uz (add a header naming the columns)")
+        take = cols if cols is not None else [0, 1, 2, 3]
+        if max(take) >= len(values):
+            raise ValueError(f"{path}:{lineno}: expected {max(take) + 1} values, got {s!r}")
+        rows.append([values[i] for i in take])
+        lines.append(lineno)
     if not rows:
         raise ValueError(f"{path}: no rows 'node_id,ux,uy,uz'")
     a = np.array(rows)

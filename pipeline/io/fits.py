@@ -197,9 +197,8 @@ def _iraf_unit(header, axis: int) -> str | None:
     wat = "".join(str(header[k]) for k in sorted(k for k in header if k.startswith(f"WAT{axis}_")))
     for word in wat.split():
         key, _, value = word.partition("=")
-        if key.lower() == "units":
+        if key.lower() == "units":  # "angstroms", "nanometers", "microns": spellings _LENGTH_TO_UM holds
             u = value.strip().lower()
-            u = {"angstroms": "angstrom", "nanometers": "nm", "nanometres": "nm", "microns": "um"}.get(u, u)
             return u if u in _LENGTH_TO_UM else None
     return None
 
