@@ -43,7 +43,8 @@ def test_profiles_see_the_total_oblique_astigmatism_through_its_square():
         assert np.max(np.abs(p - minus)) > 0.02 * p.max()
 
 
-@pytest.mark.parametrize("astig45_um", [-0.3, pytest.param(0.4, marks=pytest.mark.slow)])
+@pytest.mark.slow
+@pytest.mark.parametrize("astig45_um", [-0.3, 0.4])
 def test_sign_of_oblique_astigmatism_on_profiles_is_flagged(tmp_path, astig45_um):
     """Profiles of a truth with extra astigmatism ``astig45_um`` (noisy, shifted, scaled,
     with a background): the data are the same for the mirrored total, so the engine must
