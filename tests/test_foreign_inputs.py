@@ -104,6 +104,31 @@ def test_a_sag_in_waves_may_say_lambda(tmp_path):
     np.testing.assert_allclose(m.sag_um, 0.06328 * X)
 
 
+@pytest.mark.parametrize("where", ["variable", "file"])
+def test_a_netcdf_sag_in_waves_takes_the_wavelength_it_states(tmp_path, where):
+    """A NetCDF map in waves that states its wavelength (an attribute of the variable or of
+    the file, in µm or nm) is read with it; a manifest's different wavelength is refused
+    naming both, and one without any names the manifest key."""
+    import xarray as xr
+
+    g = np.arange(-10.0, 10.5, 0.5)
+    X, _ = np.meshgrid(g, g)
+    attrs = {"units": "waves"} | ({"wavelength_um": 0.6328} if where == "variable" else {})
+    ds = xr.Dataset({"height": (("y", "x"), 0.1 * X, attrs)},
+                    coords={"x": ("x", g, {"units": "mm"}), "y": ("y", g, {"units": "mm"})},
+                    attrs={"wavelength_nm": 632.8} if where == "file" else {})
+    ds.to_netcdf(tmp_path / "w.nc")
+    m = ic.read_sag_map(tmp_path / "w.nc")
+    np.testing.assert_allclose(m.sag_um, 0.06328 * X, rtol=1e-12)
+    np.testing.assert_allclose(ic.read_sag_map(tmp_path / "w.nc", wavelength_um=0.6328).sag_um, m.sag_um)
+    with pytest.raises(ValueError, match=r"wavelength_um=0.55 contradicts the file's wavelength_(um|nm) \(0.6328 µm\)"):
+        ic.read_sag_map(tmp_path / "w.nc", wavelength_um=0.55)
+    xr.Dataset({"height": (("y", "x"), 0.1 * X, {"units": "waves"})},
+               coords={"x": ("x", g, {"units": "mm"}), "y": ("y", g, {"units": "mm"})}).to_netcdf(tmp_path / "n.nc")
+    with pytest.raises(ValueError, match=r"needs wavelength_um.*the measurement's wavelength_um key"):
+        ic.read_sag_map(tmp_path / "n.nc")
+
+
 def test_grid_options_of_the_wrong_form_are_named():
     with pytest.raises(ValueError, match=r"extent_mm=\[1, 2, 3\] must be four numbers \(xmin, xmax, ymin, ymax\)"):
         grid_from_options(3, 3, extent_mm=[1, 2, 3])

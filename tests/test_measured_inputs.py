@@ -411,6 +411,31 @@ def test_a_profile_on_a_wavelength_axis_lands_on_the_models_detector_axis(tmp_pa
     assert shoulder > 0.2
 
 
+def test_a_spectrum_window_not_centred_on_its_line_is_read_about_the_lines_wavelength(tmp_path):
+    """One sample per 18 µm pixel at a 0.37-pixel phase, the window running 7 pixels short and
+    8 long of the line (an outside lab's 1-D spectrum): the offsets are about the line's
+    stated wavelength, not the window's median (which put every offset 6.7 µm off); a line
+    outside the file's wavelength axis is refused naming both."""
+    from optics.grating import GRATINGS, SPIFFI
+
+    g, wl_um, order = GRATINGS["J"], 1.25, -2
+    sin_b = order * wl_um / g.groove_spacing_um - np.sin(np.radians(g.incidence_deg))
+    d_um_per_um = SPIFFI.camera_focal_mm * 1e3 * order / (g.groove_spacing_um * np.sqrt(1 - sin_b**2))
+    o = (np.arange(-7, 9) + 0.37) * 18.0
+    lam_um = wl_um + o / d_um_per_um
+    f = tmp_path / "spectrum.csv"
+    f.write_text("wavelength_um,counts\n" + "".join(f"{a:.10f},{1e4 * np.exp(-0.5 * (b / 20) ** 2) + 30:.4f}\n"
+                                                      for a, b in zip(lam_um, o)))
+    x, _ = read_line_profile(f, normalise=False, dispersion_um_per_um=d_um_per_um, line_wavelength_um=wl_um)
+    np.testing.assert_allclose(x, o, atol=1e-4)
+    x_median, _ = read_line_profile(f, normalise=False, dispersion_um_per_um=d_um_per_um)
+    assert abs(np.mean(x_median - o)) > 5.0  # the window's median is not the line
+    (p,) = load_data(parse_manifest({"measurement": [_profile_entry(f, order=order)]}))
+    np.testing.assert_allclose(np.sort(p.offset_um + p.origin_um), o, atol=1e-4)
+    with pytest.raises(ValueError, match=r"wavelength_um=1.3 lies outside the file's wavelength axis.*1.24.*1.25"):
+        read_line_profile(f, dispersion_um_per_um=d_um_per_um, line_wavelength_um=1.3)
+
+
 def test_a_profile_export_with_a_preamble_is_read(tmp_path):
     """Lab and program exports put title, date and exposure lines before the table."""
     u = np.linspace(-120.0, 120.0, 61)

@@ -775,12 +775,13 @@ def _read_profile(m: Measurement) -> ProfileData:
     from optics.grating import GRATINGS, SPIFFI
 
     # offsets in detector pixels are the model's pixels; a wavelength axis goes through the
-    # model's own signed dispersion at the line (optics.pupil: +offset is the image of +x_g)
+    # model's own signed dispersion at the line, about the line's stated wavelength
+    # (optics.pupil: +offset is the image of +x_g)
     g = GRATINGS[str(m.grating).upper().replace("+", "")]
     dispersion = float(g.angular_dispersion_rad_per_um(m.wavelength_um, m.order)) * SPIFFI.camera_focal_mm * 1e3
     try:
         u, y = read_measured("line profile", m.file, normalise=False, pixel_um=SPIFFI.pixel_um,
-                             dispersion_um_per_um=dispersion)
+                             dispersion_um_per_um=dispersion, line_wavelength_um=m.wavelength_um)
     except ValueError as exc:
         raise ValueError(f"measurement {m.name!r}: file={str(m.file)!r}: {exc}") from None
     if u.size < 10:

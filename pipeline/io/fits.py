@@ -323,7 +323,8 @@ def _table_profile(path: Path, hdul) -> tuple[np.ndarray, np.ndarray, str, str] 
 
 
 def read_line_profile_fits(path: str | Path, normalise: bool = True, pixel_um: float | None = None,
-                           dispersion_um_per_um: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                           dispersion_um_per_um: float | None = None,
+                           line_wavelength_um: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Read a line profile from a FITS file (a 1-D image with a WCS, a binary table, or a
     2-D cut-out summed along the slit: the dispersion is the axis the WCS declares
     spectral, ``NAXIS1`` when none is).
@@ -338,7 +339,11 @@ def read_line_profile_fits(path: str | Path, normalise: bool = True, pixel_um: f
         Detector pixel pitch (µm) for an axis in pixels (no WCS, ``CUNIT1 = 'pixel'``).
     dispersion_um_per_um : float, optional
         Signed linear dispersion (detector µm per µm of wavelength) for a wavelength
-        axis; offsets are taken about the median wavelength.
+        axis.
+    line_wavelength_um : float, optional
+        The line's wavelength (µm): a wavelength axis's offsets are taken about it;
+        without it, about the axis's median wavelength
+        (:func:`pipeline.io.measured.profile_offsets_um`).
 
     Returns
     -------
@@ -361,7 +366,7 @@ def read_line_profile_fits(path: str | Path, normalise: bool = True, pixel_um: f
                                       f"({INTENSITY.describe()}) and an axis column (offset, wavelength, pixel)")
     a, y, unit, ctype = found
     values, kind = _profile_axis(path, a, unit, ctype)
-    x = profile_offsets_um(values, kind, path, pixel_um, dispersion_um_per_um, "FITS axis")
+    x = profile_offsets_um(values, kind, path, pixel_um, dispersion_um_per_um, "FITS axis", line_wavelength_um)
     return checked_profile(path, x, y, normalise)  # masks NaN samples, refuses inf
 
 

@@ -176,13 +176,38 @@ def write_sag_netcdf(sagmap: SagMap, path: str | Path) -> Path:
     return path
 
 
+#: NetCDF attributes stating the wavelength of one wave, and their factor to µm.
+_WAVELENGTH_ATTRIBUTES = (("wavelength_um", 1.0), ("wavelength_nm", 1e-3))
+
+
+def _wavelength_um(path: Path, field: str, given: float | None, *attrs) -> float | None:
+    """The wavelength (µm) of one wave for a NetCDF sag: ``given`` (the caller's), else the
+    first of :data:`_WAVELENGTH_ATTRIBUTES` on the variable, then on the file; a stated one
+    that is not a number, or that contradicts ``given`` (relative 1e-6), is refused."""
+    stated = None
+    for a in attrs:
+        for key, factor in _WAVELENGTH_ATTRIBUTES:
+            if key in a and stated is None:
+                try:
+                    stated = (key, float(np.asarray(a[key]).ravel()[0]) * factor)
+                except (TypeError, ValueError, IndexError):
+                    raise ValueError(f"{path}: {field!r}: attribute {key}={a[key]!r} is not a number") from None
+    if stated is None:
+        return given
+    if given is not None and abs(given - stated[1]) > 1e-6 * abs(stated[1]):
+        raise ValueError(f"{path}: {field!r}: wavelength_um={given!r} contradicts the file's {stated[0]} "
+                         f"({stated[1]:g} µm); give one wavelength")
+    return stated[1]
+
+
 def read_sag_netcdf(path: str | Path, wavelength_um: float | None = None) -> SagMap:
     """Read a NetCDF sag map: variable ``sag_um`` (or ``sag``, ``height``, ``z``, bare or
     with a unit, :mod:`pipeline.io.columns`) on dims ``(y_mm, x_mm)`` (or ``(y, x)``), NaN
     or ``_FillValue`` = no data.
 
     The sag's ``units`` attribute is honoured (nm, um/µm, mm, m, or waves with
-    ``wavelength_um``) and converted to µm; without one, the unit in the variable's name
+    ``wavelength_um``: the argument, else the variable's or the file's ``wavelength_um`` or
+    ``wavelength_nm`` attribute) and converted to µm; without one, the unit in the variable's name
     is (``sag_um``, ``height_nm``), and a bare name (``sag``, ``height``) is refused.
     Coordinate ``units`` (nm, µm, mm, m; default mm) are honoured too. Descending
     coordinates are flipped.
@@ -216,6 +241,7 @@ def read_sag_netcdf(path: str | Path, wavelength_um: float | None = None) -> Sag
             raise ValueError(f"{path}: {field!r} has dims {da.dims}; expected ('y_mm', 'x_mm') or ('y', 'x')")
         da = da.transpose(*dims)
         units = da.attrs.get("units", name_unit or None)
+        wavelength_um = _wavelength_um(path, field, wavelength_um, da.attrs, ds.attrs)
         if units is None:
             raise ValueError(f"{path}: variable {field!r} has no 'units' attribute; give units (nm, um, mm, m, "
                              f"waves) or put the unit in its name ({field.lower()}_um)")
