@@ -147,3 +147,52 @@ def test_a_stronger_quilt_alone_needs_no_wings(tmp_path):
     assert d.best.needs_outside == () and WINGS_LABEL not in d.best.degenerate_with
     scale = next(v for q, v in d.best.parameters.items() if q.startswith("scale_"))
     assert scale == pytest.approx(1.08, rel=0.03)
+
+
+def _fit_outcome(parameters, rss, deltas_um=None):
+    return FitOutcome(dict(parameters), {}, dict(deltas_um or {}), {"m": rss}, {"m": 100}, {"m": 100.0},
+                      len(parameters), True, 1, rss)
+
+
+@pytest.mark.parametrize("alternative_fits_better", [False, True])
+def test_the_joint_fit_starts_at_the_optimum_it_nests(monkeypatch, alternative_fits_better):
+    """The joint fit (detector terms beside the finding and the background) nests the
+    reference (the finding beside the background) and the finding: it starts at the
+    lower-objective of their optima, parameters and position nuisances, with the detector
+    terms at their nulls, or at the alternative's values where those fit better there (a
+    descending fit then never ends above the fit it nests). The reference starts from the
+    finding's position nuisances."""
+    import pipeline.diagnosis.wings as wings
+    from types import SimpleNamespace
+
+    prob = SimpleNamespace(forwards=[SimpleNamespace(kind="line_profile", blank="J", name="m")], weights={"m": 1.0})
+    finding = Finding("slit_width", ("slit_width",), {"slit_image_width_um": 30.0}, {}, -100.0, -100.0,
+                      1.0, 0.5, 0.5, 0.75)
+    fo = _fit_outcome({"slit_image_width_um": 30.0}, 5.0, {"m": 2.0})
+    wing_null = {q.name: q.null for q in wings.WINGS_PARAMETERS}
+    alt_wings = {"halo_fraction": 0.15, "halo_hwhm_um": 30.0, "tail_fraction": 0.15, "tail_decay_um": 5.0,
+                 "nonlinearity": 0.0}
+    calls = []
+
+    def fake_fit(problem, params, start=None, start_deltas_um=None, regrid=(), max_nfev=None, **kw):
+        names = {q.name for q in params}
+        calls.append((names, dict(start or {}), start_deltas_um))
+        if "halo_fraction" in names and "slit_image_width_um" not in names:  # the alternative
+            return _fit_outcome({**{n: 1.0 for n in names}, **alt_wings}, 9.0, {"m": 1.0})
+        if "halo_fraction" not in names:  # the reference: the finding and the quilt's shape
+            return _fit_outcome({n: start.get(n, 1.0) for n in names} | {"slit_image_width_um": 31.0}, 4.0, {"m": 2.5})
+        return _fit_outcome(start, 4.0, start_deltas_um)  # the joint: stays at its start
+
+    def fake_objective(problem, values, deltas_um=None):
+        at_null = all(values[n] == v for n, v in wing_null.items())
+        return 3.0 if at_null != alternative_fits_better else 4.0
+
+    monkeypatch.setattr(wings, "fit", fake_fit)
+    monkeypatch.setattr(wings, "objective", fake_objective)
+    wings_check(prob, finding, fo, Criteria())
+    (_, _, _), (ref_names, _, ref_deltas), (joint_names, joint_start, joint_deltas) = calls
+    assert ref_deltas == {"m": 2.0}  # from the finding's optimum
+    assert joint_deltas == {"m": 2.5}  # the reference's: its objective (4.0) is below the finding's (5.0)
+    assert joint_start["slit_image_width_um"] == 31.0
+    assert {n: joint_start[n] for n in wing_null} == (alt_wings if alternative_fits_better else wing_null)
+    assert joint_names == ref_names | set(wing_null)

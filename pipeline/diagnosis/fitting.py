@@ -57,7 +57,7 @@ from scipy.optimize import least_squares
 from .effects import Parameter
 from .noise import effective_samples
 
-__all__ = ["FitOutcome", "Problem", "fit", "nominal_weights", "long_run_s2", "other_basin_moves", "OTHER_BASIN_CHI2"]
+__all__ = ["FitOutcome", "Problem", "fit", "objective", "nominal_weights", "long_run_s2", "other_basin_moves", "OTHER_BASIN_CHI2"]
 
 _DELTA_SCALE_UM = 10.0  # normalisation of the profile offset-shift nuisance
 _DELTA_BOUND_UM = 45.0
@@ -277,6 +277,17 @@ def _best_starts(starts, z0, n_par, params, slots, fixed, problem, masks, fws, n
         ranked.append((cost, z))
     ranked.sort(key=lambda t: t[0])
     return [z for _, z in ranked[:max(n_local, 1)]]
+
+
+def objective(problem: Problem, values: dict, deltas_um: dict | None = None) -> float:
+    """The fit's objective, ``sum_i w_i^2 RSS_i``, at one point: the effect parameters
+    ``values`` (every other at its null), each measurement's position nuisances at
+    ``deltas_um`` (``FitOutcome.deltas_um``; the measurement's initial one where missing),
+    the linear nuisances (flux, coupling, background; piston and tilt) solved as in a fit.
+    Used to choose between warm starts of one fit without running it from each."""
+    deltas_um = deltas_um or {}
+    return float(sum(problem.weights[f.name] ** 2
+                     * np.sum(f.residual(values, deltas_um.get(f.name, f.delta0_um)) ** 2) for f in problem.forwards))
 
 
 def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = None,
