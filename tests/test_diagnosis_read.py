@@ -147,8 +147,8 @@ def test_the_verdict_is_said_in_words_with_the_reason():
     from pipeline.diagnosis.report import verdict_text
     from pipeline.diagnosis.wings import WINGS_LABEL
 
-    def diag(verdict, f):
-        return SimpleNamespace(verdict=verdict, best=f, criteria=Criteria())
+    def diag(verdict, f, unexplained_in=()):
+        return SimpleNamespace(verdict=verdict, best=f, criteria=Criteria(), unexplained_in=unexplained_in)
 
     weak = Finding("slit_width", ("slit_width",), {}, {}, 0.0, -6.1, 1.0, 0.8, 0.2, 0.36, excess_explained=0.35)
     assert verdict_text(diag("unexplained", weak)) == (
@@ -167,6 +167,12 @@ def test_the_verdict_is_said_in_words_with_the_reason():
     assert verdict_text(diag("explained", good)) == ("temperature explains the gap: it lowers the BIC by 250 and takes "
                                                      "up 92% of the residual beyond noise, and fitted on part of the "
                                                      "data it shrinks the rest by 61%.")
+    # a finding that takes up most of the gap says where the rest is (an outside lab's profiles
+    # broadened by a box were called explained by a collimator error, two of three still beyond noise)
+    rest = [{"measurement": "J_100mas", "rms_ratio": 2.737, "z": 10.87, "noise_rel_sd": 0.3}]
+    assert verdict_text(diag("explained", good, rest)).endswith(
+        "shrinks the rest by 61%. Part of the gap remains beyond noise after it, in J_100mas (2.7 × noise, "
+        "χ² excess 10.9 σ).")
     assert "no gap" in verdict_text(diag("no_gap", None))
 
 

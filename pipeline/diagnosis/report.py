@@ -113,8 +113,13 @@ def verdict_text(d) -> str:
     if d.verdict == "explained":
         held = ("" if b.heldout_shrink_fraction is None
                 else f", and fitted on part of the data it shrinks the rest by {b.heldout_shrink_fraction:.0%}")
+        left = ""
+        if d.unexplained_in:  # the finding takes up most of the gap, not all of it: say where the rest is
+            left = (" Part of the gap remains beyond noise after it, in "
+                    + "; ".join(f"{g['measurement']} ({g['rms_ratio']:.1f} × noise, χ² excess {g['z']:.1f} σ)"
+                                for g in d.unexplained_in) + ".")
         return (f"{b.effect} explains the gap: it lowers the BIC by {-b.delta_bic:.0f} and takes up "
-                f"{b.excess_explained:.0%} of the residual beyond noise{held}.")
+                f"{b.excess_explained:.0%} of the residual beyond noise{held}.{left}")
     failed = failed_tests(b, c)
     why = []
     if "significant" in failed:
