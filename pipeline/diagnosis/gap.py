@@ -125,8 +125,8 @@ def has_gap(prob: Problem, nom: FitOutcome, c: Criteria) -> bool:
     gives it). The bound mirrors the explained-excess test's (:func:`_noise_cost`, the
     lower bound): a profile's noise estimated from 89 samples is 24 % uncertain, and
     against the estimate itself the ratio alone called about a fifth of three-profile
-    nominal cases a gap (photon-noise profiles, ``benchmarks/results_gap_noise_bound.md``:
-    65 of 300 draws, 5 of 300 against the bound). The RMS ratio alone misses a gap spread over
+    nominal cases a gap (photon-noise profiles, ``benchmarks/gap_noise_bound.py``: 63 of
+    300 draws, 2 of 300 against the bound). The RMS ratio alone misses a gap spread over
     many samples: a map's residual at 1.18 x its noise over 14 295 samples is a chi^2
     excess of 12 such standard deviations (a campaign ghost case, map + PSF image: delta BIC of
     the best finding -214, called ``no_gap`` by the ratio alone).
