@@ -32,24 +32,23 @@ SHARED_SCOPES = {
 # other worker meanwhile instead of leaving one long module running alone at the end (xdist's
 # own order is by number of tests, which puts these few-test modules last). The first two start
 # together on the two workers; the others follow by their time on one worker (``pytest
-# --durations=0 -n 2``, one BLAS thread: scenarios ~200 s, paper claims and tables ~165 s,
-# reduced campaign ~135 s with its own two worker processes, bow ~125 s, fea_blank ~120 s,
-# fea_reduced ~90 s, surrogate_sweep ~70 s, quilt ~55 s, psf ~50 s, mesh_convergence ~40 s,
+# --durations=0 -n 2``, one BLAS thread: scenarios ~250 s, paper claims and tables ~165 s,
+# fea_blank ~120 s, fea_reduced ~90 s, quilt ~90 s, bow ~70 s, surrogate_sweep ~55 s, reduced
+# campaign ~50 s with its own two worker processes, psf ~35 s, mesh_convergence ~50 s,
 # diagnosis and study_dataset ~30 s, fea_layer ~15 s, plating ~10 s). Not strictly by time:
-# fea_blank goes before bow so that it, not bow's diagnoses, runs beside the reduced campaign's
-# two processes (three fitting processes on two cores slow all three). Measured on fresh clones
-# of one commit, idle 2-core machine: this order 772.6 s for the whole suite, bow before
-# fea_blank and fea_layer after study_dataset 890.5 s (reduced campaign 143 -> 166 s, bow
-# 80 -> 102 s). Re-rank when a heavy module is added, and time the whole suite.
+# the reduced campaign's two processes go beside the short modules' single ones, not beside
+# a heavy unit's (three fitting processes on two cores slow all three: measured when it was
+# 135 s, with bow beside it 890.5 s for the whole suite against 772.6 s with fea_blank).
+# Re-rank when a heavy module is added, and time the whole suite.
 HEAVY_FIRST = (
     "tests/test_diagnosis_scenarios.py",
     "tests/test_paper_claims.py+tests/test_paper_tables.py",
-    "tests/test_diagnosis_campaign_reduced.py",
     "tests/test_fea_blank.py",
     "tests/test_diagnosis_bow.py",
     "tests/test_fea_reduced.py",
     "tests/test_surrogate_sweep.py",
     "tests/test_diagnosis_quilt.py",
+    "tests/test_diagnosis_campaign_reduced.py",
     "tests/test_diagnosis_psf.py",
     "tests/test_fea_layer.py",
     "tests/test_fea_mesh_convergence.py",

@@ -126,13 +126,15 @@ def _gap_z(tmp_path, manifest):
 @pytest.mark.parametrize("seed", [1, 2])
 def test_a_stated_correlated_noise_is_no_gap_and_a_real_one_still_is(tmp_path, seed):
     """The nominal line with 1 % of correlated noise over 12 µm (the white part about 0.5 %):
-    unstated, the nominal fit's residual is beyond the noise (a gap); stated in counts, it
-    is what noise leaves (|z| < 3, no gap). A grating 12 % stronger under the same noise
-    keeps its gap with the noise stated."""
+    unstated, the nominal fit's residual is beyond 1.3 x the white estimate (1.51 and 1.65
+    on these draws: what the estimate does not see), though within the gap test's bound for a
+    noise estimated from 124 samples (1.3 x 1.29); stated in counts, it is what noise leaves
+    (|z| < 3, ratio < 1.3, no gap). A grating 12 % stronger under the same noise keeps its gap
+    with the noise stated."""
     rng = np.random.default_rng(seed)
     peak = _line_csv(tmp_path / "p.csv", rng, corr_counts=90.0)
-    unstated, g = _gap_z(tmp_path, _manifest(tmp_path))
-    assert g and unstated["rms_ratio"] > 1.3
+    unstated, _ = _gap_z(tmp_path, _manifest(tmp_path))
+    assert unstated["rms_ratio"] > 1.3
     stated, g = _gap_z(tmp_path, _manifest(tmp_path, correlated_noise_counts=90.0, correlation_length_um=12.0))
     assert not g and abs(stated["z"]) < 3.0 and stated["rms_ratio"] < 1.3
     (pd,) = load_data(load_manifest(_manifest(tmp_path, correlated_noise_counts=90.0, correlation_length_um=12.0)))
