@@ -57,6 +57,22 @@ def test_a_map_counted_from_a_corner_needs_its_centre(tmp_path):
     assert r["pv_um"] == pytest.approx(s.max() - s.min(), rel=1e-3)
 
 
+def test_the_extent_read_is_the_valid_datas_not_the_grids(tmp_path):
+    """A map in a 140 mm grid with NaN outside a 137 mm aperture reads the valid data's extent,
+    as a list of valid points does (an outside lab saw -69.93..69.93 for one, ±68.5 for the other)."""
+    g = np.arange(-69.93, 69.94, 0.37)
+    X, Y = np.meshgrid(g, g)
+    z = np.where(X**2 + Y**2 <= 68.5**2, 0.2 * np.cos(2 * np.pi * X / 21.0), np.nan)
+    f = tmp_path / "padded.csv"
+    f.write_text("x_mm,y_mm,sag_um\n" + "".join(f"{a:.2f},{b:.2f},{c:.6f}\n" for a, b, c in
+                                                zip(X.ravel(), Y.ravel(), z.ravel())))
+    (d,) = load_data(_surface(f))
+    r = read_summary(d)
+    inside = g[np.abs(g) <= 68.5]
+    assert r["x_range_mm"] == pytest.approx([inside.min(), inside.max()], abs=1e-6)
+    assert r["y_range_mm"] == pytest.approx([inside.min(), inside.max()], abs=1e-6)
+
+
 def test_a_map_off_centre_within_registration_reach_is_read(tmp_path):
     """8 mm off: within the registration effect's ±10 mm, so it is data, not a refusal."""
     f, n = _map_csv(tmp_path / "off.csv", 8.0, -3.0)

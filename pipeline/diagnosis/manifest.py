@@ -828,7 +828,7 @@ def read_summary(d) -> dict:
 
     Surfaces: grid size and step, valid points inside the aperture of those in the file
     (scattered points: the points themselves, the grid being their interpolation for
-    display), extent, P/V and RMS of the sag used (µm, piston removed) and the centre shift
+    display), the valid data's extent, P/V and RMS of the sag used (µm, piston removed) and the centre shift
     applied (how scattered points were gridded is the measurement's ``gridding``). Profiles: samples, step, offset range, the line's
     centre (intensity-weighted over the samples above half the peak, file frame) and the
     shift applied. PSF images: samples, extent and the shift applied."""
@@ -836,11 +836,13 @@ def read_summary(d) -> dict:
     out = {"file": m.file.name}
     if isinstance(d, SurfaceData):
         sm, s = d.sagmap, d.sag_um - float(np.mean(d.sag_um))
+        X, Y = sm.grid()
+        xv, yv = X[sm.mask], Y[sm.mask]  # the valid data's extent, not the grid's NaN padding
         out.update({"grid": f"{sm.x_mm.size} x {sm.y_mm.size}",
                     "step_mm": f"{_g(sm.x_mm[1] - sm.x_mm[0])} x {_g(sm.y_mm[1] - sm.y_mm[0])}",
                     "points_used": int(d.sag_um.size),
                     "points_valid_in_file": int(d.n_points if d.scattered else sm.mask.sum()),
-                    "x_range_mm": [_g(sm.x_mm[0]), _g(sm.x_mm[-1])], "y_range_mm": [_g(sm.y_mm[0]), _g(sm.y_mm[-1])],
+                    "x_range_mm": [_g(xv.min()), _g(xv.max())], "y_range_mm": [_g(yv.min()), _g(yv.max())],
                     "pv_um": _g(float(s.max() - s.min())), "rms_um": _g(float(np.sqrt(np.mean(s**2))))})
         if m.centre_mm is not None:
             out["centre_mm"] = f"({m.centre_mm[0]:g}, {m.centre_mm[1]:g}) subtracted"
