@@ -171,7 +171,7 @@ def test_the_joint_fit_starts_at_the_optimum_it_nests(monkeypatch, alternative_f
     fo = _fit_outcome({"slit_image_width_um": 30.0}, 5.0, {"m": 2.0})
     wing_null = {q.name: q.null for q in wings.WINGS_PARAMETERS}
     alt_wings = {"halo_fraction": 0.15, "halo_hwhm_um": 30.0, "tail_fraction": 0.15, "tail_decay_um": 5.0,
-                 "nonlinearity": 0.0}
+                 "blur_um": 3.0, "nonlinearity": 0.0}
     calls = []
 
     def fake_fit(problem, params, start=None, start_deltas_um=None, regrid=(), max_nfev=None, **kw):

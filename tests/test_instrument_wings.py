@@ -78,3 +78,15 @@ def test_non_linearity_loses_gain_in_proportion_to_the_signal():
     half = int(np.argmin(np.abs(y - 0.5)))
     assert out[half] / y[half] == pytest.approx(1.0 - 0.06 * y[half])
     assert out[0] / y[0] == pytest.approx(1.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("blur_um", [2.0, 5.2])
+def test_a_gaussian_line_blurred_adds_the_blurs_variance(blur_um):
+    """A Gaussian line of sigma 8 µm through a Gaussian blur of sigma ``blur_um`` is the
+    Gaussian of variance 64 + blur^2 (convolution of Gaussians), flux kept."""
+    y = np.exp(-0.5 * (U / 8.0) ** 2)
+    out = wings_profile(U, y, {"blur_um": blur_um})
+    s = np.hypot(8.0, blur_um)
+    expected = np.exp(-0.5 * (U / s) ** 2) * 8.0 / s
+    assert np.max(np.abs(out - expected)) < 1e-6
+    assert np.sum(out) == pytest.approx(np.sum(y), rel=1e-9)

@@ -82,12 +82,12 @@ WINGS_PARAMETERS = INSTRUMENT_WINGS.parameters
 _JOINT_NFEV_PER_PARAMETER = 10
 
 #: What a finding is degenerate with when the wings take its place.
-WINGS_LABEL = "the detector side (stray-light halo, detector tail, non-linear response)"
+WINGS_LABEL = "the detector side (stray-light halo, detector tail, blur, non-linear response)"
 
 #: Grid starts of the wing parameters (a halo's width has no leverage at zero fraction; a
 #: tail's side is a kink at zero fraction, so both sides are started).
 _STARTS = {"halo_fraction": (0.03,), "halo_hwhm_um": (30.0,), "tail_fraction": (-0.03, 0.03),
-           "tail_decay_um": (20.0,), "nonlinearity": (0.0, 0.05)}
+           "tail_decay_um": (20.0,), "nonlinearity": (0.0, 0.05), "blur_um": (0.0, 6.0)}
 
 
 @dataclass(frozen=True)
@@ -124,7 +124,7 @@ def _text(w: dict) -> str:
     side = "towards +offset" if t > 0 else "towards −offset" if t < 0 else ""
     return (f"halo {w.get('halo_fraction', 0.0):.3f} of the flux, HWHM {w.get('halo_hwhm_um', 0.0):.0f} µm; "
             f"tail {abs(t):.3f} of the flux{' ' + side if side else ''}, decay {w.get('tail_decay_um', 0.0):.0f} µm; "
-            f"non-linearity {w.get('nonlinearity', 0.0):.3f} at the peak")
+            f"blur {w.get('blur_um', 0.0):.1f} µm; non-linearity {w.get('nonlinearity', 0.0):.3f} at the peak")
 
 
 def wings_check(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria) -> WingsCheck:
