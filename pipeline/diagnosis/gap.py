@@ -141,23 +141,23 @@ def gap_statistics(prob: Problem, fo: FitOutcome) -> dict:
     out = {}
     for f in prob.forwards:
         m = f.name
-        sigma = prob.noise[m]
+        sigma, r = prob.noise[m], _noise_rel_sd(f)
         if not sigma > 0:
-            out[m] = {"rms_ratio": math.inf, "z": math.inf, "noise_rel_sd": _noise_rel_sd(f)}
+            out[m] = {"rms_ratio": math.inf, "z": math.inf, "noise_rel_sd": r}
             continue
         dof = max(fo.n[m] - _nuisances(f), 1)
         if f.correlated_noise is None:
             out[m] = {"rms_ratio": math.sqrt(fo.rss[m] / fo.n[m]) / sigma,
-                      "z": (fo.rss[m] / (dof * sigma**2) - 1.0) / math.sqrt(2.0 / dof + (2.0 * _noise_rel_sd(f)) ** 2),
-                      "noise_rel_sd": _noise_rel_sd(f)}
+                      "z": (fo.rss[m] / (dof * sigma**2) - 1.0) / math.sqrt(2.0 / dof + (2.0 * r) ** 2),
+                      "noise_rel_sd": r}
             continue
         # the stated correlated noise's share of the mean and of the spread; the white
         # part's estimate keeps its own uncertainty
         mean, var = (v * fo.n[m] / f.n for v in f.noise_rss_moments(sigma))
         white = dof * sigma**2
         out[m] = {"rms_ratio": math.sqrt(fo.rss[m] / fo.n[m]) / math.sqrt(mean / dof),
-                  "z": (fo.rss[m] / mean - 1.0) / math.sqrt(var / mean**2 + (2.0 * _noise_rel_sd(f) * white / mean) ** 2),
-                  "noise_rel_sd": _noise_rel_sd(f) * white / mean}
+                  "z": (fo.rss[m] / mean - 1.0) / math.sqrt(var / mean**2 + (2.0 * r * white / mean) ** 2),
+                  "noise_rel_sd": r * white / mean}
     return out
 
 

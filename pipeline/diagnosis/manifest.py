@@ -836,8 +836,8 @@ def read_summary(d) -> dict:
     out = {"file": m.file.name}
     if isinstance(d, SurfaceData):
         sm, s = d.sagmap, d.sag_um - float(np.mean(d.sag_um))
-        X, Y = sm.grid()
-        xv, yv = X[sm.mask], Y[sm.mask]  # the valid data's extent, not the grid's NaN padding
+        # the valid data's extent, not the grid's NaN padding
+        xv, yv = sm.x_mm[sm.mask.any(axis=0)], sm.y_mm[sm.mask.any(axis=1)]
         out.update({"grid": f"{sm.x_mm.size} x {sm.y_mm.size}",
                     "step_mm": f"{_g(sm.x_mm[1] - sm.x_mm[0])} x {_g(sm.y_mm[1] - sm.y_mm[0])}",
                     "points_used": int(d.sag_um.size),

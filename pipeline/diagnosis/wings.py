@@ -158,7 +158,7 @@ def wings_check(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria) ->
     # 15 % detector tail at its bound, on a slit width with a bow and a PSF image, it spent
     # its whole budget of 160 evaluations, 78 s, and ended 1.2 % above the reference).
     nested = min((ref, fo), key=lambda o: o.weighted_rss(prob.weights))
-    start.update({q.name: v for q, v in ((q, nested.parameters.get(q.name)) for q in own) if v is not None})
+    start.update({q.name: nested.parameters[q.name] for q in own if q.name in nested.parameters})
     starts = [{**start, **{q.name: q.null for q in wings}}, {**start, **_wings(alt)}]
     start = min(starts, key=lambda s: objective(prob, s, nested.deltas_um))
     joint = fit(prob, own + wings, start=start, start_deltas_um=nested.deltas_um,

@@ -184,16 +184,14 @@ def _wavelength_um(path: Path, field: str, given: float | None, *attrs) -> float
     """The wavelength (µm) of one wave for a NetCDF sag: ``given`` (the caller's), else the
     first of :data:`_WAVELENGTH_ATTRIBUTES` on the variable, then on the file; a stated one
     that is not a number, or that contradicts ``given`` (relative 1e-6), is refused."""
-    stated = None
-    for a in attrs:
-        for key, factor in _WAVELENGTH_ATTRIBUTES:
-            if key in a and stated is None:
-                try:
-                    stated = (key, float(np.asarray(a[key]).ravel()[0]) * factor)
-                except (TypeError, ValueError, IndexError):
-                    raise ValueError(f"{path}: {field!r}: attribute {key}={a[key]!r} is not a number") from None
-    if stated is None:
+    found = next(((key, a[key], factor) for a in attrs for key, factor in _WAVELENGTH_ATTRIBUTES if key in a), None)
+    if found is None:
         return given
+    key, value, factor = found
+    try:
+        stated = (key, float(np.asarray(value).ravel()[0]) * factor)
+    except (TypeError, ValueError, IndexError):
+        raise ValueError(f"{path}: {field!r}: attribute {key}={value!r} is not a number") from None
     if given is not None and abs(given - stated[1]) > 1e-6 * abs(stated[1]):
         raise ValueError(f"{path}: {field!r}: wavelength_um={given!r} contradicts the file's {stated[0]} "
                          f"({stated[1]:g} µm); give one wavelength")
