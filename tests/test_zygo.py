@@ -252,7 +252,6 @@ def test_a_zygo_datx_file_is_read(tmp_path):
     """An Mx ``.datx`` written here with h5py in Zygo's layout (``Data/Surface/<frame>`` in
     fringes with its scale factors, ``Attributes/<frame>`` with the lateral resolution)."""
     h5py = pytest.importorskip("h5py")
-    pytest.importorskip("prysm.io")
     truth = _truth_um()
     wl, S, O = 632.8e-9, 0.5, 1.0
     fringes = truth * 1e-6 / (S * O * wl)
@@ -271,6 +270,86 @@ def test_a_zygo_datx_file_is_read(tmp_path):
     m = ic.read_sag_map(path)
     assert m.meta["format"] == "zygo-datx"
     _check_map(m, truth, tol_um=1e-9)
+
+
+def _converter(res_m):
+    """An Mx ``X/Y Converter`` attribute: category, base unit, parameters (1: m per pixel)."""
+    dt = np.dtype([("Category", "S16"), ("BaseUnit", "S16"), ("Parameters", "<f8", (4,))])
+    return np.array([(b"LateralCat", b"Meters", [0.0, res_m, 0.0, 0.0])], dtype=dt)
+
+
+@pytest.mark.parametrize("layout", ["um_converter_only", "nx2_measurement_nm_nan", "angstrom_float32"])
+def test_datx_files_in_other_units_and_layouts_are_read(tmp_path, layout):
+    """``.datx`` files as Mx and older exports write them besides fringes: heights in µm with
+    the lateral scale only in the surface's ``X Converter`` (no ``Attributes`` group); the
+    older ``Measurement/Surface`` layout in nm with NaN holes; float32 Ångström with the
+    float32 maximum as ``No Data``. Each must give the truth within float rounding."""
+    h5py = pytest.importorskip("h5py")
+    truth = _truth_um()
+    path = tmp_path / f"{layout}.datx"
+    with h5py.File(path, "w") as f:
+        if layout == "um_converter_only":
+            no_data = 1.7976931348623157e308
+            d = f.create_dataset("Data/Surface/{F-1}", data=np.where(np.isnan(truth), no_data, truth))
+            d.attrs["Unit"] = np.array([b"MicroMeters"], dtype=object)
+            d.attrs["No Data"] = np.array([no_data])
+            d.attrs["X Converter"] = d.attrs["Y Converter"] = _converter(PITCH_MM * 1e-3)
+        elif layout == "nx2_measurement_nm_nan":
+            d = f.create_dataset("Measurement/Surface", data=truth * 1e3)
+            d.attrs["Unit"] = np.array([b"NanoMeters"], dtype=object)
+            d.attrs["No Data"] = np.array([np.nan])
+            d.attrs["X Converter"] = _converter(PITCH_MM * 1e-3)
+        else:
+            no_data = np.finfo(np.float32).max
+            d = f.create_dataset("Data/Surface/{F-2}",
+                                 data=np.where(np.isnan(truth), no_data, truth * 1e4).astype(np.float32))
+            d.attrs["Unit"] = np.array([b"Angstroms"], dtype=object)
+            d.attrs["No Data"] = np.array([no_data], dtype=np.float32)
+            a = f.create_group("Attributes/{F-2}")
+            a.attrs["Data Context.Lateral Resolution:Value"] = np.array([PITCH_MM * 1e-3])
+    m = ic.read_sag_map(path)
+    # float32 keeps 24 bits: a relative rounding of 6e-8
+    _check_map(m, truth, tol_um=2e-7 * np.nanmax(np.abs(truth)) if layout == "angstrom_float32" else 1e-9)
+
+
+def test_datx_refusals_name_what_is_wrong(tmp_path):
+    """An unknown height unit names the valid ones; no lateral scale asks for ``spacing_mm``
+    (and is read with it); a file that is not HDF5 says so — never an h5py traceback."""
+    h5py = pytest.importorskip("h5py")
+    truth = _truth_um()
+    with h5py.File(tmp_path / "inch.datx", "w") as f:
+        d = f.create_dataset("Data/Surface/{F}", data=np.nan_to_num(truth))
+        d.attrs["Unit"] = np.array([b"Inches"], dtype=object)
+    with pytest.raises(ValueError, match=r"Unit='Inches'.*valid are \['Fringes', 'NanoMeters', 'MicroMeters'"):
+        ic.read_sag_map(tmp_path / "inch.datx")
+    with h5py.File(tmp_path / "noscale.datx", "w") as f:
+        d = f.create_dataset("Data/Surface/{F}", data=truth * 1e3)
+        d.attrs["Unit"] = np.array([b"NanoMeters"], dtype=object)
+    with pytest.raises(ValueError, match="no lateral scale.*spacing_mm"):
+        ic.read_sag_map(tmp_path / "noscale.datx")
+    assert ic.read_sag_map(tmp_path / "noscale.datx", spacing_mm=PITCH_MM).meta["spacing_mm"] == PITCH_MM
+    (tmp_path / "text.datx").write_text("x,y,z\n")
+    with pytest.raises(ValueError, match="not an HDF5 file"):
+        ic.read_sag_map(tmp_path / "text.datx")
+
+
+def test_prysm_datx_reader_takes_neither_micrometres_nor_a_file_without_attributes(tmp_path):
+    """Why the ``.datx`` reader is ours: prysm's refuses heights in µm and needs the
+    ``Attributes`` group (an Mx user may pick the unit; MetroPro's export has no such group)."""
+    h5py = pytest.importorskip("h5py")
+    prysm_io = pytest.importorskip("prysm.io")
+    truth = np.nan_to_num(_truth_um())
+    for name, unit, with_attrs in (("um", b"MicroMeters", True), ("noattrs", b"NanoMeters", False)):
+        with h5py.File(tmp_path / f"{name}.datx", "w") as f:
+            d = f.create_dataset("Data/Surface/{F}", data=truth)
+            d.attrs.update({"Unit": np.array([unit], dtype=object), "No Data": np.array([1e308]),
+                            "Wavelength": np.array([632.8e-9]), "Interferometric Scale Factor": np.array([0.5]),
+                            "Obliquity Factor": np.array([1.0])})
+            if with_attrs:
+                f.create_group("Attributes/{F}").attrs["Data Context.Lateral Resolution:Value"] = np.array([5e-4])
+        with pytest.raises((ValueError, KeyError)):
+            prysm_io.read_zygo_datx(tmp_path / f"{name}.datx")
+        assert ic.read_sag_map(tmp_path / f"{name}.datx", spacing_mm=PITCH_MM).sag_um.shape == truth.shape
 
 
 def test_cli_convert_turns_an_interferogram_into_a_codev_int_and_refuses_what_it_cannot_read(tmp_path, capsys):

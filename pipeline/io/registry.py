@@ -113,7 +113,7 @@ FORMATS: tuple[Format, ...] = (
     Format("sag map", (".dat",), "Zygo MetroPro binary interferogram", read_zygo_dat, None,
            "counts x S x O x wavelength / R; invalid pixels NaN; told from Zemax by its magic number",
            sniff=is_zygo_dat),
-    Format("sag map", (".datx",), "Zygo Mx HDF5 interferogram", read_zygo_datx, None, "needs prysm and h5py"),
+    Format("sag map", (".datx",), "Zygo Mx HDF5 interferogram", read_zygo_datx, None, "needs h5py"),
     Format("sag map", (".asc",), "Zygo MetroPro ASCII interferogram", read_zygo_ascii, None,
            "counts x S x O x wavelength / R; invalid pixels NaN"),
     Format("sag map", (".csv",), "x_mm,y_mm,sag_um point table", read_sag_csv, write_sag_csv,

@@ -16,9 +16,10 @@ What the three have in common (MetroPro Reference Guide, "Data Format"):
 
 The map's origin is the centre of the valid pixels' bounding box (an interferometer has
 no absolute frame; the part's aperture is centred that way), recorded in
-``meta["origin_pixel"]`` with the scale factors read. The binary files are read with
-prysm (``pip install 'cryograting[zygo]'``; ``.datx`` also needs h5py); prysm has no reader
-of the ASCII export, so that one is ours. A Zygo ``.dat`` is told from a Zemax Grid Sag
+``meta["origin_pixel"]`` with the scale factors read. The ``.dat`` files are read with
+prysm (``pip install 'cryograting[zygo]'``), the ``.datx`` files with h5py (prysm's reader
+takes fewer of their units and layouts); prysm has no reader of the ASCII export, so that
+one is ours. A Zygo ``.dat`` is told from a Zemax Grid Sag
 ``.dat`` by its first four bytes (:func:`is_zygo_dat`), never by the suffix.
 """
 
@@ -34,7 +35,7 @@ from optics.sagmap import SagMap
 from pipeline.io.common import parse_error, read_text
 
 __all__ = ["ZYGO_DAT_MAGIC", "INVALID_COUNTS", "PHASE_RESOLUTION", "is_zygo_dat", "read_zygo_dat",
-           "read_zygo_datx", "read_zygo_ascii"]
+           "read_zygo_datx", "read_zygo_ascii", "DATX_UNITS_UM"]
 
 #: First four bytes (big-endian) of a MetroPro binary file, header formats 1, 2 and 3.
 ZYGO_DAT_MAGIC = (0x881B036F, 0x881B0370, 0x881B0371)
@@ -155,25 +156,94 @@ def read_zygo_dat(path: str | Path, spacing_mm: float | None = None) -> SagMap:
     return _to_map(path, h, float(meta["lateral_resolution"]), spacing_mm, info)
 
 
-def read_zygo_datx(path: str | Path, spacing_mm: float | None = None) -> SagMap:
-    """Read a Zygo Mx ``.datx`` (HDF5) file's surface as a map (prysm + h5py).
+#: Mx ``Unit`` of a ``.datx`` surface -> µm per unit (``Fringes`` is scaled by the file's
+#: factors instead, :func:`_datx_height_um`).
+DATX_UNITS_UM = {"NanoMeters": 1e-3, "MicroMeters": 1.0, "MilliMeters": 1e3, "Meters": 1e6, "Angstroms": 1e-4}
 
-    Parameters as :func:`read_zygo_dat`; the lateral scale is the file's
-    ``Lateral Resolution`` attribute.
+
+def _attr(attrs, key, default=None):
+    """A scalar HDF5 attribute (Mx stores each as a one-element array), bytes decoded."""
+    if key not in attrs:
+        return default
+    v = np.asarray(attrs[key]).ravel()
+    v = v[0] if v.size else default
+    return v.decode("utf-8", "replace") if isinstance(v, bytes) else v
+
+
+def _datx_height_um(phase: np.ndarray, attrs, path: Path) -> tuple[np.ndarray, dict]:
+    """Heights (µm) of a ``.datx`` surface dataset with its attributes; NaN at ``No Data``."""
+    unit = str(_attr(attrs, "Unit", "Fringes"))
+    no_data = _attr(attrs, "No Data", INVALID_COUNTS)
+    h = np.asarray(phase, dtype=float)
+    h[~np.isfinite(h) | (h >= float(no_data))] = np.nan
+    info = {"unit": unit}
+    if unit == "Fringes":
+        scale = float(_attr(attrs, "Interferometric Scale Factor", np.nan))
+        obliquity = float(_attr(attrs, "Obliquity Factor", 1.0))
+        wavelength_m = float(_attr(attrs, "Wavelength", np.nan))
+        for name, v in (("Interferometric Scale Factor", scale), ("Obliquity Factor", obliquity),
+                        ("Wavelength", wavelength_m)):
+            if not (np.isfinite(v) and v > 0):
+                raise ValueError(f"{path}: surface attribute {name!r}={v!r} must be > 0 to turn fringes into heights")
+        info.update(intf_scale_factor=scale, obliquity_factor=obliquity, wavelength_um=wavelength_m * 1e6)
+        return h * (scale * obliquity * wavelength_m * 1e6), info
+    if unit not in DATX_UNITS_UM:
+        raise ValueError(f"{path}: surface Unit={unit!r} is not one this reader knows; valid are "
+                         f"{['Fringes', *DATX_UNITS_UM]}")
+    return h * DATX_UNITS_UM[unit], info
+
+
+def _datx_resolution_m(f, surface) -> float:
+    """The lateral resolution (m per pixel): the ``Attributes`` group's ``Lateral
+    Resolution`` (Mx), else the surface's ``X Converter`` (its parameter 1, as MetroPro's
+    HDF5 export and older files keep it); NaN where neither gives one."""
+    for group in f.get("Attributes", {}).values():
+        for key, value in group.attrs.items():
+            if key.endswith("Lateral Resolution:Value") or key.endswith("Resolution:Value"):
+                v = float(np.asarray(value).ravel()[0])
+                if np.isfinite(v) and v > 0:
+                    return v
+    conv = surface.attrs.get("X Converter")
+    try:
+        v = float(np.asarray(conv).ravel()[0]["Parameters"][1])
+    except (TypeError, ValueError, IndexError, KeyError):
+        return float("nan")
+    return v if np.isfinite(v) and v > 0 else float("nan")
+
+
+def read_zygo_datx(path: str | Path, spacing_mm: float | None = None) -> SagMap:
+    """Read a Zygo Mx ``.datx`` (HDF5) file's surface as a map (h5py).
+
+    The surface is the first dataset of ``Data/Surface`` (``Measurement/Surface`` in older
+    files), in ``Fringes`` (times the interferometric scale factor, the obliquity factor and
+    the wavelength) or in a length unit (:data:`DATX_UNITS_UM`); values at or above its
+    ``No Data`` attribute, and NaN, are invalid. The lateral scale is the ``Attributes``
+    group's lateral resolution, else the surface's ``X Converter``.
+    Ours rather than prysm's ``read_zygo_datx``, which takes only fringes and nanometres and
+    needs the ``Attributes`` group (``tests/test_zygo.py`` shows both).
+
+    Parameters as :func:`read_zygo_dat`.
     """
     path = Path(path)
     spacing_mm = _check_spacing(spacing_mm)
-    io = _prysm_io(path)
     try:
-        data = io.read_zygo_datx(path)
+        import h5py
     except ModuleNotFoundError:
         raise ValueError(f"{path}: reading .datx files needs h5py ({_INSTALL})") from None
-    except (OSError, KeyError, IndexError, ValueError) as exc:
-        raise ValueError(f"{path}: not a readable Zygo .datx file ({type(exc).__name__}: {exc})") from None
-    meta = data["meta"]
-    res = meta.get("Lateral Resolution", float("nan"))
-    height_um = np.asarray(data["phase"], dtype=float) * 1e-3  # prysm returns nm
-    return _to_map(path, height_um, float(res), spacing_mm, {"format": "zygo-datx"})
+    try:
+        f = h5py.File(path, "r")
+    except OSError as exc:
+        raise ValueError(f"{path}: not an HDF5 file, so not a Zygo .datx ({exc})") from None
+    with f:
+        group = next((f[g] for g in ("Data/Surface", "Measurement/Surface") if g in f), None)
+        if isinstance(group, h5py.Group):
+            group = next((group[k] for k in group if isinstance(group[k], h5py.Dataset)), None)
+        if not isinstance(group, h5py.Dataset) or group.ndim != 2:
+            raise ValueError(f"{path}: no 2-D surface dataset under 'Data/Surface' or 'Measurement/Surface'; "
+                             f"the file holds {sorted(f)}")
+        height_um, info = _datx_height_um(group[()], group.attrs, path)
+        res = _datx_resolution_m(f, group)
+    return _to_map(path, height_um, res, spacing_mm, {"format": "zygo-datx", **info})
 
 
 # ------------------------------------------------------------------ ASCII (.asc)
