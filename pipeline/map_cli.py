@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["register", "describe", "parse_basis", "fit_table"]
+__all__ = ["register", "describe", "parse_basis", "fit_table", "reader_options", "READER_OPTIONS"]
 
 #: ``--basis`` families: Zernike in a single-index convention (count of terms), or the quilt's Fourier series.
 BASES = ("zernike-noll", "zernike-fringe", "fourier")
@@ -21,11 +21,23 @@ def describe(sagmap) -> str:
             f"RMS {v.std():.4f} µm")
 
 
+#: argparse destinations of the options a sag-map reader takes (:func:`pipeline.io.registry.read_sag_map`).
+READER_OPTIONS = ("spacing_mm", "extent_mm", "wavelength_um", "quantity", "wfr_to_sag_factor")
+
+
+def reader_options(a) -> dict:
+    """The reader options the user gave on the command line (a format that does not use one
+    refuses it, naming those it does)."""
+    out = {k: getattr(a, k) for k in READER_OPTIONS if getattr(a, k, None) is not None}
+    if "extent_mm" in out:
+        out["extent_mm"] = tuple(out["extent_mm"])
+    return out
+
+
 def _cmd_convert(a) -> int:
     from pipeline.io.registry import read_sag_map, write_sag_map
 
-    options = {k: v for k, v in (("spacing_mm", a.spacing_mm), ("wavelength_um", a.wavelength_um)) if v is not None}
-    sagmap = read_sag_map(a.input, **options)
+    sagmap = read_sag_map(a.input, **reader_options(a))
     write_sag_map(sagmap, a.output)
     print(f"read:    {Path(a.input)} ({sagmap.meta.get('format', Path(a.input).suffix)})")
     print(f"map:     {describe(sagmap)}")
@@ -81,8 +93,7 @@ def _cmd_fit(a) -> int:
     from pipeline.io.common import atomic_write
     from pipeline.io.registry import read_sag_map
 
-    options = {"spacing_mm": a.spacing_mm} if a.spacing_mm is not None else {}
-    sagmap = read_sag_map(a.map, **options)
+    sagmap = read_sag_map(a.map, **reader_options(a))
     fit, rows = fit_table(sagmap, a.basis, a.region)
     print(f"map:      {describe(sagmap)}")
     extra = (f", disc r = {fit.radius_mm:g} mm about ({fit.center_mm[0]:g}, {fit.center_mm[1]:g}) mm"
@@ -107,16 +118,30 @@ def _suffixes(written: bool) -> str:
     return " ".join(sorted({s for f in formats("sag map") if f.writer or not written for s in f.suffixes}))
 
 
+def _add_reader_options(q) -> None:
+    """What a map's file may not say about itself, for every command that reads one."""
+    g = q.add_argument_group("what the input file may not say")
+    g.add_argument("--spacing-mm", type=float, default=None,
+                   help="sample pitch (mm) of an input without one (a foreign CODE V grid, a Zygo file "
+                   "without lateral calibration, scattered points)")
+    g.add_argument("--extent-mm", type=float, nargs=4, default=None, metavar=("XMIN", "XMAX", "YMIN", "YMAX"),
+                   help="the grid's extent (mm, first to last sample) of a CODE V INT without one")
+    g.add_argument("--wavelength-um", type=float, default=None,
+                   help="wavelength (µm) of one wave, for a map whose heights are in waves")
+    g.add_argument("--quantity", choices=("sag", "wavefront"), default=None,
+                   help="what a CODE V WFR grid holds is taken as: 'wavefront' keeps it an OPD map")
+    g.add_argument("--wfr-to-sag-factor", type=float, default=None,
+                   help="sag = factor x OPD for a CODE V WFR grid (-0.5 for a mirror in reflection at normal "
+                   "incidence)")
+
+
 def register(sub) -> None:
     """Add the ``convert`` and ``fit`` subcommands to the ``cryograting`` sub-parsers."""
     q = sub.add_parser("convert", help="a sag map from one format into another (formats by suffix: "
                        "python -m pipeline.io.registry lists them)")
     q.add_argument("input", metavar="IN", help=f"sag map read: {_suffixes(False)}")
     q.add_argument("output", metavar="OUT", help=f"sag map written: {_suffixes(True)}")
-    q.add_argument("--spacing-mm", type=float, default=None,
-                   help="sample pitch (mm) of an input without one (a foreign CODE V grid, a Zygo file "
-                   "without lateral calibration, scattered CSV points)")
-    q.add_argument("--wavelength-um", type=float, default=None, help="wavelength of a NetCDF map in waves (µm)")
+    _add_reader_options(q)
     q.set_defaults(func=_cmd_convert)
 
     q = sub.add_parser("fit", help="Zernike or quilt-Fourier coefficients of a sag map (any readable format)")
@@ -126,6 +151,6 @@ def register(sub) -> None:
                    "fourier:H (the quilt's harmonics up to H at 21 x 18 mm); default zernike-fringe:37")
     q.add_argument("--region", default="full", help="center (82 x 72 mm), interferometer (137 mm disc), pupil "
                    "(110 mm disc) or full; default full")
-    q.add_argument("--spacing-mm", type=float, default=None, help="sample pitch (mm) of a map without one")
+    _add_reader_options(q)
     q.add_argument("--out", default=None, help="CSV of the coefficients (term,coefficient_um,phase_deg)")
     q.set_defaults(func=_cmd_fit)

@@ -125,7 +125,7 @@ def test_a_netcdf_sag_in_waves_takes_the_wavelength_it_states(tmp_path, where):
         ic.read_sag_map(tmp_path / "w.nc", wavelength_um=0.55)
     xr.Dataset({"height": (("y", "x"), 0.1 * X, {"units": "waves"})},
                coords={"x": ("x", g, {"units": "mm"}), "y": ("y", g, {"units": "mm"})}).to_netcdf(tmp_path / "n.nc")
-    with pytest.raises(ValueError, match=r"needs wavelength_um.*the measurement's wavelength_um key"):
+    with pytest.raises(ValueError, match=r"needs wavelength_um.*the measurement's 'wavelength_um' key"):
         ic.read_sag_map(tmp_path / "n.nc")
 
 

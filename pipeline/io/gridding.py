@@ -82,7 +82,7 @@ def sag_unit_factor(units: str, wavelength_um: float | None = None) -> float:
     if u in WAVE_UNITS:
         if wavelength_um is None or not (np.isfinite(wavelength_um) and wavelength_um > 0):
             raise ValueError(f"units={units!r} needs wavelength_um, the wavelength of one wave (µm, > 0: in a manifest "
-                             f"the measurement's wavelength_um key); got wavelength_um={wavelength_um!r}")
+                             f"the measurement's 'wavelength_um' key); got wavelength_um={wavelength_um!r}")
         return float(wavelength_um)
     raise ValueError(f"units={units!r} is not a known sag unit; valid: nm, um (µm, micron), mm, m, Angstrom, "
                      "waves (with wavelength_um)")
