@@ -34,14 +34,14 @@ from .plausibility import at_prior_bound, check_measurements
 from .psf_image import PsfImageForward
 from .verdict import explains, own_parameters
 from .pupil_orders import checks, other_orders_check, with_check
-from .ranking import fit_effects, parameters_of, predictions, rank
+from .ranking import fit_effects, parameters_of, predictions, rank, rescaling_companions
 from . import wings as wings_alternative
 from .where import measurement_parts, profile_parts, psf_image_parts, satellite_spacing_um, surface_parts
 
 # Public names of the diagnosis, re-exported here from the modules that define them.
 __all__ = ["Criteria", "N_EFF_SOURCES", "post_fit_n_eff", "recounted", "Finding", "Diagnosis", "diagnose",
            "build_problem", "fit_effects", "all_effects", "parameters_of", "summary_context", "unconstrained",
-           "acting_on", "gap_statistics", "gaps", "has_gap", "explains", "member_explains"]
+           "acting_on", "gap_statistics", "gaps", "has_gap", "explains", "member_explains", "members_of"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,6 +170,12 @@ def _with_heldout(prob: Problem, f: Finding, c: Criteria) -> Finding:
     return replace(f, heldout_shrink_fraction=h, heldout_note=note, overfit=bool(over))
 
 
+def members_of(f: Finding) -> tuple:
+    """The effects of ``f`` that :func:`member_explains` may put in its place: its own and
+    the rescaling it adopted as a companion."""
+    return tuple(f.effects) + rescaling_companions(f)
+
+
 def member_explains(prob: Problem, findings: list, c: Criteria, heldout: bool) -> tuple[list, str]:
     """Occam for a pair on top that does not explain the gap: if one of its members alone
     does (significant, ``min_variance_explained`` of the excess where it acts, not overfit
@@ -182,16 +188,27 @@ def member_explains(prob: Problem, findings: list, c: Criteria, heldout: bool) -
     trefoil discrepancy): a slit width explained ~0.92 of the profiles' excess, but
     collimator_wfe, pupil_shift or temperature beside it took up part of the trefoil in the
     image or map (delta BIC ~30 better) and the pair explained only 0.35-0.49 where it acts,
-    so 6 of 22 slit-width cases ended ``unexplained``."""
+    so 6 of 22 slit-width cases ended ``unexplained``.
+
+    A rescaling adopted as a companion (:func:`.ranking.rescaling_companions`) is a member
+    too: a finding's share of the excess is measured from its companions' own fit, so beside
+    a rescaling that already fits to the noise it explains 0 % of what is left, though the
+    pair lowers the BIC further (measured on an outside lab's pixel-sampled J profiles of a
+    1.15× quilt: ``collimator_wfe`` + amplitude ranked first, ΔBIC −301, explaining 0 %, while
+    ``amplitude_scale`` alone, ΔBIC −276, read 1.151 and explained all of it; the case ended
+    ``unexplained``). A background companion (``quilt_shape``, a bow, a plating gradient) is
+    not: real blanks carry them beside whatever else is wrong."""
     pair = findings[0]
+    members = members_of(pair)
     for i, f in enumerate(findings[1:], start=1):
-        if len(f.effects) != 1 or f.effects[0] not in pair.effects or not explains(f, c):
+        if len(f.effects) != 1 or f.effects[0] not in members or not explains(f, c):
             continue
         if heldout and f.heldout_shrink_fraction is None and not f.heldout_note:
             f = findings[i] = _with_heldout(prob, f, c)
         if f.overfit:
             continue
-        note = (f"{pair.effect} ranks higher (delta BIC {pair.delta_bic:.1f} against {f.delta_bic:.1f}) but explains "
+        beside = f" beside {' + '.join(pair.companions)}" if pair.companions else ""
+        note = (f"{pair.effect}{beside} ranks higher (delta BIC {pair.delta_bic:.1f} against {f.delta_bic:.1f}) but explains "
                 f"only {pair.excess_explained:.2f} of the excess over noise where it acts; {f.effect} alone explains "
                 f"{f.excess_explained:.2f} where it acts and is the explanation (Occam)")
         return [f] + findings[:i] + findings[i + 1:], note
@@ -359,7 +376,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
                         summary=physical_summary(all_effects(f), f.parameters, ctx)) for f in findings]
     gap = has_gap(prob, nom, criteria)
     note = ""
-    if gap and findings and len(findings[0].effects) > 1 and not explains(findings[0], criteria):
+    if gap and findings and len(members_of(findings[0])) > 1 and not explains(findings[0], criteria):
         findings, note = member_explains(prob, findings, criteria, heldout)
     best = findings[0] if findings else None
     if gap and checks(best) and explains(best, criteria):  # is the pupil aberration the collimator's?
