@@ -16,8 +16,9 @@ def format_report(res) -> str:
     lines += [f"  d{a} = {getattr(rb, f'd{a}_um'):+.4f} µm" for a in "xyz"]
     lines += [f"  r{a} = {getattr(rb, f'r{a}_urad'):+.4f} µrad = {getattr(rb, f'r{a}_arcsec'):+.4f} arcsec"
               + ("  (groove clocking)" if a == "z" else "") for a in "xyz"]
-    lines += [f"P/V, RMS (piston, tilt removed):        {st['pv_ptt_um']:.4f}, {st['rms_ptt_um']:.4f} µm",
-              f"P/V, RMS (piston, tilt, power removed): {st['pv_pttp_um']:.4f}, {st['rms_pttp_um']:.4f} µm"]
+    lines += ["over the whole face, at its nodes (RMS area-weighted; the map's regions: cryograting fit):",
+              f"  P/V, RMS (piston, tilt removed):        {st['pv_ptt_um']:.4f}, {st['rms_ptt_um']:.4f} µm",
+              f"  P/V, RMS (piston, tilt, power removed): {st['pv_pttp_um']:.4f}, {st['rms_pttp_um']:.4f} µm"]
     return "\n".join(lines)
 
 
@@ -49,8 +50,11 @@ def _cmd_import_fe(a) -> int:
 def register(sub) -> None:
     """Add the ``import-fe`` subcommand to the ``cryograting`` sub-parsers."""
     q = sub.add_parser("import-fe", help="sag map and rigid-body motion of the optical face of an FE result "
-                       "from any solver (VTU, XDMF, Exodus, gmsh; Abaqus .inp / Nastran .bdf + displacement CSV)")
-    q.add_argument("result", metavar="RESULT", help="mesh with nodal displacements (or a mesh with --displacement-csv)")
+                       "from any solver (VTU, XDMF, Exodus, gmsh; Abaqus .inp / Nastran .bdf + displacement CSV; "
+                       "a table of nodes x,y,z,ux,uy,uz)")
+    q.add_argument("result", metavar="RESULT", help="mesh with nodal displacements (or a mesh with --displacement-csv), "
+                   "or a .csv/.txt/.tsv table of nodes with coordinates and displacements (its face: a plane or "
+                   "an axis, --surface z=10 or +z)")
     q.add_argument("--surface", required=True, help="optical face: a node set / cell set / physical group name, "
                    "a plane such as z=10 (solver unit), or an outward normal such as +z or normal:0,0,1")
     q.add_argument("--out", required=True, help="output sag map; format by suffix (.int CODE V, .dat Zemax, "

@@ -342,3 +342,70 @@ def test_own_fea_written_to_vtu_reads_back_to_its_own_sag(tmp_path, coarse_eight
     err = np.abs(d[ok]).max()
     print(f"own FEA via VTU: max |import - fea map| = {err:.2e} um, bound {bound:.2e} um")
     assert err <= bound, (err, bound)
+
+
+def _node_table(path, pts_mm, u_um, header, scale=1.0, delimiter=",", hole_r_mm=None, seed=3):
+    """A nodal solution table as a post-processor exports it: coordinates and displacements
+    in one unit, rows in any order, no elements."""
+    keep = np.ones(len(pts_mm), bool)
+    if hole_r_mm is not None:  # a hole through the face: no nodes there
+        keep = np.hypot(pts_mm[:, 0] - 12.0, pts_mm[:, 1] - 6.0) > hole_r_mm
+    rows = np.column_stack([np.arange(1, len(pts_mm) + 1), pts_mm / scale, 1e-3 * u_um / scale])[keep]
+    rows = rows[np.random.default_rng(seed).permutation(len(rows))]
+    np.savetxt(path, rows, delimiter=delimiter, header=header, comments="", fmt="%.12g")
+    return path
+
+
+def test_a_table_of_nodes_without_a_mesh_recovers_rigid_body_and_quilt(tmp_path):
+    """A workbench-style nodal table in metres (``X Location (m)`` … ``UZ (m)``, rows shuffled,
+    no elements): the face ``+z`` is the table's top plane, triangulated. Rigid body exact; the
+    sag within the linear-triangle bound R² |f''| / 2 for right triangles of legs h (R² = h²/2)."""
+    h = 3.0
+    pts, _, _ = plate(h)
+    path = _node_table(tmp_path / "nodes.csv", pts, field_um(pts),
+                       "Node Number,X Location (m),Y Location (m),Z Location (m),UX (m),UY (m),UZ (m)", scale=1e3)
+    r = import_fe(path, "+z", length_unit="m")
+    rb = r.rigid_body
+    # Delaunay picks each square's diagonal freely, so the nodal areas are not symmetric and the
+    # quilt's area-weighted mean over the face is not exactly zero: 1e-3 of its 0.1 µm amplitude
+    np.testing.assert_allclose([rb.dx_um, rb.dy_um, rb.dz_um], D_UM, atol=1e-3 * A_UM)
+    np.testing.assert_allclose([rb.rx_urad, rb.ry_urad, rb.rz_urad], TH_URAD, atol=1e-2)  # of A / 42 mm = 2.4 µrad
+    bound = (h**2 / 2) * A_UM * (KX**2 + KY**2) / 2
+    err = np.abs(r.sag_map.sag_um - exact_on(r.sag_map))
+    assert np.isfinite(r.sag_map.sag_um).all() and err.max() <= bound
+    assert r.sag_map.meta["interpolation"].startswith("linear")
+    same = import_fe(path, "z=0", length_unit="m")  # the plane named instead of the axis
+    np.testing.assert_allclose(same.sag_map.sag_um, r.sag_map.sag_um, atol=1e-12)
+
+
+def test_a_node_table_with_a_hole_in_its_face_is_not_bridged(tmp_path):
+    """Nodes missing in a 10 mm disc of the face: the triangles Delaunay would lay across it
+    are dropped, so the map has no values there, and keeps them around it."""
+    pts, _, _ = plate(3.0)
+    path = _node_table(tmp_path / "holed.txt", pts, field_um(pts), "node x y z ux uy uz", delimiter=" ",
+                       hole_r_mm=10.0)
+    sm = import_fe(path, "+z").sag_map
+    X, Y = sm.grid()
+    d = np.hypot(X - 12.0, Y - 6.0)
+    assert np.isnan(sm.sag_um[d < 6.0]).all()
+    assert np.isfinite(sm.sag_um[(d > 14.0) & (np.abs(X) < 40) & (np.abs(Y) < 34)]).all()
+
+
+def test_node_table_refusals_name_what_is_wrong(tmp_path):
+    pts, _, _ = plate(6.0)
+    u = field_um(pts)
+    bare = tmp_path / "bare.csv"
+    np.savetxt(bare, np.column_stack([pts, 1e-3 * u]), delimiter=",")
+    with pytest.raises(ValueError, match="needs a header naming its columns"):
+        import_fe(bare, "+z")
+    metres = _node_table(tmp_path / "m.csv", pts, u, "id,x_m,y_m,z_m,ux_m,uy_m,uz_m", scale=1e3)
+    with pytest.raises(ValueError, match=r"lengths in \['m'\].*length_unit='mm'"):
+        import_fe(metres, "+z")
+    no_uz = _node_table(tmp_path / "nouz.csv", pts[:, :3], u, "id,x,y,z,ux,uy,temperature")
+    with pytest.raises(ValueError, match=r"no column for \['uz'\]"):
+        import_fe(no_uz, "+z")
+    ok = _node_table(tmp_path / "ok.csv", pts, u, "id,x,y,z,ux,uy,uz")
+    with pytest.raises(ValueError, match="no node or element sets"):
+        import_fe(ok, "FRONT")
+    with pytest.raises(ValueError, match=r"0 nodes lie on the plane z=5.*spans z = -10 .. 0"):
+        import_fe(ok, "z=5")

@@ -5,7 +5,9 @@ Formats (read with meshio): VTU/VTK, XDMF (XML data; HDF5 data needs h5py), Exod
 ``.inp`` / Nastran ``.bdf``/``.nas`` meshes with the displacements in a CSV
 ``node_id,ux,uy,uz`` (columns found by their header names, other columns ignored; without
 a header exactly these four; ``#`` comments) keyed by the solver's node IDs.
-A CSV next to another format is keyed by 1-based point number.
+A CSV next to another format is keyed by 1-based point number. A ``.csv``/``.txt``/``.tsv``
+result without a mesh is a table of nodes with coordinates and displacements
+(:mod:`pipeline.io.fe_nodes`): its face is the nodes on a plane, triangulated.
 
 The displacement field is the point-data array named ``field``, or, by default, the one
 3-component array called displacement/displacements/disp/u/depl (any case); three
@@ -26,6 +28,7 @@ import numpy as np
 from fea.external import face_sag_map
 from fea.fe_face import parse_surface, select_face
 from pipeline.io.common import numbered_lines, read_text, split_fields
+from pipeline.io.fe_nodes import NODE_TABLE_SUFFIXES, face_triangles, read_node_table
 
 __all__ = ["LENGTH_UNITS_MM", "FEResultData", "read_fe_result", "import_fe"]
 
@@ -294,11 +297,18 @@ def import_fe(path, surface: str, *, displacement_csv=None, field: str | None = 
         ``.sag_map`` (a SagMap for fits, exports, optics), ``.rigid_body``, ``.stats``.
     """
     scale = _unit_scale(length_unit)
-    data = read_fe_result(path, displacement_csv=displacement_csv, field=field, length_unit=length_unit)
     spec = parse_surface(surface)
-    pts = data.points_mm / scale  # selection in the solver's own unit
-    if tol is None:
-        tol = 1e-6 * float(np.ptp(pts, axis=0).max() or 1.0)
+    if Path(path).suffix.lower() in NODE_TABLE_SUFFIXES and displacement_csv is None:
+        if field is not None:
+            raise ValueError(f"field={field!r}: a node table's displacement is its ux, uy, uz columns")
+        pts, u = read_node_table(path, length_unit)  # no mesh: the face's nodes triangulated in their plane
+        tol = 1e-6 * float(np.ptp(pts, axis=0).max() or 1.0) if tol is None else tol
+        blocks, spec = face_triangles(pts, spec, tol)
+        data = FEResultData(pts * scale, u * scale, blocks, source=str(path))
+    else:
+        data = read_fe_result(path, displacement_csv=displacement_csv, field=field, length_unit=length_unit)
+        pts = data.points_mm / scale  # selection in the solver's own unit
+        tol = 1e-6 * float(np.ptp(pts, axis=0).max() or 1.0) if tol is None else tol
     face = select_face(pts, data.blocks, spec, tol=tol, angle_tol_deg=angle_tol_deg,
                        point_sets=data.point_sets, cell_sets=data.cell_sets, cell_data=data.cell_data,
                        field_data=data.field_data)

@@ -43,6 +43,7 @@ from pipeline.io.codev import read_codev_int, write_codev_int
 from pipeline.io.codev_zfr import read_codev_zernike, write_codev_zernike
 from pipeline.io.columns import names_table
 from pipeline.io.fe import read_fe_result
+from pipeline.io.fe_nodes import NODE_TABLE_SUFFIXES, read_node_table
 from pipeline.io.fits import (FITS_SUFFIXES, read_line_profile_fits, read_psf_image_fits, read_sag_fits,
                               write_sag_fits)
 from pipeline.io.gridding import GridUnknownError
@@ -142,6 +143,8 @@ FORMATS: tuple[Format, ...] = (
     Format("fe result", (".vtu", ".vtk", ".xdmf", ".exo", ".e", ".msh", ".inp", ".bdf", ".nas"),
            "another FE solver's mesh with nodal displacements (meshio)", read_fe_result, None,
            ".inp/.bdf/.nas with a node_id,ux,uy,uz CSV; cryograting import-fe"),
+    Format("fe result", NODE_TABLE_SUFFIXES, "another FE solver's nodal table x,y,z,ux,uy,uz (no mesh)",
+           read_node_table, None, "columns by header names; the face: a plane, triangulated; cryograting import-fe"),
 )
 
 
