@@ -267,6 +267,11 @@ def read_fe_result(path, *, displacement_csv=None, field: str | None = None,
                         dict(mesh.field_data), str(path))
 
 
+def _plane_tol(points: np.ndarray, tol: float | None) -> float:
+    """``tol``, or by default 1e-6 of the model's largest extent (its own length unit)."""
+    return 1e-6 * float(np.ptp(points, axis=0).max() or 1.0) if tol is None else tol
+
+
 def import_fe(path, surface: str, *, displacement_csv=None, field: str | None = None, length_unit: str = "mm",
               tol: float | None = None, angle_tol_deg: float = 1.0, sag_along: str = "z",
               axes: str = "x,y,z", origin=None, spacing_mm: float = 0.5):
@@ -302,13 +307,13 @@ def import_fe(path, surface: str, *, displacement_csv=None, field: str | None = 
         if field is not None:
             raise ValueError(f"field={field!r}: a node table's displacement is its ux, uy, uz columns")
         pts, u = read_node_table(path, length_unit)  # no mesh: the face's nodes triangulated in their plane
-        tol = 1e-6 * float(np.ptp(pts, axis=0).max() or 1.0) if tol is None else tol
+        tol = _plane_tol(pts, tol)
         blocks, spec = face_triangles(pts, spec, tol)
         data = FEResultData(pts * scale, u * scale, blocks, source=str(path))
     else:
         data = read_fe_result(path, displacement_csv=displacement_csv, field=field, length_unit=length_unit)
         pts = data.points_mm / scale  # selection in the solver's own unit
-        tol = 1e-6 * float(np.ptp(pts, axis=0).max() or 1.0) if tol is None else tol
+        tol = _plane_tol(pts, tol)
     face = select_face(pts, data.blocks, spec, tol=tol, angle_tol_deg=angle_tol_deg,
                        point_sets=data.point_sets, cell_sets=data.cell_sets, cell_data=data.cell_data,
                        field_data=data.field_data)
