@@ -25,6 +25,7 @@ one is ours. A Zygo ``.dat`` is told from a Zemax Grid Sag
 
 from __future__ import annotations
 
+import re
 import shlex
 import struct
 from pathlib import Path
@@ -199,7 +200,8 @@ def _datx_resolution_m(f, surface) -> float:
     HDF5 export and older files keep it); NaN where neither gives one."""
     for group in f.get("Attributes", {}).values():
         for key, value in group.attrs.items():
-            if key.endswith("Lateral Resolution:Value") or key.endswith("Resolution:Value"):
+            # "Data Context.Lateral Resolution:Value", "Data Context.Data Attributes.Resolution:Value"
+            if re.search(r"(^|\.)(Lateral )?Resolution:Value$", key):
                 v = float(np.asarray(value).ravel()[0])
                 if np.isfinite(v) and v > 0:
                     return v
