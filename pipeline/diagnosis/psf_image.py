@@ -24,7 +24,7 @@ than its noise: a nominal image coupled 2 % with 0.5 % noise is then ``unexplain
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.interpolate import RectBivariateSpline
@@ -38,7 +38,8 @@ from .manifest import PsfImageData
 from .nominal import DEFAULT_MATERIALS
 from .noise import estimate_noise, estimate_noise_band_limited
 
-__all__ = ["PsfImageSettings", "FIT_PSF_SETTINGS", "FIT_PSF_SETTINGS_FINE", "psf_image_model", "PsfImageForward"]
+__all__ = ["PsfImageSettings", "FIT_PSF_SETTINGS", "FIT_PSF_SETTINGS_FINE", "covering", "psf_image_model",
+           "PsfImageForward"]
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,31 @@ FIT_PSF_SETTINGS = PsfImageSettings(detector_step_um=1.5, n_fft=256, window_um=9
 #: ... and an image that resolves the diffraction core (``pixel_um`` below 6 µm, e.g. a
 #: microscope-relayed focal-plane image): 0.5 µm steps.
 FIT_PSF_SETTINGS_FINE = PsfImageSettings(detector_step_um=0.5, n_fft=512, window_um=60.0)
+
+
+#: How far the fit may move the image (µm) beyond the data's extent: the initial position
+#: search spans ±20 µm (:meth:`PsfImageForward._initial_shift`).
+_SHIFT_MARGIN_UM = 24.0
+
+
+def covering(settings: PsfImageSettings, x_um: np.ndarray, y_um: np.ndarray,
+             pixel_um: float = 0.0) -> PsfImageSettings:
+    """``settings`` with a window that holds every sample of an image at ``x_um``, ``y_um``
+    moved by up to :data:`_SHIFT_MARGIN_UM` and read a pixel away (the coupling's
+    neighbours), the FFT lengthened (doubled) until its period holds the window.
+
+    A sample beyond the model's window would be compared with the image spline's
+    extrapolation: a focal-plane image of ±80 µm against the 60 µm window left 1.6 % of the
+    peak in the residual of the nominal's own image and the fit took the quilt's harmonics
+    along x 11 % low (0.888 on a noise-free image made by ``cryograting psf``).
+    """
+    half = float(max(np.max(np.abs(x_um)), np.max(np.abs(y_um)))) + _SHIFT_MARGIN_UM + float(pixel_um)
+    if half <= settings.window_um:
+        return settings
+    n = settings.n_fft
+    while 0.5 * n * settings.detector_step_um < half:
+        n *= 2
+    return replace(settings, n_fft=n, window_um=float(np.ceil(half)))
 
 
 def psf_image_model(grating: str, wavelength_um: float, order: int, sag: SagMap | None, p: dict,
@@ -115,7 +141,8 @@ class PsfImageForward(SpectrographImageModel):
                  materials: tuple[str, str] = DEFAULT_MATERIALS):
         m = data.measurement
         if settings is None:
-            settings = FIT_PSF_SETTINGS if m.pixel_um >= 6.0 else FIT_PSF_SETTINGS_FINE
+            settings = covering(FIT_PSF_SETTINGS if m.pixel_um >= 6.0 else FIT_PSF_SETTINGS_FINE,
+                                data.x_um, data.y_um, m.pixel_um)
         self._setup(m, nominal, cold_K, warm_K, settings, cache_size, materials)
         self.x, self.y = np.asarray(data.x_um, float), np.asarray(data.y_um, float)
         self.data = np.asarray(data.intensity, float)
