@@ -28,7 +28,7 @@ import numpy as np
 from fea.external import face_sag_map
 from fea.fe_face import parse_surface, select_face
 from pipeline.io.common import numbered_lines, read_text, split_fields
-from pipeline.io.fe_nodes import NODE_TABLE_SUFFIXES, face_triangles, read_node_table
+from pipeline.io.fe_nodes import DISPLACEMENT_COLUMNS, NODE_TABLE_SUFFIXES, face_triangles, read_node_table
 
 __all__ = ["LENGTH_UNITS_MM", "FEResultData", "read_fe_result", "import_fe"]
 
@@ -100,13 +100,11 @@ def _node_ids(path: Path) -> np.ndarray | None:
     return np.array(ids, dtype=np.int64)
 
 
-#: Header names of a displacement CSV's columns (lower case, spaces, dots and dashes read as
-#: underscores): Abaqus's report ("Node Label", "U-U1"), Ansys's ("UX"), generic ones.
+#: Header names of a displacement CSV's columns: the node ID (Abaqus's report "Node Label",
+#: generic ones) and the displacement's (:data:`pipeline.io.fe_nodes.DISPLACEMENT_COLUMNS`).
 _CSV_COLUMNS = {
     "node_id": ("node_id", "node", "id", "nodeid", "node_label", "label", "node_number", "nid"),
-    "ux": ("ux", "u_x", "u1", "u_u1", "dx", "disp_x", "displacement_x", "x_displacement"),
-    "uy": ("uy", "u_y", "u2", "u_u2", "dy", "disp_y", "displacement_y", "y_displacement"),
-    "uz": ("uz", "u_z", "u3", "u_u3", "dz", "disp_z", "displacement_z", "z_displacement"),
+    **DISPLACEMENT_COLUMNS,
 }
 
 

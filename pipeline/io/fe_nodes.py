@@ -25,16 +25,24 @@ import numpy as np
 from fea.fe_face import FaceSpec
 from pipeline.io.common import numbered_lines, read_text, split_fields
 
-__all__ = ["COLUMNS", "NODE_TABLE_SUFFIXES", "MAX_EDGE_OVER_SPACING", "read_node_table", "face_triangles"]
+__all__ = ["COLUMNS", "DISPLACEMENT_COLUMNS", "NODE_TABLE_SUFFIXES", "MAX_EDGE_OVER_SPACING", "read_node_table",
+           "face_triangles"]
 
-#: Column -> accepted header names (lower case, unit removed, spaces/dots/dashes as ``_``).
+#: Header names of a displacement's columns (lower case, spaces, dots and dashes read as
+#: underscores): Abaqus's report ("U-U1"), Ansys's ("UX"), generic ones; a displacement CSV
+#: beside a mesh (:mod:`pipeline.io.fe`) takes these too.
+DISPLACEMENT_COLUMNS = {
+    "ux": ("ux", "u_x", "u1", "u_u1", "dx", "disp_x", "displacement_x", "x_displacement"),
+    "uy": ("uy", "u_y", "u2", "u_u2", "dy", "disp_y", "displacement_y", "y_displacement"),
+    "uz": ("uz", "u_z", "u3", "u_u3", "dz", "disp_z", "displacement_z", "z_displacement"),
+}
+#: Column -> accepted header names of a node table (as above, the unit removed): coordinates,
+#: and displacements also as a workbench names them ("X Deformation").
 COLUMNS = {
     "x": ("x", "x_coord", "coord_x", "x_coordinate", "loc_x", "location_x", "x_location", "coor1", "x0"),
     "y": ("y", "y_coord", "coord_y", "y_coordinate", "loc_y", "location_y", "y_location", "coor2", "y0"),
     "z": ("z", "z_coord", "coord_z", "z_coordinate", "loc_z", "location_z", "z_location", "coor3", "z0"),
-    "ux": ("ux", "u_x", "u1", "u_u1", "dx", "disp_x", "displacement_x", "x_displacement", "x_deformation"),
-    "uy": ("uy", "u_y", "u2", "u_u2", "dy", "disp_y", "displacement_y", "y_displacement", "y_deformation"),
-    "uz": ("uz", "u_z", "u3", "u_u3", "dz", "disp_z", "displacement_z", "z_displacement", "z_deformation"),
+    **{k: v + (f"{k[1]}_deformation",) for k, v in DISPLACEMENT_COLUMNS.items()},
 }
 #: Suffixes of a result file read as a node table (no FE mesh format uses them).
 NODE_TABLE_SUFFIXES = (".csv", ".txt", ".tsv")
