@@ -328,6 +328,14 @@ def test_datx_refusals_name_what_is_wrong(tmp_path):
     with pytest.raises(ValueError, match="no lateral scale.*spacing_mm"):
         ic.read_sag_map(tmp_path / "noscale.datx")
     assert ic.read_sag_map(tmp_path / "noscale.datx", spacing_mm=PITCH_MM).meta["spacing_mm"] == PITCH_MM
+    with h5py.File(tmp_path / "badres.datx", "w") as f:
+        d = f.create_dataset("Data/Surface/{F}", data=truth * 1e3)
+        d.attrs["Unit"] = np.array([b"NanoMeters"], dtype=object)
+        f.create_group("Attributes/{F}").attrs["Data Context.Lateral Resolution:Value"] = np.array([b"n/a"],
+                                                                                                  dtype=object)
+    with pytest.raises(ValueError, match=r"Lateral Resolution:Value=.*n/a.*not a lateral resolution.*spacing_mm"):
+        ic.read_sag_map(tmp_path / "badres.datx")
+    assert ic.read_sag_map(tmp_path / "badres.datx", spacing_mm=PITCH_MM).meta["spacing_mm"] == PITCH_MM
     (tmp_path / "text.datx").write_text("x,y,z\n")
     with pytest.raises(ValueError, match="not an HDF5 file"):
         ic.read_sag_map(tmp_path / "text.datx")

@@ -202,7 +202,11 @@ def _datx_resolution_m(f, surface) -> float:
         for key, value in group.attrs.items():
             # "Data Context.Lateral Resolution:Value", "Data Context.Data Attributes.Resolution:Value"
             if re.search(r"(^|\.)(Lateral )?Resolution:Value$", key):
-                v = float(np.asarray(value).ravel()[0])
+                try:
+                    v = float(np.asarray(value).ravel()[0])
+                except (TypeError, ValueError, IndexError):
+                    raise ValueError(f"{f.filename}: attribute {key}={value!r} is not a lateral resolution "
+                                     "(m per pixel > 0); pass spacing_mm, the pixel pitch on the part in mm") from None
                 if np.isfinite(v) and v > 0:
                     return v
     conv = surface.attrs.get("X Converter")
@@ -244,7 +248,7 @@ def read_zygo_datx(path: str | Path, spacing_mm: float | None = None) -> SagMap:
             raise ValueError(f"{path}: no 2-D surface dataset under 'Data/Surface' or 'Measurement/Surface'; "
                              f"the file holds {sorted(f)}")
         height_um, info = _datx_height_um(group[()], group.attrs, path)
-        res = _datx_resolution_m(f, group)
+        res = _datx_resolution_m(f, group) if spacing_mm is None else float("nan")  # spacing_mm overrides it
     return _to_map(path, height_um, res, spacing_mm, {"format": "zygo-datx", **info})
 
 
