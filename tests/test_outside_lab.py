@@ -55,3 +55,42 @@ def test_pixel_sampled_cutouts_of_a_stronger_quilt_are_its_amplitude(cache):
     d = diagnose(DATA / "cutouts" / "manifest.toml", cache_dir=cache, heldout=False)
     assert (d.verdict, d.best.effect) == ("explained", "amplitude_scale"), (d.verdict, d.best.effect, d.ranking_note)
     assert d.best.parameters["scale_J"] == pytest.approx(1.15, abs=0.03)
+
+
+def test_a_map_and_profiles_of_one_blank_each_state_their_own_reading(cache, tmp_path):
+    """The lab's cut-outs (quilt 1.15x) beside a map of the same blank at 1.20x the nominal
+    (written here with numpy as the valid points inside a 137 mm aperture, 3 nm of noise): the
+    joint fit takes one scale for both and leaves a gap in one of them, and the report then
+    says what each kind reads fitted alone. Rule fixed before the run: explained by
+    ``amplitude_scale``; two parts; the map alone reads scale_J within 0.005 of 1.20, the
+    profiles alone within 0.03 of 1.15 (as the cut-outs alone); the verdict's sentence names
+    both readings."""
+    import shutil
+
+    import numpy as np
+
+    from pipeline.diagnosis.manifest import load_manifest
+    from pipeline.diagnosis.nominal import nominal_sag_map
+    from pipeline.diagnosis.report import verdict_text
+
+    src = DATA / "cutouts"
+    for name in ("J_250mas_cutout.fits", "J_25mas_cutout.fits"):
+        shutil.copy(src / name, tmp_path / name)
+    nominal = nominal_sag_map(load_manifest(src / "manifest.toml").simulation, cache)
+    xx, yy = np.meshgrid(nominal.x_mm, nominal.y_mm)
+    sag = 1.20 * nominal.sag_um + np.random.default_rng(5).normal(0.0, 0.003, nominal.sag_um.shape)
+    keep = (np.hypot(xx, yy) <= 68.5) & np.isfinite(sag)
+    np.savetxt(tmp_path / "map_J.csv", np.column_stack([xx[keep], yy[keep], sag[keep]]), delimiter=",",
+               header="x_mm,y_mm,sag_um", comments="", fmt="%.5f")
+    text = (src / "manifest.toml").read_text()
+    (tmp_path / "manifest.toml").write_text(
+        text + '\n[[measurement]]\nkind = "surface"\nfile = "map_J.csv"\nblank = "J"\ntemperature_K = 80\n'
+        'aperture_diameter_mm = 137\n')
+    d = diagnose(tmp_path / "manifest.toml", cache_dir=cache, heldout=False)
+    assert (d.verdict, d.best.effect) == ("explained", "amplitude_scale"), (d.verdict, d.best.effect)
+    parts = {p.label: p for p in d.parts_alone}
+    assert set(parts) == {"surface maps", "line profiles"}, [p.label for p in d.parts_alone]
+    assert parts["surface maps"].parameters["scale_J"] == pytest.approx(1.20, abs=0.005)
+    assert parts["line profiles"].parameters["scale_J"] == pytest.approx(1.15, abs=0.03)
+    text = verdict_text(d)
+    assert "surface maps alone read scale_J" in text and "line profiles alone read scale_J" in text, text

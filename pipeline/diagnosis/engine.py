@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 
 from .criteria import N_EFF_SOURCES, Criteria
+from .alone import fits_alone
 from .departure_choice import departure_choice
 from .effects import SummaryContext, applicable_effects, library_rows, parameter_units, physical_summary
 from .amplitude_or_shape import amplitude_degeneracies
@@ -66,6 +67,11 @@ class Diagnosis:
     #: (:mod:`.pupil_orders`), and the check of a line-profile finding against light the
     #: detector side adds (:mod:`.wings`), else "".
     ranking_note: str = ""
+    #: The best finding refitted on each kind of measurement alone (each measurement where
+    #: all are of one kind), where its joint fit leaves a gap in some measurement
+    #: (:func:`.alone.fits_alone`): whether the parts read one value or the gap is a
+    #: missing effect.
+    parts_alone: tuple = ()
 
     @property
     def best(self) -> Finding | None:
@@ -86,6 +92,7 @@ class Diagnosis:
 
         return clean({"verdict": self.verdict, "unexplained_in": list(self.unexplained_in),
                       "ranking_note": self.ranking_note,
+                      "parts_alone": [p.to_dict() for p in self.parts_alone],
                       "findings": [asdict(f) for f in self.findings],
                       "where": list(self.where), "where_after_best": list(self.where_after),
                       "baseline": self.baseline, "measurements": list(self.measurements),
@@ -394,6 +401,9 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     else:
         verdict = "unexplained"
     after = fits[best.effect] if best is not None and verdict == "explained" else nom
+    alone = ()
+    if gap and best is not None and best.significant and best.remaining_gap:
+        alone = fits_alone(prob, best, fits[best.effect], criteria)
     unexplained_in = tuple(gaps(prob, after, criteria)) if gap else ()
     where = _where(prob, nom)
     where_after = tuple(_where(prob, fits[best.effect])) if best else ()
@@ -417,4 +427,4 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
             curves["best"] = predictions(prob, fits[best.effect])
     t["total_s"] = time.perf_counter() - t.pop("start")
     return Diagnosis(verdict, tuple(findings), tuple(where), where_after, baseline, ms, criteria,
-                     {k: round(v, 3) for k, v in t.items()}, manifest.source, curves, unexplained_in, note)
+                     {k: round(v, 3) for k, v in t.items()}, manifest.source, curves, unexplained_in, note, alone)

@@ -7,6 +7,7 @@ import base64
 import html
 import io
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,7 @@ import numpy as np
 from pipeline.io.common import atomic_write
 
 from .effects import library_rows
-from .verdict import OUTSIDE_ALTERNATIVES, failed_tests
+from .verdict import OUTSIDE_ALTERNATIVES, failed_tests, own_parameters
 
 __all__ = ["coupling_text", "read_text", "verdict_text", "write_report"]
 
@@ -118,8 +119,9 @@ def verdict_text(d) -> str:
             left = (" Part of the gap remains beyond noise after it, in "
                     + "; ".join(f"{g['measurement']} ({g['rms_ratio']:.1f} × noise, χ² excess {g['z']:.1f} σ)"
                                 for g in d.unexplained_in) + ".")
+        alone = alone_text(d)
         return (f"{b.effect} explains the gap: it lowers the BIC by {-b.delta_bic:.0f} and takes up "
-                f"{b.excess_explained:.0%} of the residual beyond noise{held}.{left}")
+                f"{b.excess_explained:.0%} of the residual beyond noise{held}.{left}" + (f" {alone}" if alone else ""))
     failed = failed_tests(b, c)
     why = []
     if "significant" in failed:
@@ -139,6 +141,33 @@ def verdict_text(d) -> str:
                    + "; ".join(b.needs_outside))
     return ("No library effect explains the gap. The nearest candidate, " + b.effect + ", is not the explanation"
             + (": " + "; ".join(why) if why else "") + ".")
+
+
+def alone_text(d) -> str:
+    """What each part of the data reads fitted alone (:attr:`Diagnosis.parts_alone`), in one
+    sentence: the finding's own parameters (a companion's only where it lies 2 sigma or more
+    from the joint value), how far each lies from the joint value in the part's own errors,
+    and where a gap is left after the part's own fit ("" when the parts were not refitted)."""
+    if not d.parts_alone or d.best is None:
+        return ""
+    b = d.best
+    own = own_parameters(b)
+    texts = []
+    for p in d.parts_alone:
+        vals = []
+        for k, v in p.parameters.items():
+            if k not in own and not abs(p.tension.get(k, 0.0)) >= 2.0:
+                continue  # a companion is named only where this part pulls it away from the joint value
+            unit = b.parameter_units.get(k, "")
+            unit = "" if unit in ("", "1") else f" {unit}"
+            e, t = p.uncertainties.get(k, math.inf), p.tension.get(k, math.nan)
+            err = f" ± {e:.2g}" if math.isfinite(e) else " (not constrained)"
+            far = f", {abs(t):.1f} σ from the joint value" if math.isfinite(t) and abs(t) >= 1.0 else ""
+            vals.append(f"{k} = {v:.4g}{err}{unit}{far}")
+        left = ("; it leaves " + ", ".join(f"{g['measurement']} at {g['rms_ratio']:.2f} × noise" for g in p.gap)
+                if p.gap else "; it leaves no gap")
+        texts.append(f"{p.label} alone read {', '.join(vals)}{left}")
+    return "Fitted to each part alone, " + "; ".join(texts) + "."
 
 
 def _rms_unit(f) -> str:
@@ -227,6 +256,8 @@ def write_report(diagnosis, out_dir: str | Path) -> tuple[Path, Path]:
         parts.append("<p>Residual still beyond noise (unexplained) in: " + "; ".join(
             html.escape(f"{g['measurement']} (RMS {g['rms_ratio']:.2f} × noise, χ² excess {g['z']:.1f} σ)")
             for g in d.unexplained_in) + "</p>")
+    if d.verdict != "explained" and alone_text(d):  # an explained verdict's sentence holds it already
+        parts.append(f"<p>{html.escape(alone_text(d))}</p>")
     rows = [{"effect": f.effect, "ΔBIC": _fmt(f.delta_bic), "shrink": _fmt(f.shrink_fraction),
              "variance explained": _fmt(f.variance_explained),
              "excess over noise explained (where it acts)": _fmt(f.excess_explained),
