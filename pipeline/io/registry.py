@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Callable
 
 from optics.sagmap import SagMap
+from pipeline.io.ansys_listing import ANSYS_LISTING_SUFFIXES, is_ansys_listing, read_ansys_listing
 from pipeline.io.codev import read_codev_int, write_codev_int
 from pipeline.io.codev_zfr import read_codev_zernike, write_codev_zernike
 from pipeline.io.columns import names_table
@@ -145,6 +146,9 @@ FORMATS: tuple[Format, ...] = (
            ".inp/.bdf/.nas with a node_id,ux,uy,uz CSV; cryograting import-fe"),
     Format("fe result", NODE_TABLE_SUFFIXES, "another FE solver's nodal table x,y,z,ux,uy,uz (no mesh)",
            read_node_table, None, "columns by header names; the face: a plane, triangulated; cryograting import-fe"),
+    Format("fe result", ANSYS_LISTING_SUFFIXES, "ANSYS Mechanical APDL PRNSOL,U listing with the NLIST of its nodes",
+           read_ansys_listing, None, "any name, told by content; 5 significant digits as printed; paired by node "
+           "number, then read as a table of nodes; cryograting import-fe --nodes", sniff=is_ansys_listing),
 )
 
 
