@@ -31,7 +31,7 @@ USER_ERRORS = (OSError, ValueError, ArithmeticError, EOFError, zipfile.BadZipFil
 
 #: argparse destinations that name input files -> their spelling on the command line.
 INPUT_OPTIONS = {"sag": "--sag", "manifest": "MANIFEST", "config": "CONFIG.toml", "check": "--check",
-                 "result": "RESULT", "displacement_csv": "--displacement-csv"}
+                 "result": "RESULT", "displacement_csv": "--displacement-csv", "nodes": "--nodes"}
 #: ... and those that name output locations.
 OUTPUT_OPTIONS = {"out": "--out", "cache_dir": "--cache-dir"}
 #: Destinations of a study config source: a command with one also knows config keys named

@@ -7,7 +7,9 @@ Formats (read with meshio): VTU/VTK, XDMF (XML data; HDF5 data needs h5py), Exod
 a header exactly these four; ``#`` comments) keyed by the solver's node IDs.
 A CSV next to another format is keyed by 1-based point number. A ``.csv``/``.txt``/``.tsv``
 result without a mesh is a table of nodes with coordinates and displacements
-(:mod:`pipeline.io.fe_nodes`): its face is the nodes on a plane, triangulated.
+(:mod:`pipeline.io.fe_nodes`): its face is the nodes on a plane, triangulated. An ANSYS
+Mechanical APDL ``PRNSOL,U`` listing, with the ``NLIST`` listing of its nodes (``nodes``),
+is paired by node number into such a table (:mod:`pipeline.io.ansys_listing`).
 
 The displacement field is the point-data array named ``field``, or, by default, the one
 3-component array called displacement/displacements/disp/u/depl (any case); three
@@ -27,6 +29,7 @@ import numpy as np
 
 from fea.external import face_sag_map
 from fea.fe_face import parse_surface, select_face
+from pipeline.io.ansys_listing import is_ansys_listing, read_ansys_listing
 from pipeline.io.common import numbered_lines, read_text, split_fields
 from pipeline.io.fe_nodes import DISPLACEMENT_COLUMNS, NODE_TABLE_SUFFIXES, face_triangles, read_node_table
 
@@ -49,6 +52,8 @@ class FEResultData:
     point_sets, cell_sets, cell_data, field_data : dict
         As meshio reads them (for face selection by name).
     source : str
+    node_ids : ndarray of int, optional
+        The solver's node numbers of the points, where the reader knows them (for errors).
     """
 
     points_mm: np.ndarray
@@ -59,6 +64,7 @@ class FEResultData:
     cell_data: dict = field(default_factory=dict)
     field_data: dict = field(default_factory=dict)
     source: str = ""
+    node_ids: np.ndarray | None = None
 
 
 def _unit_scale(length_unit: str) -> float:
@@ -270,7 +276,8 @@ def _plane_tol(points: np.ndarray, tol: float | None) -> float:
     return 1e-6 * float(np.ptp(points, axis=0).max() or 1.0) if tol is None else tol
 
 
-def import_fe(path, surface: str, *, displacement_csv=None, field: str | None = None, length_unit: str = "mm",
+def import_fe(path, surface: str, *, displacement_csv=None, nodes=None, load_step: int | None = None,
+              substep: int | None = None, field: str | None = None, length_unit: str = "mm",
               tol: float | None = None, angle_tol_deg: float = 1.0, sag_along: str = "z",
               axes: str = "x,y,z", origin=None, spacing_mm: float = 0.5):
     """The optical face's sag map and rigid-body motion of an FE result from any solver.
@@ -282,6 +289,12 @@ def import_fe(path, surface: str, *, displacement_csv=None, field: str | None = 
     surface : str
         Face selection (:func:`fea.fe_face.parse_surface`): a set/physical-group name,
         a plane ``z=VALUE`` (``length_unit``) or an outward normal ``+z``/``normal:nx,ny,nz``.
+    nodes : str or Path, optional
+        The ANSYS ``NLIST`` listing of the nodes when ``path`` is a ``PRNSOL,U`` listing
+        (:func:`pipeline.io.ansys_listing.read_ansys_listing`); not needed when ``path``
+        holds both.
+    load_step, substep : int, optional
+        The result set of an ANSYS listing that holds several.
     tol : float, optional
         Plane tolerance (``length_unit``); default 1e-6 of the model's size.
     angle_tol_deg : float
@@ -297,11 +310,31 @@ def import_fe(path, surface: str, *, displacement_csv=None, field: str | None = 
     Returns
     -------
     fea.external.FaceSagResult
-        ``.sag_map`` (a SagMap for fits, exports, optics), ``.rigid_body``, ``.stats``.
+        ``.sag_map`` (a SagMap for fits, exports, optics), ``.rigid_body``, ``.stats``;
+        ``sag_map.meta["notes"]`` says what was assumed or left out, where anything was.
     """
     scale = _unit_scale(length_unit)
     spec = parse_surface(surface)
-    if Path(path).suffix.lower() in NODE_TABLE_SUFFIXES and displacement_csv is None:
+    notes, extra = [], {}
+    listing = nodes is not None or is_ansys_listing(path)  # told by content: listings come under any name
+    given = [f"{n}={v!r}" for n, v in (("load_step", load_step), ("substep", substep)) if v is not None]
+    if given and not listing:
+        raise ValueError(f"{', '.join(given)}: only an ANSYS listing has load steps; {path} is not one "
+                         "(a PRNSOL,U listing is read with nodes=NLIST)")
+    if listing:
+        if displacement_csv is not None or field is not None:
+            which = "displacement_csv" if displacement_csv is not None else "field"
+            raise ValueError(f"{which}={str(displacement_csv or field)!r}: an ANSYS listing's displacements are its "
+                             "PRNSOL,U table, its node coordinates come from nodes=NLIST")
+        lst = read_ansys_listing(path, nodes, load_step=load_step, substep=substep)
+        tol = _plane_tol(lst.points, tol)
+        blocks, spec = face_triangles(lst.points, spec, tol)  # no elements: the face's nodes triangulated
+        data = FEResultData(lst.points * scale, lst.displacement * scale, blocks, source=str(path),
+                            node_ids=lst.node_ids)
+        pts = lst.points
+        notes += lst.notes
+        extra = {"nodes": str(nodes or path), "result_set": lst.result_set, "components": list(lst.components)}
+    elif Path(path).suffix.lower() in NODE_TABLE_SUFFIXES and displacement_csv is None:
         if field is not None:
             raise ValueError(f"field={field!r}: a node table's displacement is its ux, uy, uz columns")
         pts, u = read_node_table(path, length_unit)  # no mesh: the face's nodes triangulated in their plane
@@ -315,10 +348,24 @@ def import_fe(path, surface: str, *, displacement_csv=None, field: str | None = 
     face = select_face(pts, data.blocks, spec, tol=tol, angle_tol_deg=angle_tol_deg,
                        point_sets=data.point_sets, cell_sets=data.cell_sets, cell_data=data.cell_data,
                        field_data=data.field_data)
-    if not np.isfinite(data.displacement_mm[face.node_index]).all():
-        raise ValueError(f"{displacement_csv or path}: no displacement for some nodes of the face {surface!r}")
+    unknown = ~np.isfinite(data.displacement_mm).all(axis=1)
+    bad = face.node_index[unknown[face.node_index]]
+    if bad.size:
+        named = (f"nodes {', '.join(map(str, data.node_ids[bad[:5]]))}" if data.node_ids is not None
+                 else f"points {', '.join(map(str, bad[:5] + 1))}") + (", ..." if bad.size > 5 else "")
+        raise ValueError(f"{displacement_csv or path}: no displacement for some nodes of the face {surface!r}: "
+                         f"{bad.size} of its {face.node_index.size} nodes ({named})"
+                         + ("; list them with PRNSOL under the same selection as NLIST (ALLSEL before both)"
+                            if listing else ""))
+    if listing and unknown.any():
+        left = np.flatnonzero(unknown)
+        notes.append(f"{left.size} nodes of {Path(nodes or path).name} are not in the displacement listing and not "
+                     f"on the face: left out (nodes {', '.join(map(str, data.node_ids[left[:5]]))}"
+                     f"{', ...' if left.size > 5 else ''})")
     res = face_sag_map(data.points_mm, np.nan_to_num(data.displacement_mm), face, axes=axes,
                        origin_mm=None if origin is None else scale * np.asarray(origin, float),
                        sag_along=sag_along, spacing_mm=spacing_mm, label=f"{Path(path).name} {surface}")
-    res.sag_map.meta.update({"source": str(path), "surface": surface, "length_unit": length_unit})
+    res.sag_map.meta.update({"source": str(path), "surface": surface, "length_unit": length_unit, **extra})
+    if notes:
+        res.sag_map.meta["notes"] = notes
     return res
