@@ -365,3 +365,26 @@ def test_a_psf_images_noise_in_counts_matches_its_residual_where_the_files_maxim
         ratio[key] = float(np.sqrt(np.sum(r**2) / (r.size - 4))) / f.noise_known
     assert ratio["noise_counts"] == pytest.approx(1.0, abs=0.07), ratio
     assert ratio["noise_rel"] > 1.5, ratio
+
+
+def test_a_fold_whose_training_fit_ends_at_a_prior_bound_does_not_count(monkeypatch):
+    """The prior, not the training part, set a parameter left at its bound: such a fold says so
+    and is not scored (a plating gradient fitted on profiles alone went to both bounds and
+    'predicted' the withheld map)."""
+    from types import SimpleNamespace
+
+    from pipeline.diagnosis import heldout
+    from pipeline.diagnosis.finding import Finding
+    from pipeline.diagnosis.fitting import FitOutcome, Problem
+
+    def fw(name, kind):
+        return SimpleNamespace(name=name, kind=kind, n=50, blank="J")
+
+    prob = Problem([fw("p", "line_profile"), fw("map", "surface")], weights={"p": 1.0, "map": 1.0})
+    finding = Finding("plating_gradient", ("plating_gradient",), {}, {}, 0.0, -20.0, 1.0, 0.5, 0.5, 0.75)
+    at_bounds = {"plating_grad_x": -0.1, "plating_grad_y": 0.1}
+    monkeypatch.setattr(heldout, "fit", lambda *a, **k: FitOutcome(at_bounds, {n: 0.01 for n in at_bounds}, {}, {}, {},
+                                                                     {}, 2, True, 1, 0.0))
+    h, note = heldout.heldout_check(prob, finding, None)
+    assert h is None
+    assert note.count("untestable (the training part leaves plating_grad_x, plating_grad_y at a bound") == 2, note

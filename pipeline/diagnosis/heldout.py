@@ -12,8 +12,11 @@ Only the effect parameters travel from the training to the test part; the nuisan
 (piston/tilt, offset shift, flux, background) are refitted on the test data both
 before and after, so the shrink is the effect's alone. A fold whose training part
 does not pin down the change the effect predicts on the withheld part (prediction
-uncertainty >= the predicted change, :func:`_prediction_spread`) is reported but does
-not count.
+uncertainty >= the predicted change, :func:`_prediction_spread`), or whose training fit
+leaves a parameter at a bound of its prior range (the prior, not the training part, set it:
+a plating-gradient companion that a map beside the profiles wants, fitted on the profiles
+alone, went to both bounds and "predicted" a map change 2x its spread, so a pupil shift
+that the six profile folds confirmed was called overfit), is reported but does not count.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import numpy as np
 
 from .finding import all_effects
 from .fitting import Problem, fit
+from .plausibility import at_prior_bound
 from .ranking import parameters_of
 
 __all__ = ["folds", "heldout_check", "untestable_reason"]
@@ -100,8 +104,14 @@ def heldout_check(prob: Problem, finding, criteria) -> tuple[float | None, str]:
     params = parameters_of(all_effects(finding), prob.forwards)
     before = after = 0.0
     notes, used = [], 0
+    bounds = {q.name: (q.lo, q.hi) for q in params}
     for train, test, label in folds(prob):
         tr = fit(prob, params, masks=train)
+        stopped = at_prior_bound(tr.parameters, bounds)
+        if stopped:  # the prior, not the training part, set these: what they predict is the prior's
+            notes.append(f"{label}: untestable (the training part leaves {', '.join(stopped)} at a bound of "
+                         "its prior range)")
+            continue
         signal, spread = _prediction_spread(prob, params, tr, test)
         if not spread < signal:
             notes.append(f"{label}: untestable ({untestable_reason(signal, spread)})")
