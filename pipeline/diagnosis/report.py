@@ -17,7 +17,7 @@ from pipeline.io.common import atomic_write
 from .effects import library_rows
 from .verdict import OUTSIDE_ALTERNATIVES, failed_tests, own_parameters
 
-__all__ = ["coupling_text", "read_text", "verdict_text", "write_report"]
+__all__ = ["alone_text", "coupling_text", "read_text", "verdict_text", "write_report"]
 
 
 def _png(fig) -> str:
