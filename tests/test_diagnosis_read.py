@@ -164,7 +164,8 @@ def test_the_verdict_is_said_in_words_with_the_reason():
     from pipeline.diagnosis.wings import WINGS_LABEL
 
     def diag(verdict, f, unexplained_in=()):
-        return SimpleNamespace(verdict=verdict, best=f, criteria=Criteria(), unexplained_in=unexplained_in)
+        return SimpleNamespace(verdict=verdict, best=f, criteria=Criteria(), unexplained_in=unexplained_in,
+                               parts_alone=())
 
     weak = Finding("slit_width", ("slit_width",), {}, {}, 0.0, -6.1, 1.0, 0.8, 0.2, 0.36, excess_explained=0.35)
     assert verdict_text(diag("unexplained", weak)) == (
@@ -388,3 +389,26 @@ def test_a_fold_whose_training_fit_ends_at_a_prior_bound_does_not_count(monkeypa
     h, note = heldout.heldout_check(prob, finding, None)
     assert h is None
     assert note.count("untestable (the training part leaves plating_grad_x, plating_grad_y at a bound") == 2, note
+
+
+def test_each_parts_own_reading_is_said_with_its_distance_from_the_joint_value():
+    """The finding's own parameter always, a companion only where a part pulls it 2 sigma or
+    more from the joint value; a part's remaining gap by measurement."""
+    from types import SimpleNamespace
+
+    from pipeline.diagnosis.alone import PartFit
+    from pipeline.diagnosis.finding import Finding
+    from pipeline.diagnosis.report import alone_text
+
+    best = Finding("amplitude_scale", ("amplitude_scale",), {"scale_J": 1.153, "quilt_cross_ratio": 1.01}, {}, 0.0,
+                   -263.0, 1.0, 0.1, 0.9, 0.99, companions=("quilt_shape",))
+    parts = (PartFit("surface maps", ("map_J",), {"scale_J": 1.1998, "quilt_cross_ratio": 1.0}, {"scale_J": 0.036,
+                     "quilt_cross_ratio": 0.08}, {"scale_J": 1.29, "quilt_cross_ratio": -0.13}, ()),
+             PartFit("line profiles", ("a", "b"), {"scale_J": 1.1494, "quilt_cross_ratio": 0.9}, {"scale_J": 0.0025,
+                     "quilt_cross_ratio": 0.01}, {"scale_J": -1.48, "quilt_cross_ratio": -11.0},
+                     ({"measurement": "a", "rms_ratio": 1.31, "z": 3.0},)))
+    t = alone_text(SimpleNamespace(best=best, parts_alone=parts))
+    assert t == ("Fitted to each part alone, surface maps alone read scale_J = 1.2 ± 0.036, 1.3 σ from the joint "
+                 "value; it leaves no gap; line profiles alone read scale_J = 1.149 ± 0.0025, 1.5 σ from the joint "
+                 "value, quilt_cross_ratio = 0.9 ± 0.01, 11.0 σ from the joint value; it leaves a at 1.31 × noise."), t
+    assert alone_text(SimpleNamespace(best=best, parts_alone=())) == ""
