@@ -317,6 +317,7 @@ def import_fe(path, surface: str, *, displacement_csv=None, nodes=None, load_ste
     spec = parse_surface(surface)
     notes, extra = [], {}
     listing = nodes is not None or is_ansys_listing(path)  # told by content: listings come under any name
+    table = not listing and Path(path).suffix.lower() in NODE_TABLE_SUFFIXES and displacement_csv is None
     given = [f"{n}={v!r}" for n, v in (("load_step", load_step), ("substep", substep)) if v is not None]
     if given and not listing:
         raise ValueError(f"{', '.join(given)}: only an ANSYS listing has load steps; {path} is not one "
@@ -327,20 +328,18 @@ def import_fe(path, surface: str, *, displacement_csv=None, nodes=None, load_ste
             raise ValueError(f"{which}={str(displacement_csv or field)!r}: an ANSYS listing's displacements are its "
                              "PRNSOL,U table, its node coordinates come from nodes=NLIST")
         lst = read_ansys_listing(path, nodes, load_step=load_step, substep=substep)
-        tol = _plane_tol(lst.points, tol)
-        blocks, spec = face_triangles(lst.points, spec, tol)  # no elements: the face's nodes triangulated
-        data = FEResultData(lst.points * scale, lst.displacement * scale, blocks, source=str(path),
-                            node_ids=lst.node_ids)
-        pts = lst.points
+        pts, u, ids = lst.points, lst.displacement, lst.node_ids  # paired by node: a table of nodes
         notes += lst.notes
         extra = {"nodes": str(nodes or path), "result_set": lst.result_set, "components": list(lst.components)}
-    elif Path(path).suffix.lower() in NODE_TABLE_SUFFIXES and displacement_csv is None:
+    elif table:
         if field is not None:
             raise ValueError(f"field={field!r}: a node table's displacement is its ux, uy, uz columns")
-        pts, u = read_node_table(path, length_unit)  # no mesh: the face's nodes triangulated in their plane
+        pts, u = read_node_table(path, length_unit)
+        ids = None
+    if listing or table:  # no mesh: the face's nodes triangulated in their plane
         tol = _plane_tol(pts, tol)
         blocks, spec = face_triangles(pts, spec, tol)
-        data = FEResultData(pts * scale, u * scale, blocks, source=str(path))
+        data = FEResultData(pts * scale, u * scale, blocks, source=str(path), node_ids=ids)
     else:
         data = read_fe_result(path, displacement_csv=displacement_csv, field=field, length_unit=length_unit)
         pts = data.points_mm / scale  # selection in the solver's own unit
