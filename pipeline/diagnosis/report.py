@@ -89,11 +89,15 @@ def _fmt(v):
     return f"{v:.4g}" if isinstance(v, float) else v
 
 
+def _unit_text(f, k: str) -> str:
+    """' K' for a parameter in kelvin, '' for a dimensionless one (from the finding's parameter_units)."""
+    unit = f.parameter_units.get(k, "")
+    return "" if unit in ("", "1") else f" {unit}"
+
+
 def _param_text(f, k: str) -> str:
     """'temperature_offset_K = 12.3 ± 1.1 K' (unit from the finding's parameter_units)."""
-    unit = f.parameter_units.get(k, "")
-    unit = "" if unit in ("", "1") else f" {unit}"
-    return f"{k} = {f.parameters[k]:.4g} ± {f.uncertainties.get(k, float('nan')):.2g}{unit}"
+    return f"{k} = {f.parameters[k]:.4g} ± {f.uncertainties.get(k, float('nan')):.2g}{_unit_text(f, k)}"
 
 
 def _absorbs_text(absorbed: str, k: dict) -> str:
@@ -158,12 +162,10 @@ def alone_text(d) -> str:
         for k, v in p.parameters.items():
             if k not in own and not abs(p.tension.get(k, 0.0)) >= 2.0:
                 continue  # a companion is named only where this part pulls it away from the joint value
-            unit = b.parameter_units.get(k, "")
-            unit = "" if unit in ("", "1") else f" {unit}"
             e, t = p.uncertainties.get(k, math.inf), p.tension.get(k, math.nan)
             err = f" ± {e:.2g}" if math.isfinite(e) else " (not constrained)"
             far = f", {abs(t):.1f} σ from the joint value" if math.isfinite(t) and abs(t) >= 1.0 else ""
-            vals.append(f"{k} = {v:.4g}{err}{unit}{far}")
+            vals.append(f"{k} = {v:.4g}{err}{_unit_text(b, k)}{far}")
         left = ("; it leaves " + ", ".join(f"{g['measurement']} at {g['rms_ratio']:.2f} × noise" for g in p.gap)
                 if p.gap else "; it leaves no gap")
         texts.append(f"{p.label} alone read {', '.join(vals)}{left}")
