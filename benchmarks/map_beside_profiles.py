@@ -43,17 +43,10 @@ def right_by_value(row: dict) -> bool | None:
     return None if v is None else bool(v)
 
 
-def paired(alone_path: Path, map_path: Path) -> list[tuple[str, bool, bool, str, str]]:
-    """(case type, alone right, with map right, alone's top, with map's top) per case both
-    files diagnosed from the same truth."""
+def paired(alone_path: Path, map_path: Path) -> list[tuple[dict, dict]]:
+    """(row alone, row with the map) per line-profile case both files diagnosed from the same truth."""
     a, b = _profile_rows(alone_path), _profile_rows(map_path)
-    out = []
-    for i in sorted(set(a) & set(b)):
-        if a[i]["truth"] != b[i]["truth"]:
-            continue
-        out.append((a[i]["effect"], right(a[i]), right(b[i]), f"{a[i]['verdict']}:{a[i]['top']}",
-                    f"{b[i]['verdict']}:{b[i]['top']}"))
-    return out
+    return [(a[i], b[i]) for i in sorted(set(a) & set(b)) if a[i]["truth"] == b[i]["truth"]]
 
 
 def sign_test_p(n_for: int, n_against: int) -> float:
@@ -82,19 +75,17 @@ def main(argv=None) -> int:
         if not alone.exists():
             continue
         rows = paired(alone, m)
-        ra_rows, rb_rows = _profile_rows(alone), _profile_rows(m)
-        for i in set(ra_rows) & set(rb_rows):
-            va, vb = right_by_value(ra_rows[i]), right_by_value(rb_rows[i])
-            if (va is not None and vb is not None and not ra_rows[i]["effect"].startswith("ool")
-                    and ra_rows[i]["truth"] == rb_rows[i]["truth"]):
-                by_value[(va, vb)] += 1
         c = collections.Counter()
-        for t, ra, rb, ta, tb in rows:
+        for row_a, row_b in rows:
+            t, ra, rb = row_a["effect"], right(row_a), right(row_b)
             group = "ool" if t.startswith("ool") else "lib"
             c[(group, ra, rb)] += 1
             by_type[t][(ra, rb)] += 1
-            if ra != rb:
-                moves[(t, ta.split(":")[1] if ra is False else tb.split(":")[1], "rescued" if rb else "lost")] += 1
+            if ra != rb:  # named by the wrong outcome's top finding
+                moves[(t, (row_b if ra else row_a)["top"], "rescued" if rb else "lost")] += 1
+            va, vb = right_by_value(row_a), right_by_value(row_b)
+            if group == "lib" and va is not None and vb is not None:
+                by_value[(va, vb)] += 1
         total.update(c)
         n_ool = sum(v for k, v in c.items() if k[0] == "ool")
         n_lib = sum(v for k, v in c.items() if k[0] == "lib")
