@@ -28,8 +28,11 @@ footprint, 110 mm aperture), so ``L -> delta(eta - s_y)``: each source lights on
 row ``eta = s_y`` and the detector field is, up to a phase linear in the along-slit
 coordinate, the 1-D FT of ``P(xi, s_y) T(xi - s_x)``. The intensity does not depend on
 the along-slit position (a uniform infinite slit is translation invariant), so the
-Abbe sum becomes one batch of 1-D FFTs. ``tests/test_imaging.py`` checks this against
-a literal 2-D slit -> pupil -> detector computation with a finite slit.
+Abbe sum becomes one batch of 1-D FFTs, one per coherent mode of each row's
+illumination (:mod:`optics.slit_modes`: the sources' overlapping slit spectra hold far
+fewer modes than sources). ``tests/test_imaging.py`` checks this against a literal 2-D
+slit -> pupil -> detector computation with a finite slit, ``tests/test_slit_modes.py``
+the modes against the sum over sources.
 """
 
 from __future__ import annotations
@@ -38,6 +41,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft as sfft
+
+from optics.slit_modes import slit_modes
 
 __all__ = [
     "Profile",
@@ -253,7 +258,7 @@ def partially_coherent_lsf(rows: np.ndarray, xi_mm: np.ndarray, s_x_mm: np.ndarr
     window_um : float, optional
         Crop to |offset| <= window_um.
     batch : int
-        Source fields per FFT call (memory bound).
+        Mode fields per FFT call (memory bound).
 
     Returns
     -------
@@ -264,22 +269,23 @@ def partially_coherent_lsf(rows: np.ndarray, xi_mm: np.ndarray, s_x_mm: np.ndarr
         raise ValueError(f"weights {weights.shape} must be (n_rows={rows.shape[0]}, n_sx={np.size(s_x_mm)})")
     if n_fft < rows.shape[1]:
         raise ValueError(f"n_fft={n_fft} must be >= the pupil width {rows.shape[1]} samples")
-    # Slit spectrum in the pupil: first zero at xi = lambda f_coll / w.
+    # Slit spectrum in the pupil: first zero at xi = lambda f_coll / w. The sources of one
+    # pupil row add as that row's coherent modes (optics.slit_modes): the same sum, with far
+    # fewer FFTs than sources.
     scale = (slit_width_coll_um * 1e-3) / (wavelength_um * 1e-3 * collimator_focal_mm)
-    T = np.sinc(scale * (np.asarray(xi_mm)[None, :] - np.asarray(s_x_mm)[:, None]))  # (n_sx, n_xi)
-    jj, kk = np.nonzero(weights)
-    ww = weights[jj, kk]
+    modes = slit_modes(xi_mm, s_x_mm, weights, scale)
     acc = np.zeros(n_fft)
-    for a in range(0, jj.size, batch):
-        f = rows[jj[a:a + batch]] * T[kk[a:a + batch]]
+    for a in range(0, modes.row.size, batch):
+        f = rows[modes.row[a:a + batch]] * modes.field[a:a + batch]
         spec = sfft.fft(f, n=n_fft, axis=-1, workers=workers)
-        acc += ww[a:a + batch] @ (spec.real**2 + spec.imag**2)
+        acc += (spec.real**2 + spec.imag**2).sum(axis=0)
     acc = np.fft.fftshift(acc)
     u = detector_axis_um(n_fft, xi_mm[1] - xi_mm[0], wavelength_um, camera_focal_mm, anamorphic)
     if window_um is not None:
         k = np.abs(u) <= window_um
         u, acc = u[k], acc[k]
-    return Profile(u, acc, "partially_coherent", {"wavelength_um": wavelength_um, "n_sources": int(jj.size)}).normalised()
+    return Profile(u, acc, "partially_coherent", {"wavelength_um": wavelength_um, "n_sources": modes.n_sources,
+                                                  "n_modes": int(modes.row.size)}).normalised()
 
 
 def detected_profile(p: Profile, pixel_um: float = 18.0) -> Profile:
