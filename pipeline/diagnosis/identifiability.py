@@ -123,21 +123,23 @@ def sign_degeneracies(prob: Problem, finding: Finding, fo: FitOutcome, c: Criter
     for names, jfo in joint or ():
         if jfo is fo:
             continue  # the adopted joint fit: tested above
-        out |= set(_sign_test(prob, finding, jfo, c, names, start=jfo.parameters))
+        out |= set(_sign_test(prob, finding, jfo, c, names, start=jfo.parameters, settled=out))
     return tuple(n for n in finding.parameters if n in out)
 
 
 def _sign_test(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, effects: tuple,
-               start: dict | None = None) -> tuple:
+               start: dict | None = None, settled=()) -> tuple:
     """Profile-likelihood sign test of ``finding``'s own signed parameters with the
-    parameters of ``effects`` free (reference fit ``fo``); see :func:`sign_degeneracies`."""
+    parameters of ``effects`` free (reference fit ``fo``); see :func:`sign_degeneracies`.
+    Parameters in ``settled`` (already found undetermined by another test) are not tested
+    again: one test saying so is enough, and each costs a full refit."""
     out = []
     start = finding.parameters if start is None else start
     cost = fo.weighted_rss(prob.weights)
     params = parameters_of(effects, prob.forwards)
     own = {q.name for q in parameters_of(finding.effects, prob.forwards)}
     for name in finding.parameters:
-        if name not in own:
+        if name not in own or name in settled:
             continue  # a companion's sign is not tested (it is refitted with the others)
         v = fo.parameters.get(name, finding.parameters[name])
         q = next((q for q in params if q.name == name), None)
