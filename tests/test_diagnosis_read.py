@@ -412,3 +412,9 @@ def test_each_parts_own_reading_is_said_with_its_distance_from_the_joint_value()
                  "value; it leaves no gap; line profiles alone read scale_J = 1.149 ± 0.0025, 1.5 σ from the joint "
                  "value, quilt_cross_ratio = 0.9 ± 0.01, 11.0 σ from the joint value; it leaves a at 1.31 × noise."), t
     assert alone_text(SimpleNamespace(best=best, parts_alone=())) == ""
+    # a part none of the finding's own parameters acts on (a map beside a pupil shift)
+    pupil = Finding("pupil_shift", ("pupil_shift",), {"pupil_x_mm": 3.3}, {}, 0.0, -182.0, 1.0, 0.5, 0.5, 0.75)
+    part = PartFit("surface maps", ("map",), {}, {}, {}, ({"measurement": "map", "rms_ratio": 1.86, "z": 40.0},))
+    assert alone_text(SimpleNamespace(best=pupil, parts_alone=(part,))) == (
+        "Fitted to each part alone, surface maps alone hold none of the finding's own parameters; it leaves map at "
+        "1.86 × noise."), alone_text(SimpleNamespace(best=pupil, parts_alone=(part,)))

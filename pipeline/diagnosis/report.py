@@ -168,7 +168,10 @@ def alone_text(d) -> str:
             vals.append(f"{k} = {v:.4g}{err}{_unit_text(b, k)}{far}")
         left = ("; it leaves " + ", ".join(f"{g['measurement']} at {g['rms_ratio']:.2f} × noise" for g in p.gap)
                 if p.gap else "; it leaves no gap")
-        texts.append(f"{p.label} alone read {', '.join(vals)}{left}")
+        if vals:
+            texts.append(f"{p.label} alone read {', '.join(vals)}{left}")
+        else:  # none of the finding's own parameters acts on this part, and no companion is pulled away
+            texts.append(f"{p.label} alone hold none of the finding's own parameters{left}")
     return "Fitted to each part alone, " + "; ".join(texts) + "."
 
 
