@@ -391,6 +391,39 @@ def test_a_fold_whose_training_fit_ends_at_a_prior_bound_does_not_count(monkeypa
     assert note.count("untestable (the training part leaves plating_grad_x, plating_grad_y at a bound") == 2, note
 
 
+def test_a_fold_that_withholds_what_the_finding_cannot_change_does_not_count(monkeypatch):
+    """A pupil shift does not change a surface map: the fold "others -> map" could carry only
+    its bow companion's reading, so it is reported untestable and not fitted; the profile
+    folds are tested as before."""
+    from types import SimpleNamespace
+
+    from pipeline.diagnosis import heldout
+    from pipeline.diagnosis.finding import Finding
+    from pipeline.diagnosis.fitting import FitOutcome, Problem
+
+    def fw(name, kind):
+        return SimpleNamespace(name=name, kind=kind, n=50, blank="J")
+
+    prob = Problem([fw("p1", "line_profile"), fw("p2", "line_profile"), fw("map", "surface")],
+                   weights={"p1": 1.0, "p2": 1.0, "map": 1.0})
+    finding = Finding("pupil_shift", ("pupil_shift",), {}, {}, 0.0, -20.0, 1.0, 0.5, 0.5, 0.75,
+                      companions=("blank_bow",))
+    trained = []
+
+    def fake_fit(prob, params, masks=None, **k):
+        trained.append(masks)
+        return FitOutcome({"pupil_x_mm": 1.0, "pupil_y_mm": 0.5, "bow_defocus_um": 0.01, "bow_spherical_um": 0.0},
+                          {}, {}, {}, {}, {}, 4, True, 1, 0.0)
+
+    monkeypatch.setattr(heldout, "fit", fake_fit)
+    monkeypatch.setattr(heldout, "_prediction_spread", lambda *a: (1.0, 0.1))
+    _, note = heldout.heldout_check(prob, finding, None)
+    assert "others -> map: untestable (the finding's own effects do not change the withheld part)" in note, note
+    assert "others -> p1: shrink" in note and "others -> p2: shrink" in note, note
+    assert not any(set(m) == {"map"} for m in trained if m), "the map fold was fitted"  # train masks: what is left out
+    assert any(set(m) == {"p1"} for m in trained if m)
+
+
 def test_each_parts_own_reading_is_said_with_its_distance_from_the_joint_value():
     """The finding's own parameter always, a companion only where a part pulls it 2 sigma or
     more from the joint value; a part's remaining gap by measurement."""
