@@ -45,3 +45,6 @@ def test_reduced_campaign(cache):
     assert s["correct_top_rate"] >= 0.75
     assert s["recovered_20pct_rate"] >= 0.7
     assert s["ool_unexplained_rate"] >= 0.8
+    # each row says how its top finding's held-out folds went (which rule decided a verdict)
+    assert all(isinstance(r["top_heldout_note"], str) for r in res["cases"])
+    assert any("->" in r["top_heldout_note"] for r in res["cases"])

@@ -586,6 +586,8 @@ def run_case(args) -> dict:
             "top": best.effect if best else None, "top_degenerate_with": list(best.degenerate_with) if best else [],
             "top_delta_bic": best.delta_bic if best else None, "top_shrink": best.shrink_fraction if best else None,
             "top_heldout_shrink": best.heldout_shrink_fraction if best else None,
+            # each fold's outcome or why it was untestable: which rule decided a verdict
+            "top_heldout_note": best.heldout_note if best else "",
             "correct": correct, "correct_fundamental": correct_fundamental,
             "rescalings_present": list(rescalings_present(fx)),
             "recovery_error": rec["per_parameter"] if rec else None,
