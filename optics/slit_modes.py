@@ -13,8 +13,8 @@ eigen-expansion ``M_j = sum_m phi_m phi_m^T`` gives the same intensity as
 "sum of coherent systems"). Shifted slit spectra overlap, so a row of ``n`` sources holds
 far fewer modes that carry any light: on SPIFFI's J grating at 1.25 µm the 6180 sources of
 250 mas hold 1174 modes above 1e-12 of the largest eigenvalue, the 1028 of 100 mas 356, the 216
-of 25 mas 102. The modes
-are computed once per illumination (cached) and reused for every pupil field a fit tries.
+of 25 mas 102. The modes are computed once per illumination (cached) and reused for every
+pupil field a fit tries.
 
 Truncation: modes whose eigenvalue is below :data:`MODE_RTOL` of the largest eigenvalue of
 all rows are dropped; the intensity they carry is at most their eigenvalue sum relative to
@@ -106,10 +106,23 @@ def slit_modes(xi_mm, s_x_mm, weights, scale_per_mm: float, rtol: float = MODE_R
     Returns
     -------
     SlitModes
+
+    Raises
+    ------
+    ValueError
+        If ``weights`` is not (n_rows, n_sx) for the ``n_sx`` source positions, or holds a
+        negative or non-finite weight; if ``rtol`` is not in [0, 1).
     """
     xi = np.ascontiguousarray(xi_mm, float)
     sx = np.ascontiguousarray(s_x_mm, float)
     w = np.ascontiguousarray(weights, float)
+    if w.ndim != 2 or w.shape[1] != sx.size:
+        raise ValueError(f"slit_modes: weights has shape {w.shape}, must be (n_rows, n_sx={sx.size})")
+    bad = w[~(np.isfinite(w) & (w >= 0))]
+    if bad.size:
+        raise ValueError(f"slit_modes: weights must be finite and >= 0 (source areas); it holds {bad[0]:g}")
+    if not 0 <= rtol < 1:
+        raise ValueError(f"slit_modes: rtol={rtol!r} must be in [0, 1)")
     h = hashlib.blake2b(digest_size=16)
     for a in (np.array([scale_per_mm, rtol], float), np.array(w.shape, float), xi, sx, w):
         h.update(a.tobytes())

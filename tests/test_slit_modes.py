@@ -8,6 +8,8 @@ the eigenvalue sum of the flux when the pupil field has unit modulus.
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -91,3 +93,14 @@ def test_one_illumination_is_decomposed_once():
     a = slit_modes(xi, sx, w, 0.2)
     assert slit_modes(xi.copy(), sx.copy(), w.copy(), 0.2) is a
     assert slit_modes(xi, sx, w, 0.21) is not a
+
+
+@pytest.mark.parametrize("weights, rtol, words", [
+    (np.ones((3, 4)), 1e-12, "weights has shape (3, 4), must be (n_rows, n_sx=5)"),
+    (-np.ones((3, 5)), 1e-12, "weights must be finite and >= 0"),
+    (np.full((3, 5), np.nan), 1e-12, "weights must be finite and >= 0"),
+    (np.ones((3, 5)), 1.5, "rtol=1.5 must be in [0, 1)"),
+])
+def test_bad_illumination_is_refused_by_name(weights, rtol, words):
+    with pytest.raises(ValueError, match=re.escape(words)):
+        slit_modes(np.linspace(-10.0, 10.0, 21), np.linspace(-2.0, 2.0, 5), weights, 0.2, rtol=rtol)

@@ -140,7 +140,7 @@ def _sign_test(prob: Problem, finding: Finding, fo: FitOutcome, c: Criteria, eff
     own = {q.name for q in parameters_of(finding.effects, prob.forwards)}
     for name in finding.parameters:
         if name not in own or name in settled:
-            continue  # a companion's sign is not tested (it is refitted with the others)
+            continue  # a companion's sign is not tested (it is refitted with the others), nor one already undetermined
         v = fo.parameters.get(name, finding.parameters[name])
         q = next((q for q in params if q.name == name), None)
         if q is None or q.null != 0.0:
