@@ -21,12 +21,10 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
 import pytest  # noqa: E402
 
 # Modules that share session-scoped work run as one xdist work unit (one worker): the
-# paper scorecard solves the Table 1 and 2 cases into ``paper_fea_dir`` and the table
-# checks reload them from there instead of solving them again on the other worker.
-SHARED_SCOPES = {
-    "tests/test_paper_claims.py": "tests/test_paper_claims.py+tests/test_paper_tables.py",
-    "tests/test_paper_tables.py": "tests/test_paper_claims.py+tests/test_paper_tables.py",
-}
+# paper scorecard solves the Table 1 and 2 cases into ``paper_fea_dir`` and the table and
+# mesh-record checks reload them from there instead of solving them again on the other worker.
+PAPER_UNIT = "tests/test_paper_claims.py+tests/test_paper_tables.py+tests/test_fea_mesh_convergence.py"
+SHARED_SCOPES = {m: PAPER_UNIT for m in PAPER_UNIT.split("+")}
 # The work units that hold most of the suite's CPU time (diagnosis campaigns and fits, FEA
 # table solves), handed out first and longest first, so that the many short modules fill the
 # other worker meanwhile instead of leaving one long module running alone at the end (xdist's
@@ -42,7 +40,7 @@ SHARED_SCOPES = {
 # Re-rank when a heavy module is added, and time the whole suite.
 HEAVY_FIRST = (
     "tests/test_diagnosis_scenarios.py",
-    "tests/test_paper_claims.py+tests/test_paper_tables.py",
+    PAPER_UNIT,
     "tests/test_fea_blank.py",
     "tests/test_diagnosis_bow.py",
     "tests/test_fea_reduced.py",
@@ -51,7 +49,6 @@ HEAVY_FIRST = (
     "tests/test_diagnosis_campaign_reduced.py",
     "tests/test_diagnosis_psf.py",
     "tests/test_fea_layer.py",
-    "tests/test_fea_mesh_convergence.py",
     "tests/test_diagnosis.py",
     "tests/test_study_dataset.py",
     "tests/test_diagnosis_plating.py",
