@@ -57,7 +57,7 @@ from scipy.optimize import least_squares
 from .effects import Parameter
 from .noise import effective_samples
 
-__all__ = ["FitOutcome", "Problem", "fit", "objective", "nominal_weights", "long_run_s2", "other_basin_moves", "OTHER_BASIN_CHI2"]
+__all__ = ["FitOutcome", "Problem", "fit", "fd_steps", "grouped_fd_jacobian", "DIFF_STEP", "objective", "nominal_weights", "long_run_s2", "other_basin_moves", "OTHER_BASIN_CHI2"]
 
 _DELTA_SCALE_UM = 10.0  # normalisation of the profile offset-shift nuisance
 _DELTA_BOUND_UM = 45.0
@@ -237,6 +237,64 @@ def other_basin_moves(minima, s2: float, chi2: float = OTHER_BASIN_CHI2) -> np.n
     return np.max(np.abs(z[near] - z[b]), axis=0)
 
 
+#: Relative step of the forward differences (``least_squares``' ``diff_step``).
+DIFF_STEP = 1e-4
+
+
+def fd_steps(z: np.ndarray, lo: np.ndarray, hi: np.ndarray, rel_step: float = DIFF_STEP) -> np.ndarray:
+    """The forward-difference step of every parameter, as ``scipy.optimize.least_squares``
+    takes it with ``diff_step=rel_step``: ``rel_step * |z|`` signed as ``z`` (``z = 0``
+    counts as positive), ``sqrt(eps) * max(1, |z|)`` where that step is lost to rounding
+    (``z = 0``), and turned inward, or shortened to the room left, where it would cross a
+    bound."""
+    z, lo, hi = (np.asarray(a, dtype=float) for a in (z, lo, hi))
+    sign = (z >= 0).astype(float) * 2 - 1
+    h = rel_step * sign * np.abs(z)
+    h = np.where((z + h) - z == 0, np.finfo(float).eps ** 0.5 * sign * np.maximum(1.0, np.abs(z)), h)
+    lower, upper = z - lo, hi - z
+    crosses = ((z + h) < lo) | ((z + h) > hi)
+    fits = np.abs(h) <= np.maximum(lower, upper)
+    h = np.where(crosses & fits, -h, h)
+    h = np.where(~fits & (upper >= lower), upper, h)
+    return np.where(~fits & (upper < lower), -lower, h)
+
+
+def grouped_fd_jacobian(fun, z: np.ndarray, f0: np.ndarray, h: np.ndarray, groups: list) -> np.ndarray:
+    """Forward-difference Jacobian ``(fun(z + h_j e_j) - f0) / dx_j`` with the columns of a
+    group perturbed in one evaluation (Curtis, Powell & Reid 1974).
+
+    Parameters
+    ----------
+    fun : callable
+        Residual vector of the parameters.
+    z, f0, h : numpy.ndarray
+        Parameters, ``fun(z)`` and the steps (:func:`fd_steps`).
+    groups : list of list of (int, slice or None)
+        Each group's columns with the rows each one changes (``None``: every row). Columns
+        of one group must change disjoint rows; a column with ``None`` must be alone.
+
+    Returns
+    -------
+    numpy.ndarray
+        The Jacobian (rows x columns): column by column the numbers a one-column-at-a-time
+        difference with the same steps gives, since a column's rows do not depend on the
+        other columns of its group.
+    """
+    jt = np.zeros((z.size, f0.size))
+    for group in groups:
+        z1 = z.copy()
+        for j, _ in group:
+            z1[j] = z[j] + h[j]
+        df = fun(z1) - f0
+        for j, rows in group:
+            dx = (z[j] + h[j]) - z[j]
+            if rows is None:
+                jt[j] = df / dx
+            else:
+                jt[j, rows] = df[rows] / dx
+    return jt.T
+
+
 def _shift_slots(fws) -> list:
     """(forward, component) of every position nuisance that is a fit parameter: a line
     profile's offset shift (1), a PSF image's position (2)."""
@@ -337,10 +395,30 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
     lo = np.concatenate([[(q.lo - q.null) / q.width for q in params], np.full(len(slots), -_DELTA_BOUND_UM / _DELTA_SCALE_UM)])
     hi = np.concatenate([[(q.hi - q.null) / q.width for q in params], np.full(len(slots), _DELTA_BOUND_UM / _DELTA_SCALE_UM)])
 
+    last: dict = {}  # the latest residual vector, by parameters: the Jacobian's f0
+    groups: list = []  # the Jacobian's column groups (grouped_fd_jacobian), from the first residual
+
     def residuals(z):
         p, d = _unpack(z, params, slots, fixed)
         out = [problem.weights[f.name] * f.residual(p, d.get(f.name, 0.0), masks.get(f.name)) for f in fws]
-        return np.concatenate(out)
+        last.clear()
+        last[z.tobytes()] = vec = np.concatenate(out)
+        if not groups:
+            edges = np.cumsum([0] + [r.size for r in out])
+            blocks = {f.name: slice(int(a), int(b)) for f, a, b in zip(fws, edges[:-1], edges[1:])}
+            # A position nuisance changes only its own measurement's rows, so the nuisances of
+            # different measurements share one evaluation (the i-th component of each); an
+            # effect parameter changes every row and has one of its own.
+            shift_groups = [[(len(params) + j, blocks[f.name]) for j, (f, k) in enumerate(slots) if k == c]
+                            for c in range(max((k + 1 for _, k in slots), default=0))]
+            groups[:] = [[(i, None)] for i in range(len(params))] + shift_groups
+        return vec
+
+    def jacobian(z):
+        f0 = last.get(z.tobytes())
+        if f0 is None:
+            f0 = residuals(z)
+        return grouped_fd_jacobian(residuals, z, f0, fd_steps(z, lo, hi), groups)
 
     grids = [[(s - q.null) / q.width for s in (q.starts or (q.null,))] for q in params]
     starts = list(itertools.product(*grids))
@@ -371,7 +449,7 @@ def fit(problem: Problem, params: tuple[Parameter, ...], masks: dict | None = No
         res_vec = residuals(z0)
         z, jac, success, nfev = z0, np.zeros((res_vec.size, 0)), True, 1
     else:
-        sols = [least_squares(residuals, zi, bounds=(lo, hi), method="trf", diff_step=1e-4, x_scale=1.0,
+        sols = [least_squares(residuals, zi, jac=jacobian, bounds=(lo, hi), method="trf", x_scale=1.0,
                               max_nfev=max_nfev or 40 * (nfree + 1), xtol=1e-6, ftol=_FTOL) for zi in inits]
         best = min(sols, key=lambda sol: sol.cost)
         z, jac, success, nfev, res_vec = best.x, best.jac, bool(best.success), int(best.nfev), best.fun
