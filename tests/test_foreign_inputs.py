@@ -54,6 +54,37 @@ def test_a_fits_axis_with_a_wcs_but_no_unit_is_refused_by_name(tmp_path):
     np.testing.assert_allclose(x, 18.0 * np.arange(1, 10))
 
 
+@pytest.mark.parametrize("cunit,to_um", [("Angstroms", 1e-4), ("angstroms", 1e-4), ("micron", 1.0),
+                                         ("microns", 1.0), ("nanometer", 1e-3), ("nanometers", 1e-3)])
+def test_a_spectrum_whose_cunit_is_spelled_out_is_read_in_that_unit(tmp_path, cunit, to_um):
+    # wcslib refuses these spellings on a spectral axis; pipelines and lab tools write them
+    f = _spectrum(tmp_path / "s.fits", CTYPE1="WAVE", CUNIT1=cunit, CRVAL1=1.2496 / to_um, CDELT1=2e-4 / to_um,
+                  CRPIX1=1.0)
+    x, y = _profile(f)
+    np.testing.assert_allclose(x, np.sort(OFFSET_UM * 2e-4 * DISPERSION), atol=1e-6)
+    np.testing.assert_array_equal(y, COUNTS[::-1])
+
+
+@pytest.mark.parametrize("ctype", ["WAVELENGTH", "Wavelength"])
+def test_a_spectrum_typed_wavelength_in_full_is_a_wavelength(tmp_path, ctype):
+    # CTYPE1 = 'WAVELENGTH' is outside the WCS standard, and common; in µm it is no offset
+    f = _spectrum(tmp_path / "s.fits", CTYPE1=ctype, CUNIT1="um", CRVAL1=1.2496, CDELT1=2e-4, CRPIX1=1.0)
+    x, _ = _profile(f)
+    np.testing.assert_allclose(x, np.sort(OFFSET_UM * 2e-4 * DISPERSION), atol=1e-6)
+
+
+@pytest.mark.parametrize("cards", [{}, {"CTYPE1": "LINEAR"}])
+def test_a_spectrum_in_um_not_typed_a_wavelength_is_refused_by_name(tmp_path, cards):
+    # 1.2496, 1.2498, ... µm read as detector offsets would be a line 0.002 µm wide: not guessed
+    f = _spectrum(tmp_path / "s.fits", CUNIT1="um", CRVAL1=1.2496, CDELT1=2e-4, CRPIX1=1.0, **cards)
+    with pytest.raises(ValueError, match=r"s\.fits: axis 1 \(unit 'um', CTYPE (none|LINEAR)\) reads as detector "
+                                         r"offsets spanning 0\.0016 µm, below the 1 µm.*declare it \(CTYPE1 = 'WAVE'"):
+        _profile(f)
+    # a detector-offset axis in µm is one
+    x, _ = _profile(_spectrum(tmp_path / "o.fits", CUNIT1="um", CRVAL1=-36.0, CDELT1=9.0, CRPIX1=1.0, **cards))
+    np.testing.assert_allclose(x, 9.0 * OFFSET_UM)
+
+
 @pytest.mark.parametrize("name", ["OFFSET", "X"])
 def test_a_fits_table_offset_without_a_unit_is_refused_by_name(tmp_path, name):
     from astropy.io import fits

@@ -16,7 +16,9 @@ What is read
   dispersion and ``NAXIS2`` the slit. Two spectral axes, or a spectral axis of one pixel
   (an image at one wavelength), are refused naming the ``CTYPE``/``CUNIT`` keys. The
   profile's axis comes from the WCS (``CRVALi``, ``CRPIXi``, ``CDELTi`` or ``CDi_i``,
-  ``PCi_i``, ``CUNITi``, ``CTYPEi``, via ``astropy.wcs``) or the column's ``TUNIT``.
+  ``PCi_i``, ``CUNITi``, ``CTYPEi``, via ``astropy.wcs``; a length ``CUNITi`` in another
+  spelling, ``Angstroms``, ``micron``, ``nanometer``, is read as the standard's) or the
+  column's ``TUNIT``.
 * **Point-source image**: the first 2-D image HDU; ``NAXIS1`` is x (dispersion), ``NAXIS2``
   y (along the slit). NaN pixels (or ``BLANK`` in integer data) are masked points and are
   left out.
@@ -27,8 +29,10 @@ What is read
 Axes and units
 --------------
 An axis is a **wavelength** if its ``CTYPE`` is a wavelength type (``WAVE``, ``AWAV``,
-``LAMBDA``…) or its unit is Angstrom or nm (no detector offset is given in those), a
-**length** (µm, mm, m; detector offset or map coordinate) if it has such a unit, and in
+``LAMBDA``, ``WAVELENGTH``…) or its unit is Angstrom or nm (no detector offset is given in
+those), a **length** (µm, mm, m; detector offset or map coordinate) if it has such a unit
+(a profile's offsets spanning under 1 µm are refused: a wavelength in µm without its
+``CTYPE``), and in
 **pixels** if it has no WCS on that axis or its unit is ``pixel``: a profile's pixels
 are the detector's (``pixel_um``), an image's too; a map in pixels needs ``spacing_mm`` or
 ``extent_mm`` as a CODE V INT file does. ``BSCALE``/``BZERO`` are applied by astropy;
@@ -56,14 +60,23 @@ __all__ = ["FITS_SUFFIXES", "read_line_profile_fits", "read_psf_image_fits", "re
 
 #: Suffixes of FITS files.
 FITS_SUFFIXES = (".fits", ".fit", ".fts")
-#: CTYPE prefixes of wavelength axes (FITS WCS paper III: vacuum, air, velocity-wavelength).
+#: CTYPE prefixes of wavelength axes (FITS WCS paper III: vacuum, air, velocity-wavelength);
+#: a type starting ``WAVELEN`` (``WAVELENGTH``, which pipelines write outside the standard) too.
 _WAVELENGTH_CTYPES = ("WAVE", "AWAV", "VWAV", "LAMBDA", "WAVELEN")
-#: Units that are a wavelength on a profile's axis, not a detector offset.
-_WAVELENGTH_UNITS = frozenset({"angstrom", "a", "aa", "nm", "nanometer", "nanometre"})
 #: CTYPE prefixes of spectral axes that are not a wavelength (refused on a profile's axis).
 _OTHER_SPECTRAL_CTYPES = ("FREQ", "ENER", "WAVN", "VRAD", "VOPT", "ZOPT", "VELO", "BETA")
 #: Length units (to µm): the project's spellings (Angstrom among them) and the FITS ``um``.
 _LENGTH_TO_UM = dict(SAG_UNITS_TO_UM)
+#: Units that are a wavelength on a profile's axis, not a detector offset: Angstrom and nm in
+#: any spelling (no detector offset is given in those).
+_WAVELENGTH_UNITS = frozenset(u for u, f in _LENGTH_TO_UM.items() if f <= 1e-3)
+#: The FITS standard's spelling of each length unit (WCS paper I), by its factor to µm: wcslib
+#: refuses ``Angstroms``, ``micron`` or ``nanometer`` on a spectral axis, which files carry.
+_FITS_LENGTH_UNITS = {1e-4: "Angstrom", 1e-3: "nm", 1.0: "um", 1e3: "mm", 1e6: "m"}
+#: Narrowest span (µm) of a profile's offsets: no line at the detector is narrower (its
+#: diffraction core alone is ``wavelength x f-number`` >= 1 µm in the near infrared), while
+#: a window of a spectrum in µm of wavelength spans a small fraction of one.
+_MIN_OFFSET_SPAN_UM = 1.0
 #: CTYPE prefixes of an axis in detector pixels.
 _PIXEL_CTYPES = ("PIXEL", "PIX", "PX")
 #: Header keywords that put an axis ``i`` under a WCS (without any of them it is in pixels).
@@ -157,6 +170,7 @@ def _axis(path: Path, header, axis: int, n: int, naxis: int, unit_needed: bool =
 
     if not any(k.format(i=axis) in header for k in _WCS_KEYS):
         return np.arange(1.0, n + 1.0), "", ""
+    header = _standard_units(header, naxis)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -172,7 +186,7 @@ def _axis(path: Path, header, axis: int, n: int, naxis: int, unit_needed: bool =
     except ValueError as exc:
         if str(path) in str(exc):
             raise
-        raise parse_error(path, None, f"axis {axis}: WCS not readable ({exc})") from None
+        raise parse_error(path, None, f"axis {axis}: WCS not readable ({' '.join(str(exc).split())})") from None
     if not np.isfinite(values).all():
         raise parse_error(path, None, f"axis {axis}: the WCS gives non-finite coordinates")
     if not unit and f"CUNIT{axis}" not in header:
@@ -192,6 +206,24 @@ def _axis(path: Path, header, axis: int, n: int, naxis: int, unit_needed: bool =
     return values, unit, ctype
 
 
+def _standard_units(header, naxis: int):
+    """``header``, or a copy with each ``CUNITi`` that is a length in another spelling
+    (``Angstroms``, ``micron``, ``nanometer``: :data:`_LENGTH_TO_UM`) written as the FITS
+    standard spells it, which wcslib requires of a spectral axis."""
+    fixes = {}
+    for i in range(1, naxis + 1):
+        u = str(header.get(f"CUNIT{i}", "")).strip()
+        f = _LENGTH_TO_UM.get(u.lower())
+        if f in _FITS_LENGTH_UNITS and u != _FITS_LENGTH_UNITS[f]:
+            fixes[f"CUNIT{i}"] = _FITS_LENGTH_UNITS[f]
+    if not fixes:
+        return header
+    header = header.copy()
+    for k, v in fixes.items():
+        header[k] = v
+    return header
+
+
 def _iraf_unit(header, axis: int) -> str | None:
     """The length unit IRAF's ``WAT<axis>_nnn`` cards give (``units=angstroms``), else None."""
     wat = "".join(str(header[k]) for k in sorted(k for k in header if k.startswith(f"WAT{axis}_")))
@@ -205,7 +237,8 @@ def _iraf_unit(header, axis: int) -> str | None:
 
 def _is_wavelength(ctype: str, unit: str) -> bool:
     """Whether an axis of this ``CTYPE`` and unit is a wavelength (see the module notes)."""
-    return (str(ctype).strip().upper().split("-")[0] in _WAVELENGTH_CTYPES
+    head = str(ctype).strip().upper().split("-")[0]
+    return (head in _WAVELENGTH_CTYPES or head.startswith("WAVELEN")
             or str(unit).strip().lower() in _WAVELENGTH_UNITS)
 
 
@@ -243,8 +276,12 @@ def _dispersion_axis(path: Path, header, axes: list[int]) -> int:
     return axes[0]
 
 
-def _profile_axis(path: Path, values: np.ndarray, unit: str, ctype: str) -> tuple[np.ndarray, str]:
-    """(values in µm or pixels, axis kind for :func:`profile_offsets_um`)."""
+def _profile_axis(path: Path, values: np.ndarray, unit: str, ctype: str, source: str = "the axis",
+                  declare: str = "CTYPE = 'WAVE'") -> tuple[np.ndarray, str]:
+    """(values in µm or pixels, axis kind for :func:`profile_offsets_um`). A length axis not
+    declared a wavelength whose values span less than :data:`_MIN_OFFSET_SPAN_UM` is refused:
+    such offsets hold no line, while a wavelength in µm of a line's window does span so
+    little, so the file is asked to ``declare`` it (``source`` names the axis)."""
     is_wave = _is_wavelength(ctype, unit)
     try:
         f = _unit_to_um(unit)
@@ -257,11 +294,17 @@ def _profile_axis(path: Path, values: np.ndarray, unit: str, ctype: str) -> tupl
         if is_wave:
             raise parse_error(path, None, f"wavelength axis CTYPE {ctype!r} has no unit (CUNIT)")
         return values, "pixel"
+    span_um = float(np.nanmax(values) - np.nanmin(values)) * f if values.size else 0.0
+    if not is_wave and span_um < _MIN_OFFSET_SPAN_UM:
+        raise parse_error(path, None, f"{source} (unit {unit!r}, CTYPE {ctype or 'none'}) reads as detector offsets "
+                                      f"spanning {span_um:.3g} µm, below the {_MIN_OFFSET_SPAN_UM:g} µm of any line at "
+                                      f"the detector: if it is a wavelength, declare it ({declare})")
     return values * f, ("wavelength_um" if is_wave else "offset_um")
 
 
 def _profile_image(path: Path, hdul, ndim: int) -> tuple | None:
-    """(axis values, intensity, unit, ctype) of the first ``ndim``-D image, else None. A
+    """(axis values, intensity, unit, ctype, (the axis in words, how to declare it a
+    wavelength)) of the first ``ndim``-D image, else None. A
     2-D frame is summed along the slit, as the line profiles are: each slit line's valid
     pixels, scaled to the full line where some are masked (a line with none is left out).
     The dispersion is the axis the WCS declares spectral (:func:`_dispersion_axis`),
@@ -286,12 +329,12 @@ def _profile_image(path: Path, hdul, ndim: int) -> tuple | None:
                                       f"spectrum onto a linear axis (CRVAL{dispersion}/CDELT{dispersion}) or "
                                       "write it as a table")
     a, unit, ctype = _axis(path, header, dispersion, y.size, header.get("NAXIS", ndim))
-    return a, y, unit, ctype
+    return a, y, unit, ctype, (f"axis {dispersion}", f"CTYPE{dispersion} = 'WAVE', or 'AWAV' in air")
 
 
 def _table_profile(path: Path, hdul) -> tuple[np.ndarray, np.ndarray, str, str] | None:
-    """(axis values, intensity, unit, axis kind name) of the first binary table with an
-    intensity and an axis column, else None."""
+    """(axis values, intensity, unit, axis kind name, (the column in words, how to declare it
+    a wavelength)) of the first binary table with an intensity and an axis column, else None."""
     from astropy.io import fits
 
     for h in hdul:
@@ -318,7 +361,8 @@ def _table_profile(path: Path, hdul) -> tuple[np.ndarray, np.ndarray, str, str] 
             raise parse_error(path, None, f"table column {aname!r} has no unit (TUNIT), so its values could be "
                                           "µm, mm or pixels; give its TUNIT (um, mm) or name it offset_um, or "
                                           "put the axis in a pixel column")
-        return a.ravel(), y.ravel(), unit, ctype
+        return (a.ravel(), y.ravel(), unit, ctype,
+                (f"table column {aname!r}", "name the column WAVELENGTH, WAVE or LAMBDA"))
     return None
 
 
@@ -364,8 +408,8 @@ def read_line_profile_fits(path: str | Path, normalise: bool = True, pixel_um: f
     if found is None:
         raise parse_error(path, None, "no 1-D or 2-D image and no binary table with an intensity column "
                                       f"({INTENSITY.describe()}) and an axis column (offset, wavelength, pixel)")
-    a, y, unit, ctype = found
-    values, kind = _profile_axis(path, a, unit, ctype)
+    a, y, unit, ctype, (source, declare) = found
+    values, kind = _profile_axis(path, a, unit, ctype, source, declare)
     x = profile_offsets_um(values, kind, path, pixel_um, dispersion_um_per_um, "FITS axis", line_wavelength_um)
     return checked_profile(path, x, y, normalise)  # masks NaN samples, refuses inf
 
