@@ -256,6 +256,22 @@ def test_units_in_a_second_header_line(tmp_path, names, units):
     np.testing.assert_array_equal(y, COUNTS)
 
 
+def test_a_european_spreadsheet_map_with_its_units_under_the_names(tmp_path):
+    """pandas' two-row header (names, then units) in a European locale's export: BOM, ';',
+    CRLF, decimal commas; the units row is told from the data by the decimal commas."""
+    import pandas as pd
+
+    g = np.arange(-10.0, 10.01, 0.5)
+    X, Y = np.meshgrid(g, g)
+    S_nm = np.round(300.0 * np.cos(2 * np.pi * X / 21.0) + 10.0 * Y, 3)
+    df = pd.DataFrame({"X": X.ravel(), "Y": Y.ravel(), "Z": S_nm.ravel()})
+    df.columns = pd.MultiIndex.from_tuples([("X", "mm"), ("Y", "mm"), ("Z", "nm")])
+    df.to_csv(tmp_path / "m.csv", sep=";", decimal=",", index=False, encoding="utf-8-sig", lineterminator="\r\n")
+    m = ic.read_sag_map(tmp_path / "m.csv")
+    np.testing.assert_allclose(m.x_mm, g)
+    np.testing.assert_allclose(m.sag_um, S_nm * 1e-3, atol=1e-12)
+
+
 def test_a_cut_out_keeps_its_detector_pixel_numbers(tmp_path):
     # a unitless WCS of step one is pixel numbers, wherever it starts
     x, _ = _profile(_spectrum(tmp_path / "cut.fits", CRVAL1=1024.0, CDELT1=1.0, CRPIX1=1.0))

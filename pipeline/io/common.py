@@ -209,11 +209,12 @@ def _found(header: list[str], alts: tuple[str, ...]):
 
 
 def _numeric(line: str, delimiter: str | None) -> bool:
-    """Whether every field of ``line`` is a number (a data row, not a header)."""
-    fields = [f for f in _split(line, delimiter) if f.strip()]
+    """Whether every field of ``line`` is a number (a data row, not a header); where the
+    delimiter is not a comma, a decimal comma (``-118,19``) is a number too."""
+    fields = [f.strip() for f in _split(line, delimiter) if f.strip()]
     try:
         for f in fields:
-            float(f)
+            float(f.replace(",", ".") if delimiter != "," and _DECIMAL_COMMA.match(f) else f)
     except ValueError:
         return False
     return bool(fields)
