@@ -272,6 +272,34 @@ def test_a_european_spreadsheet_map_with_its_units_under_the_names(tmp_path):
     np.testing.assert_allclose(m.sag_um, S_nm * 1e-3, atol=1e-12)
 
 
+def test_a_map_saved_as_a_matrix_is_refused_naming_what_it_lacks(tmp_path):
+    # np.savetxt of sag[y, x] (MATLAB's writematrix alike): no coordinates, no unit
+    np.savetxt(tmp_path / "m.csv", np.zeros((20, 30)), delimiter=",")
+    with pytest.raises(ValueError, match=r"m\.csv, line 1: no header line, and 30 numbers on the row: a matrix of "
+                                         r"values .* is not read; write the sag CSV as a table with a header line "
+                                         r"x_mm,y_mm,sag_um, or as a FITS image"):
+        ic.read_sag_map(tmp_path / "m.csv")
+
+
+@pytest.mark.parametrize("suffix", [".nc", ".xlsx"])
+def test_a_binary_file_given_as_a_profile_is_named_binary(tmp_path, suffix):
+    import xarray as xr
+
+    f = tmp_path / f"p{suffix}"
+    if suffix == ".nc":
+        xr.Dataset({"intensity": (("offset_um",), COUNTS)}, coords={"offset_um": OFFSET_UM}).to_netcdf(f)
+        kind = r"HDF5 or NetCDF-4"
+    else:  # an .xlsx workbook is a zip archive
+        import zipfile
+
+        with zipfile.ZipFile(f, "w") as z:
+            z.writestr("xl/workbook.xml", "<workbook/>")
+        kind = r"a zip archive: an Excel \.xlsx workbook"
+    with pytest.raises(ValueError, match=rf"line profile .*p\{suffix}: is a binary file \({kind}.*\), not a text "
+                                         r"table; save it as delimited text \(CSV\)"):
+        _profile(f)
+
+
 def test_a_cut_out_keeps_its_detector_pixel_numbers(tmp_path):
     # a unitless WCS of step one is pixel numbers, wherever it starts
     x, _ = _profile(_spectrum(tmp_path / "cut.fits", CRVAL1=1024.0, CDELT1=1.0, CRPIX1=1.0))

@@ -75,7 +75,29 @@ def read_text(path: str | Path, what: str) -> str:
         raise ValueError(f"{what} {path}: file does not exist") from None
     except OSError as exc:
         raise ValueError(f"{what} {path}: cannot read ({exc.strerror or exc})") from None
+    binary = _binary_kind(raw)
+    if binary is not None:
+        raise ValueError(f"{what} {path}: is a binary file ({binary}), not a text table; save it as delimited text "
+                         "(CSV) with a header line")
     return decode_text(raw, path, what)
+
+
+#: Leading bytes of binary files a text table is mistaken for, and what each is.
+_BINARY_MAGIC = ((b"\x89HDF", "HDF5 or NetCDF-4"), (b"CDF\x01", "NetCDF-3"), (b"CDF\x02", "NetCDF-3"),
+                 (b"PK\x03\x04", "a zip archive: an Excel .xlsx workbook or a NumPy .npz"),
+                 (b"\xd0\xcf\x11\xe0", "an Excel .xls workbook"), (b"\x93NUMPY", "a NumPy .npy array"))
+
+
+def _binary_kind(raw: bytes) -> str | None:
+    """What a binary file is (:data:`_BINARY_MAGIC`, else "NUL bytes" where its first 8 KiB
+    hold one), or None for text. UTF-16/32 text holds NULs too and starts with its
+    byte-order mark."""
+    kind = next((k for magic, k in _BINARY_MAGIC if raw.startswith(magic)), None)
+    if kind is not None:
+        return kind
+    if raw.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)) or b"\x00" not in raw[:8192]:
+        return None
+    return "NUL bytes"
 
 
 def decode_text(raw: bytes, path: str | Path, what: str, strict: bool = False) -> str:
@@ -195,6 +217,10 @@ def decimal_commas(fields: list[str]) -> bool | None:
 
 #: Lines of preamble (before the header line) a table may have.
 PREAMBLE_LINES = 50
+#: A header-less row of this many numbers is a matrix (a map or image saved as a grid), not a
+#: table the readers take: those have a few columns (a profile 2, a map or image 3, an FE
+#: node table 7 with its number).
+MATRIX_NUMBERS = 8
 
 
 def _header(line: str, data_line: str | None = None) -> list[str]:
@@ -299,6 +325,12 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
     if callable(hint):
         hint = hint(missing, header) if missing else ""
     if missing:
+        n_numbers = len([f for f in _split(htext, delim) if f.strip()])
+        if _numeric(htext, delim) and n_numbers >= MATRIX_NUMBERS:
+            raise parse_error(path, hline, f"no header line, and {n_numbers} numbers on the row: a matrix of values "
+                                           "(an image or map saved as a grid, without its coordinates and unit) is not "
+                                           f"read; write the {what} as a table with a header line {','.join(names)}, or "
+                                           "as a FITS image with its axes in a WCS")
         if _numeric(htext, delim):
             raise parse_error(path, hline, f"the table has no header line naming its columns; add a first line "
                                            f"{','.join(names)} (with the units in the names)"
