@@ -85,6 +85,16 @@ def test_a_spectrum_in_um_not_typed_a_wavelength_is_refused_by_name(tmp_path, ca
     np.testing.assert_allclose(x, 9.0 * OFFSET_UM)
 
 
+@pytest.mark.parametrize("cards", [{"PS1_0": "WCS-TAB", "PS1_1": "COORDS"}, {}])
+def test_a_tabulated_wavelength_axis_is_refused_by_name(tmp_path, cards):
+    # wcslib reads a -TAB axis from another HDU: from the header alone it raised a MemoryError
+    # (no PSi_m cards) or asked for an HDUList
+    f = _spectrum(tmp_path / "tab.fits", CTYPE1="WAVE-TAB", CUNIT1="um", CRVAL1=1.25, CDELT1=1.0, CRPIX1=1.0, **cards)
+    with pytest.raises(ValueError, match=r"tab\.fits: axis 1: CTYPE1='WAVE-TAB' is a tabulated \(-TAB\) axis, which "
+                                         r"is not read; write the profile as a binary table"):
+        _profile(f)
+
+
 @pytest.mark.parametrize("name", ["OFFSET", "X"])
 def test_a_fits_table_offset_without_a_unit_is_refused_by_name(tmp_path, name):
     from astropy.io import fits

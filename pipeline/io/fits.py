@@ -38,7 +38,8 @@ are the detector's (``pixel_um``), an image's too; a map in pixels needs ``spaci
 ``extent_mm`` as a CODE V INT file does. ``BSCALE``/``BZERO`` are applied by astropy;
 counts in any normalisation, negative background-subtracted samples and pedestals are
 data (the diagnosis fits flux and background). Rotated or skewed WCS (off-diagonal
-``CD``/``PC`` terms), IRAF's log-linear (``DC-FLAG = 1``) and multispec dispersions, and
+``CD``/``PC`` terms), IRAF's log-linear (``DC-FLAG = 1``) and multispec dispersions, tabulated
+(``-TAB``) axes, and
 non-length, non-wavelength axes are refused by name: resample to a linear, axis-aligned
 grid first.
 """
@@ -171,6 +172,11 @@ def _axis(path: Path, header, axis: int, n: int, naxis: int, unit_needed: bool =
     if not any(k.format(i=axis) in header for k in _WCS_KEYS):
         return np.arange(1.0, n + 1.0), "", ""
     header = _standard_units(header, naxis)
+    if str(header.get(f"CTYPE{axis}", "")).strip().upper().endswith("-TAB"):
+        # its coordinates are in another HDU's table, which a header alone does not give
+        raise parse_error(path, None, f"axis {axis}: CTYPE{axis}={header[f'CTYPE{axis}']!r} is a tabulated (-TAB) axis, "
+                                      "which is not read; write the profile as a binary table with a wavelength "
+                                      "column and its TUNIT, or resample it onto a linear axis (CRVAL/CDELT)")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
