@@ -206,6 +206,27 @@ def test_a_commented_header_as_numpy_and_astropy_write_it(tmp_path):
         np.testing.assert_array_equal(y, COUNTS)
 
 
+def test_an_astropy_ecsv_table_gives_its_units_in_its_yaml_header(tmp_path):
+    import astropy.units as u
+    from astropy.table import Table
+
+    lam_um = 1.2496 + 2e-4 * (OFFSET_UM + 4.0)
+    Table({"wavelength": lam_um * u.um, "flux": COUNTS}).write(tmp_path / "p.ecsv")
+    x, y = _profile(tmp_path / "p.ecsv")
+    np.testing.assert_allclose(x, np.sort((lam_um - np.median(lam_um)) * DISPERSION), atol=1e-9)
+    np.testing.assert_array_equal(y, COUNTS[::-1])
+    g = np.arange(5.0)
+    X, Y = np.meshgrid(g, g)
+    Table({"x": X.ravel() * u.mm, "y": Y.ravel() * u.mm, "height": 10.0 * X.ravel() * u.nm}).write(
+        tmp_path / "m.txt", format="ascii.ecsv")
+    m = ic.read_sag_map(tmp_path / "m.txt")
+    np.testing.assert_allclose(m.sag_um, 0.01 * X)
+    Table({"x": X.ravel(), "y": Y.ravel(), "height": X.ravel()}).write(tmp_path / "n.txt", format="ascii.ecsv")
+    with pytest.raises(ValueError, match=r"n\.txt, line 8: missing column\(s\) \['x_mm', 'y_mm', 'sag_um'\].*'x' has no unit.*"
+                                         r"'height' has no unit"):
+        ic.read_sag_map(tmp_path / "n.txt")
+
+
 def test_a_tab_table_with_commas_in_its_names(tmp_path):
     f = _text(tmp_path / "p.tsv", "Offset [um]\tIntensity, counts\tcomment, note",
               [(a, b, "ok") for a, b in _rows()], delimiter="\t")

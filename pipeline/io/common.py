@@ -275,7 +275,8 @@ def read_csv_columns(path: Path, what: str, names: tuple[str, ...]) -> tuple[np.
     length unit, converted. Other columns are ignored, ``#`` comment lines and blank lines
     skipped; the delimiter (comma, semicolon, tab or whitespace) is the header's. The header
     is the first line naming every column (within :data:`PREAMBLE_LINES` lines): a preamble
-    before it (an export's title, date, exposure lines) is skipped. A table without a
+    before it (an export's title, date, exposure lines) is skipped. Units may also stand on a
+    second header line, or in an astropy ECSV file's YAML header. A table without a
     header is refused, naming the header line to add."""
     v, lines, _ = read_csv_choices(path, what, tuple((n,) for n in names))
     return v, lines
@@ -318,8 +319,11 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
     header = [_canonical_header(h) for h in _split(htext, delim)]
     units = _units_row(lines_[start + 1:start + 3], delim, len(header))
     if units is not None:  # a spreadsheet's second header line: "(um),(counts)" under "Offset,Intensity"
-        header = [h if "_" in h or not u else _canonical_header(f"{h} [{u}]") for h, u in zip(header, units)]
         lines_ = lines_[:start + 1] + lines_[start + 2:]
+    else:  # astropy's ECSV: the units in the commented YAML header
+        units = _ecsv_units(text, len(header))
+    if units is not None:
+        header = [h if "_" in h or not u else _canonical_header(f"{h} [{u}]") for h, u in zip(header, units)]
     found = [_found(header, alts) for alts in choices]
     missing = [n for n, f in zip(names, found) if f is None]
     if callable(hint):
@@ -373,6 +377,28 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
             raise parse_error(path, n, f"non-numeric value in {t.strip()!r}") from None
         lines.append(n)
     return np.array(vals, dtype=float).reshape(-1, len(choices)) * factor, np.array(lines, dtype=int), chosen
+
+
+#: One column of an ECSV file's YAML header: ``# - {name: wavelength, unit: um, datatype: float64}``.
+_ECSV_COLUMN = re.compile(r"^#\s*-\s*\{\s*name:\s*(?:'([^']*)'|\"([^\"]*)\"|([^,}]*))(.*)\}\s*$")
+_ECSV_UNIT = re.compile(r"\bunit:\s*(?:'([^']*)'|\"([^\"]*)\"|([^,}]*))")
+
+
+def _ecsv_units(text: str, n: int) -> list[str] | None:
+    """The units (lower case, "" for none) of the ``n`` columns of an ECSV table (astropy's
+    ``Table.write(..., format="ascii.ecsv")``), which its YAML header gives in column order,
+    else None (not ECSV, or not ``n`` columns described)."""
+    if not text.startswith("# %ECSV"):
+        return None
+    units = []
+    for line in text.splitlines():
+        if not line.startswith("#"):
+            break
+        m = _ECSV_COLUMN.match(line.strip())
+        if m:
+            u = _ECSV_UNIT.search(m.group(4))
+            units.append("" if u is None else next(g for g in u.groups() if g is not None).strip().lower())
+    return units if len(units) == n else None
 
 
 def _units_row(after: list, delimiter: str | None, n: int) -> list[str] | None:
