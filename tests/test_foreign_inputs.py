@@ -331,6 +331,18 @@ def test_a_binary_file_given_as_a_profile_is_named_binary(tmp_path, suffix):
         _profile(f)
 
 
+@pytest.mark.parametrize("comments", ["line centre,dark subtracted", ","])
+def test_an_origin_export_with_names_units_and_comments_lines(tmp_path, comments):
+    # OriginLab's ASCII export: long names, units, then a comments line (empty or not)
+    x, y = _profile(_text(tmp_path / "p.csv", f"Offset,Intensity\num,counts\n{comments}", _rows()))
+    np.testing.assert_array_equal(x, OFFSET_UM)
+    np.testing.assert_array_equal(y, COUNTS)
+    # a second line of words that are not units is no units line: the names stay without one
+    with pytest.raises(ValueError, match=r"missing column\(s\) \['offset_um'\]; found header \['offset', 'intensity'\]"):
+        _profile(_text(tmp_path / "q.csv", "Offset,Intensity\nfrom centre,dark\nline centre,dark subtracted",
+                       _rows()))
+
+
 def test_a_cut_out_keeps_its_detector_pixel_numbers(tmp_path):
     # a unitless WCS of step one is pixel numbers, wherever it starts
     x, _ = _profile(_spectrum(tmp_path / "cut.fits", CRVAL1=1024.0, CDELT1=1.0, CRPIX1=1.0))

@@ -35,8 +35,8 @@ from typing import Callable
 import numpy as np
 
 from fea.atomic import atomic_path, atomic_write
-from pipeline.io.columns import ANY_UNIT, matches
-from pipeline.io.gridding import SAG_UNITS_TO_UM
+from pipeline.io.columns import ANY_UNIT, INTENSITY_UNITS, matches
+from pipeline.io.gridding import SAG_UNITS_TO_UM, WAVE_UNITS
 
 __all__ = ["atomic_write", "atomic_path", "ascii_label", "parse_error", "numbered_lines", "read_text",
            "decode_text", "read_csv_columns", "read_csv_choices", "decimal_commas", "PREAMBLE_LINES",
@@ -317,9 +317,10 @@ def read_csv_choices(path: Path, what: str, choices: tuple[tuple[str, ...], ...]
             start = 0
     delim = _delimiter(htext, lines_[start + 1][1] if len(lines_) > start + 1 else None)
     header = [_canonical_header(h) for h in _split(htext, delim)]
-    units = _units_row(lines_[start + 1:start + 3], delim, len(header))
+    units = _units_row(lines_[start + 1:start + 4], delim, len(header))
     if units is not None:  # a spreadsheet's second header line: "(um),(counts)" under "Offset,Intensity"
-        lines_ = lines_[:start + 1] + lines_[start + 2:]
+        units, drop = units
+        lines_ = lines_[:start + 1] + lines_[start + 1 + drop:]
     else:  # astropy's ECSV: the units in the commented YAML header
         units = _ecsv_units(text, len(header))
     if units is not None:
@@ -401,16 +402,28 @@ def _ecsv_units(text: str, n: int) -> list[str] | None:
     return units if len(units) == n else None
 
 
-def _units_row(after: list, delimiter: str | None, n: int) -> list[str] | None:
-    """The units of a table's second header line, the first of ``after`` (the two lines after
-    the header): ``n`` fields, none a number, each a unit or empty (``um``, ``(um)``,
-    ``[counts]``), followed by a data row; else None."""
-    if len(after) < 2 or not _numeric(after[1][1], delimiter) or _numeric(after[0][1], delimiter):
+#: Units a second header line may hold above a line of comments (OriginLab's export: long
+#: names, units, comments): lengths, waves, pixels and intensity units.
+_KNOWN_UNITS = frozenset((*SAG_UNITS_TO_UM, *WAVE_UNITS, *INTENSITY_UNITS, "px", "pix", "pixel", "pixels"))
+
+
+def _units_row(after: list, delimiter: str | None, n: int) -> tuple[list[str], int] | None:
+    """The units of a table's second header line, the first of ``after`` (the three lines
+    after the header): ``n`` fields, none a number, each a unit or empty (``um``, ``(um)``,
+    ``[counts]``), followed by a data row, or by one more line of text (comments) and a data
+    row where every unit is one the readers know (:data:`_KNOWN_UNITS`); with the number of
+    lines to drop before the data. Else None."""
+    if len(after) < 2 or _numeric(after[0][1], delimiter):
         return None
     fields = [f.strip() for f in _split(after[0][1], delimiter)]
     if len(fields) != n or any(re.search(r"\d\.\d|^[+-]?\d+$", f) for f in fields):
         return None
-    return [re.sub(r"^[\[(]\s*(.*?)\s*[\])]$", r"\1", f).lower() for f in fields]
+    units = [re.sub(r"^[\[(]\s*(.*?)\s*[\])]$", r"\1", f).lower() for f in fields]
+    if _numeric(after[1][1], delimiter):
+        return units, 1
+    if len(after) > 2 and _numeric(after[2][1], delimiter) and all(not u or u in _KNOWN_UNITS for u in units):
+        return units, 2
+    return None
 
 
 def numbered_lines(text: str) -> list[tuple[int, str]]:
