@@ -170,6 +170,16 @@ def test_a_netcdf_sag_in_waves_takes_the_wavelength_it_states(tmp_path, where):
         ic.read_sag_map(tmp_path / "n.nc")
 
 
+def test_a_netcdf_coordinate_in_an_unknown_unit_is_named_as_the_coordinate(tmp_path):
+    import xarray as xr
+
+    g = np.arange(5.0)
+    xr.Dataset({"sag": (("y", "x"), np.zeros((5, 5)), {"units": "um"})},
+               coords={"x": ("x", g, {"units": "cm"}), "y": ("y", g, {"units": "mm"})}).to_netcdf(tmp_path / "c.nc")
+    with pytest.raises(ValueError, match=r"c\.nc: coordinate 'x': units='cm' is not a known length unit"):
+        ic.read_sag_map(tmp_path / "c.nc")
+
+
 def test_grid_options_of_the_wrong_form_are_named():
     with pytest.raises(ValueError, match=r"extent_mm=\[1, 2, 3\] must be four numbers \(xmin, xmax, ymin, ymax\)"):
         grid_from_options(3, 3, extent_mm=[1, 2, 3])

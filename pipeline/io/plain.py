@@ -245,13 +245,16 @@ def read_sag_netcdf(path: str | Path, wavelength_um: float | None = None) -> Sag
                              f"waves) or put the unit in its name ({field.lower()}_um)")
         try:
             factor = sag_unit_factor(units, wavelength_um)
-            axes = []
-            for d in dims[::-1]:
-                cu = da[d].attrs.get("units") if d in da.coords else None
-                axes.append(da[d].values * (1.0 if cu is None else length_unit_factor(cu)) if d in da.coords
-                            else None)
         except ValueError as exc:
             raise ValueError(f"{path}: {field!r}: {exc}") from None
+        axes = []
+        for d in dims[::-1]:
+            cu = da[d].attrs.get("units") if d in da.coords else None
+            try:
+                axes.append(da[d].values * (1.0 if cu is None else length_unit_factor(cu)) if d in da.coords
+                            else None)
+            except ValueError as exc:
+                raise ValueError(f"{path}: coordinate {d!r}: {exc}") from None
         if axes[0] is None or axes[1] is None:
             raise ValueError(f"{path}: {field!r} lacks coordinate values for {dims}")
         try:
