@@ -154,6 +154,30 @@ def test_map_in_mm_is_named(tmp_path):
     assert "3 orders below" in p.message and p.message.endswith("wrong unit (mm)?")
 
 
+def test_map_with_coordinates_in_metres_read_as_mm_names_the_coordinates(tmp_path):
+    """A NetCDF map whose coordinates are in metres without a ``units`` attribute is read in
+    mm (the documented default): a 0.16 x 0.14 mm patch. That is a coordinate unit, not a
+    sag unit, and the refusal says so (the sag check would name nm or mm for the sag)."""
+    import xarray as xr
+
+    nom = _nominal(tmp_path)
+    x, y = np.arange(-80.0, 80.01, 1.0), np.arange(-70.0, 70.01, 1.0)
+    X, Y = np.meshgrid(x, y)
+    xr.Dataset({"sag_um": (("y", "x"), _analytic_quilt_um(X, Y), {"units": "um"})},
+               coords={"x": x * 1e-3, "y": y * 1e-3}).to_netcdf(tmp_path / "map.nc")
+    text = '[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n' + _map_entry("map.nc")
+    (tmp_path / "m.toml").write_text(text)
+    (p,) = _problems(tmp_path / "m.toml", nom)
+    assert p.code == "unit" and p.fatal
+    assert "map spans 0.16 x 0.14 mm, 3 orders below the blank's 160 mm" in p.message
+    assert "coordinates in m read as mm?" in p.message
+    # a sub-aperture map a tenth of the blank's size is data, not a unit error
+    xs, ys = np.arange(-8.0, 8.01, 0.5), np.arange(-7.0, 7.01, 0.5)
+    write_sag_map(SagMap(xs, ys, _analytic_quilt_um(*np.meshgrid(xs, ys))), tmp_path / "small.npz")
+    (tmp_path / "small.toml").write_text('[simulation]\nsag_file = "nominal.npz"\ncold_K = 80\n' + _map_entry("small.npz"))
+    assert all(p.code != "unit" or "spans" not in p.message for p in _problems(tmp_path / "small.toml", nom))
+
+
 @pytest.mark.parametrize("make", ["zeros", "noise"])
 def test_map_without_signal_says_no_signal(tmp_path, make):
     nom = _nominal(tmp_path)

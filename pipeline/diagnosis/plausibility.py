@@ -13,7 +13,9 @@ the nominal model predicts for it:
   the line is one sample, not a line: where the raw FWHM is implausible but the profile's
   3-sample running median holds a line of plausible width, the profile is data with a
   spike (a non-fatal "spike" problem naming the samples), not a refusal;
-* surface map: its RMS about piston and tilt must exceed ``min_signal_ratio`` times its
+* surface map: its lateral span must lie within ``max_orders`` decades of the blank's
+  (coordinates in m or µm read as mm are named as a coordinate unit); its RMS about piston
+  and tilt must exceed ``min_signal_ratio`` times its
   white noise ("no signal" otherwise), and lie within ``max_orders`` decades of the
   nominal's RMS at the measurement temperature (else "wrong unit (nm)?" / "(mm)?"); and it
   must not match the nominal better with its heights reversed or turned by 90° (a height or
@@ -215,15 +217,28 @@ def _piston_tilt_residual(x: np.ndarray, y: np.ndarray, v: np.ndarray) -> np.nda
 
 
 def map_problems(name: str, x_mm: np.ndarray, y_mm: np.ndarray, sag_um: np.ndarray, nominal_sag_um: np.ndarray,
-                 noise_um: float | None = None, rules: Plausibility = Plausibility()) -> list[Problem]:
+                 noise_um: float | None = None, rules: Plausibility = Plausibility(),
+                 blank_span_mm: float | None = None) -> list[Problem]:
     """Problems of a surface map (valid samples at ``x_mm, y_mm``) against the nominal
     sag predicted at the same points and temperature (µm; nan where the nominal has none).
 
-    "no_signal" (not fatal here: :func:`check_measurements` decides) if the RMS about
-    piston and tilt is below ``min_signal_ratio`` noise sigmas; "unit" if it is
-    ``max_orders`` decades or more away from the nominal's RMS.
+    "unit" if the map's lateral span (the larger of its x and y extents) is ``max_orders``
+    decades or more from ``blank_span_mm`` (the nominal's, mm): coordinates in m or µm read
+    as mm, which would otherwise reach the RMS check below with a sag unit named for what
+    is a coordinate unit; "no_signal" (not fatal here: :func:`check_measurements` decides)
+    if the RMS about piston and tilt is below ``min_signal_ratio`` noise sigmas; "unit" if
+    it is ``max_orders`` decades or more away from the nominal's RMS.
     """
     x, y, v = (np.asarray(a, float) for a in (x_mm, y_mm, sag_um))
+    span = max(float(np.ptp(x)), float(np.ptp(y))) if x.size else 0.0
+    if blank_span_mm is not None and span > 0 and blank_span_mm > 0:
+        orders = math.log10(span / blank_span_mm)
+        if abs(orders) >= rules.max_orders:
+            where = "above" if orders > 0 else "below"
+            hint = {-3: "m", 3: "µm"}.get(round(orders), "another unit")
+            return [Problem(name, "unit", f"map spans {np.ptp(x):.3g} x {np.ptp(y):.3g} mm, {abs(orders):.0f} orders "
+                            f"{where} the blank's {blank_span_mm:.3g} mm: coordinates in {hint} read as mm? give "
+                            "the coordinates' unit (a column x_m or 'X [um]', a NetCDF coordinate's units)")]
     rms = float(np.sqrt(np.mean(_piston_tilt_residual(x, y, v) ** 2)))
     sigma = noise_um if noise_um is not None else estimate_noise(x, v, rows=y)
     if not math.isfinite(sigma):
@@ -348,8 +363,9 @@ def measurement_problems(manifest, data: tuple, nominal, rules: Plausibility = P
         elif isinstance(d, SurfaceData):
             k = thermal_factor(m.temperature_K, sim.cold_K, sim.warm_K, *sim.materials)
             noise = m.noise_um if m.noise_um is not None else d.samples_noise_um  # scattered: the points' own
+            blank_span = max(float(np.ptp(nominal.x_mm)), float(np.ptp(nominal.y_mm)))
             found = map_problems(m.name, d.x_mm, d.y_mm, d.sag_um, k * _nominal_at(nominal, d.x_mm, d.y_mm),
-                                 noise, rules)
+                                 noise, rules, blank_span)
             if not found:  # a map with signal and the right magnitude: is it the right way round?
                 found = orientation_problems(m.name, d.x_mm, d.y_mm, d.sag_um,
                                              lambda bx, by, k=k: k * _nominal_at(nominal, bx, by), rules)
