@@ -37,6 +37,7 @@ the modes against the sum over sources.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -225,13 +226,23 @@ def source_points(radius_mm: float, step_mm: float) -> tuple[np.ndarray, np.ndar
     """
     if not radius_mm > 0 or not step_mm > 0:
         raise ValueError(f"radius_mm={radius_mm} and step_mm={step_mm} must be > 0")
+    return _source_grid(float(radius_mm), float(step_mm))
+
+
+@functools.lru_cache(maxsize=64)
+def _source_grid(radius_mm: float, step_mm: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`source_points`, computed once per illumination and shared read-only: a fit asks
+    for the same grid at every forward call (a profile per call, thousands per diagnosis)."""
     n = max(1, int(np.ceil(2 * radius_mm / step_mm)))
     s = (np.arange(n) - (n - 1) / 2) * step_mm
     r = np.hypot(s[None, :], s[:, None])
     w = np.clip(0.5 + (radius_mm - r) / step_mm, 0.0, 1.0)
     keep_y = w.any(axis=1)
     keep_x = w.any(axis=0)
-    return s[keep_x], s[keep_y], w[np.ix_(keep_y, keep_x)]
+    out = s[keep_x], s[keep_y], w[np.ix_(keep_y, keep_x)]
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
 def partially_coherent_lsf(rows: np.ndarray, xi_mm: np.ndarray, s_x_mm: np.ndarray, weights: np.ndarray,
