@@ -30,9 +30,9 @@ SHARED_SCOPES = {m: PAPER_UNIT for m in PAPER_UNIT.split("+")}
 # other worker meanwhile instead of leaving one long module running alone at the end (xdist's
 # own order is by number of tests, which puts these few-test modules last). The first two start
 # together on the two workers; the others follow by their time on one worker (``pytest
-# --durations=0 -n 2``, one BLAS thread: scenarios ~250 s, paper claims and tables ~165 s,
+# --durations=0 -n 2``, one BLAS thread: scenarios ~250 s, paper claims, tables and the mesh record ~200 s,
 # fea_blank ~120 s, fea_reduced ~90 s, quilt ~90 s, bow ~70 s, surrogate_sweep ~55 s, reduced
-# campaign ~50 s with its own two worker processes, psf ~35 s, mesh_convergence ~50 s,
+# campaign ~50 s with its own two worker processes, psf ~35 s,
 # diagnosis and study_dataset ~30 s, fea_layer ~15 s, plating ~10 s). Not strictly by time:
 # the reduced campaign's two processes go beside the short modules' single ones, not beside
 # a heavy unit's (three fitting processes on two cores slow all three: measured when it was
