@@ -338,7 +338,7 @@ def _profile_image(path: Path, hdul, ndim: int) -> tuple | None:
     return a, y, unit, ctype, (f"axis {dispersion}", f"CTYPE{dispersion} = 'WAVE', or 'AWAV' in air")
 
 
-def _table_profile(path: Path, hdul) -> tuple[np.ndarray, np.ndarray, str, str] | None:
+def _table_profile(path: Path, hdul) -> tuple | None:
     """(axis values, intensity, unit, axis kind name, (the column in words, how to declare it
     a wavelength)) of the first binary table with an intensity and an axis column, else None."""
     from astropy.io import fits
