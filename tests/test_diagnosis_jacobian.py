@@ -84,3 +84,15 @@ def test_a_fit_with_the_grouped_jacobian_takes_scipys_steps():
     got = least_squares(fun, z0, jac=jac, bounds=(lo, hi), method="trf", x_scale=1.0, xtol=1e-6, ftol=1e-6)
     assert np.array_equal(got.x, ref.x) and got.nfev == ref.nfev and got.cost == ref.cost
 
+
+
+def test_groups_whose_columns_would_mix_are_refused():
+    fun, _ = _blocks_problem()
+    z = np.array([0.3, -0.2, 1.5, -2.0, 0.7])
+    h = fd_steps(z, np.full(5, -5.0), np.full(5, 5.0))
+    f0 = fun(z)
+    for groups in ([[(0, None), (2, slice(0, 40))]], [[(2, slice(0, 40)), (3, slice(30, 65))]]):
+        with pytest.raises(ValueError, match=r"group \[\d, \d\] perturbs columns whose rows overlap"):
+            grouped_fd_jacobian(fun, z, f0, h, groups)
+    with pytest.raises(ValueError, match="h has 4 steps for 5 parameters"):
+        grouped_fd_jacobian(fun, z, f0, h[:4], [[(0, None)]])

@@ -279,7 +279,21 @@ def grouped_fd_jacobian(fun, z: np.ndarray, f0: np.ndarray, h: np.ndarray, group
         The Jacobian (rows x columns): column by column the numbers a one-column-at-a-time
         difference with the same steps gives, since a column's rows do not depend on the
         other columns of its group.
+
+    Raises
+    ------
+    ValueError
+        If ``h`` and ``z`` differ in size, or a group holds a column acting on every row beside
+        others or columns whose rows overlap (their differences would mix).
     """
+    if np.size(h) != np.size(z):
+        raise ValueError(f"grouped_fd_jacobian: h has {np.size(h)} steps for {np.size(z)} parameters")
+    for group in groups:
+        spans = sorted((rows.indices(f0.size)[:2] for _, rows in group if rows is not None))
+        if (len(group) > 1 and any(rows is None for _, rows in group)) or any(
+                a[1] > b[0] for a, b in zip(spans, spans[1:])):
+            raise ValueError(f"grouped_fd_jacobian: group {[j for j, _ in group]} perturbs columns whose rows overlap; "
+                             "a group's columns must change disjoint rows, a column acting on every row stands alone")
     jt = np.zeros((z.size, f0.size))
     for group in groups:
         z1 = z.copy()
