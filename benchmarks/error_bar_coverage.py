@@ -4,7 +4,10 @@ For every library line-profile case of the frozen, pre-registered campaign runs 
 ``benchmarks/frozen_*raw*.json`` whose top finding is the injected effect (rescalings judged
 by their value, ``correct_measured``), each injected parameter's pull
 ``z = (fitted - true) / reported 1-sigma`` is collected; an amplitude is compared with the
-truth's own x-fundamental ratio (``rescaling_true``), the amplitude the rescalings measure.
+truth's own x-fundamental ratio (``rescaling_true``), the amplitude the rescalings measure. A
+parameter the finding reports as ``sign_degenerate`` (the engine claims no sign) is compared
+as the campaign scores it: the fit's mirror about the parameter's sign origin on the truth's
+side.
 Well-calibrated Gaussian errors put 68 % of pulls within 1 and 95 % within 2, with a median
 ``|z|`` of 0.67.
 
@@ -19,6 +22,8 @@ import json
 from pathlib import Path
 
 import numpy as np
+
+from pipeline.diagnosis.effects import parameter_spec
 
 HERE = Path(__file__).parent
 
@@ -44,9 +49,14 @@ def pulls(paths) -> dict:
                     if name not in fitted or not isinstance(true, (int, float)) or not s or not np.isfinite(s):
                         continue
                     key = (str(path), r["index"], r["measurement"], name)
-                    if key not in seen:
-                        seen.add(key)
-                        out[name].append((fitted[name] - true) / s)
+                    if key in seen:
+                        continue
+                    seen.add(key)
+                    fit = fitted[name]
+                    if name in (r.get("sign_degenerate") or ()):
+                        o = parameter_spec(name).origin
+                        fit = fit if (fit - o) * (true - o) >= 0 else 2.0 * o - fit
+                    out[name].append((fit - true) / s)
     return dict(out)
 
 
