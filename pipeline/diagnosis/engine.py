@@ -256,10 +256,12 @@ class _Ranking:
     base_forwards: tuple  # one per measurement, in the manifest's order
 
 
-def _ranked(manifest: Manifest, data: tuple, nominal, criteria: Criteria, cands, map_in_optics: bool) -> _Ranking:
+def _ranked(manifest: Manifest, data: tuple, nominal, criteria: Criteria, cands, map_in_optics: bool,
+            warm: tuple = ()) -> _Ranking:
     """Build the problem (the image models carrying a measured map's departure where
     ``map_in_optics``), fit and rank the candidate effects ``cands``, re-ranking under the
-    error model (``docs/diagnosis.md``, steps 1-5)."""
+    error model (``docs/diagnosis.md``, steps 1-5); ``warm``: fits of the same model made
+    before, restarted from (:func:`.ranking.rank`)."""
     prob, nom = build_problem(manifest, data, nominal, criteria.weight_scale, map_in_optics)
     base_forwards = tuple(prob.forwards)  # one per measurement, in the manifest's order
     kinds = {f.kind for f in prob.forwards}
@@ -270,7 +272,7 @@ def _ranked(manifest: Manifest, data: tuple, nominal, criteria: Criteria, cands,
         errors = measure_errors(base_prob, nom)  # first pass: the nominal residual (signal counts as mismatch)
         prob = two_part_problem(base_prob, errors)
         nom = fit(prob, ())
-    findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo)
+    findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo, warm)
     if model == "two_part":
         for _ in range(_N_EFF_PASSES):
             errs = measure_errors(base_prob, fits[error_source(findings).effect])
@@ -279,7 +281,7 @@ def _ranked(manifest: Manifest, data: tuple, nominal, criteria: Criteria, cands,
                 break
             prob, errors, memo = new, errs, {}  # new weights: every fit is redone
             nom = fit(prob, ())
-            findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo)
+            findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo, warm)
     elif criteria.n_eff_from == "best_fit":
         for _ in range(_N_EFF_PASSES):
             count = post_fit_n_eff(prob, fits[findings[0].effect])
@@ -288,7 +290,7 @@ def _ranked(manifest: Manifest, data: tuple, nominal, criteria: Criteria, cands,
                 break
             prob = recounted(prob, count)
             nom = recount(prob, nom)
-            findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo)
+            findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo, warm)
     return _Ranking(prob, nom, findings, fits, joint_fits, errors, model, base_forwards)
 
 
@@ -347,7 +349,7 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     if departures and r.findings:  # do the images hold the map's departure?
         choice = departure_choice(r.prob, r.findings[0], r.fits[r.findings[0].effect], criteria)
         if not choice.carried:
-            r = _ranked(manifest, data, nominal, criteria, cands, False)
+            r = _ranked(manifest, data, nominal, criteria, cands, False, warm=(choice.without,))
     prob, nom, findings, fits, joint_fits, errors, model = (r.prob, r.nom, r.findings, r.fits, r.joint_fits,
                                                             r.errors, r.model)
     base_forwards = r.base_forwards

@@ -41,12 +41,16 @@ NESTED_RTOL = 1e-6
 
 
 def fit_effects(prob: Problem, nom: FitOutcome, names: tuple, criteria: Criteria, start: dict | None = None,
-                memo: dict | None = None, regrid: tuple = (), nested: tuple = ()):
+                memo: dict | None = None, regrid: tuple = (), nested: tuple = (), warm: tuple = ()):
     """Fit one combination of library effects; returns (Finding, FitOutcome). ``memo``:
     fits by (names, start, regrid) to reuse (valid while the weights are the same);
     ``regrid``: parameters grid-searched beside the warm ``start`` (:func:`.fitting.fit`);
-    ``nested``: fits of combinations this one contains (:func:`restart_from_nested`)."""
+    ``nested``: fits of combinations this one contains (:func:`restart_from_nested`);
+    ``warm``: fits of the same data made elsewhere (:func:`rank`), used as ``nested`` where
+    their parameters are among this combination's."""
     params = parameters_of(names, prob.forwards)
+    names_here = {q.name for q in params}
+    nested = tuple(nested) + tuple(w for w in warm if w.parameters and set(w.parameters) <= names_here)
     key = (tuple(names), tuple(sorted((start or {}).items())), tuple(regrid))
     if memo is not None and key in memo:
         fo = recount(prob, memo[key])
@@ -86,13 +90,18 @@ def restart_from_nested(prob: Problem, params: tuple, fo: FitOutcome, nested: tu
     return again if again.weighted_rss(w) < fo.weighted_rss(w) else fo
 
 
-def rank(prob: Problem, nom: FitOutcome, cands, criteria: Criteria, memo: dict) -> tuple[list, dict, dict]:
+def rank(prob: Problem, nom: FitOutcome, cands, criteria: Criteria, memo: dict,
+         warm: tuple = ()) -> tuple[list, dict, dict]:
     """Steps 2, 3 and 5 of ``docs/diagnosis.md`` (fit singles, pairs, companions; rank):
     (findings best first, fits, joint fits). ``memo`` keeps every fit by (effects, start):
-    a re-count changes the scores, not the fits."""
+    a re-count changes the scores, not the fits. ``warm``: fits of these data's measurements
+    made before (:class:`.departure_choice.DepartureChoice`'s refit without the map's
+    departure); every fit whose parameters hold one's is restarted from it where it ends
+    above it (:func:`restart_from_nested`), so the ranking never reads a model at a worse
+    optimum than one already found."""
     fits, findings = {}, []
     for e in cands:
-        f, fo = fit_effects(prob, nom, (e.name,), criteria, memo=memo)
+        f, fo = fit_effects(prob, nom, (e.name,), criteria, memo=memo, warm=warm)
         findings.append(f)
         fits[f.effect] = fo
     for a, b in pairs_to_fit(findings, criteria.pair_from, criteria.pair_forward, criteria.pair_second):
@@ -102,12 +111,12 @@ def rank(prob: Problem, nom: FitOutcome, cands, criteria: Criteria, memo: dict) 
         # (:func:`.fitting.fit`). Both are off by default, as measured together.
         regrid = tuple(b.parameters) if criteria.pair_forward else ()
         f, fo = fit_effects(prob, nom, names, criteria, start={**a.parameters, **b.parameters}, memo=memo,
-                            regrid=regrid, nested=(fits[a.effect], fits[b.effect]))
+                            regrid=regrid, nested=(fits[a.effect], fits[b.effect]), warm=warm)
         findings.append(f)
         fits[f.effect] = fo
     findings.sort(key=lambda f: rank_key(f, criteria))
     joint_fits = {}
-    findings = _with_companions(prob, nom, findings, fits, cands, criteria, joint_fits, memo)
+    findings = _with_companions(prob, nom, findings, fits, cands, criteria, joint_fits, memo, warm)
     findings.sort(key=lambda f: rank_key(f, criteria))
     return one_model_each(findings), fits, joint_fits
 
@@ -207,7 +216,7 @@ def _rescales(f: Finding) -> bool:
 
 
 def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict, cands, c: Criteria,
-                     joint_fits: dict | None = None, memo: dict | None = None) -> list:
+                     joint_fits: dict | None = None, memo: dict | None = None, warm: tuple = ()) -> list:
     """Refit the ``c.companion_top`` best findings (and every significant single where a
     companion alone is significant) jointly with the companion effects, and, beside a finding
     that does not rescale, with the best rescaling (:func:`best_rescaling`, with
@@ -252,7 +261,7 @@ def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict,
         for sub in [(n,) for n in own_comp]:
             start = {**f.parameters, **(fits[sub[0]].parameters if sub[0] in fits else {})}
             tried.append((*fit_effects(prob, nom, tuple(f.effects) + sub, c, start=start, memo=memo,
-                                       nested=(fits[f.effect],)), sub))
+                                       nested=(fits[f.effect],), warm=warm), sub))
         better = [t for t in tried if t[0].score < f.score]  # single companions, in library order
         helping = tuple(sub[0] for _, _, sub in better)
         for size in range(2, len(helping) + 1):
@@ -260,7 +269,7 @@ def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict,
                 start = {k: v for t in better if set(t[2]) <= set(sub) for k, v in t[0].parameters.items()}
                 inner = (fits[f.effect],) + tuple(o for _, o, s in tried if set(s) < set(sub))
                 tried.append((*fit_effects(prob, nom, tuple(f.effects) + sub, c, start=start, memo=memo,
-                                           nested=inner), sub))
+                                           nested=inner, warm=warm), sub))
         joint_fits.setdefault(f.effect, []).extend((tuple(f.effects) + sub, fo) for _, fo, sub in tried)
         joint, fo, sub = _supported_companions(tried, c)
         if not joint.score <= f.score - c.companion_bic:
@@ -274,7 +283,7 @@ def _with_companions(prob: Problem, nom: FitOutcome, findings: list, fits: dict,
         key = "+".join(sub)
         if key not in fits:
             fits[key] = fit_effects(prob, nom, sub, c, start=fo.parameters, memo=memo,
-                                    nested=tuple(fits[n] for n in sub if n in fits))[1]
+                                    nested=tuple(fits[n] for n in sub if n in fits), warm=warm)[1]
         ref = [fits[n] for n in set(own_comp) | {key} if n in fits]
         base = min(ref, key=lambda o: o.bic(w), default=nom)
         base_bic = min(base.bic(w), nom.bic(w))
