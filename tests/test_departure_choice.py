@@ -95,6 +95,8 @@ def test_a_maps_own_error_is_not_carried(tmp_path):
     c = _choice(path, nominal)
     assert not c.carried
     assert c.bic_with - c.bic_without > Criteria().degenerate_bic
+    # the refit is kept for the ranking redone without the departure, which restarts from it
+    assert c.without is not None and set(c.without.parameters) == {"slit_image_width_um"}
 
 
 def test_the_diagnosis_says_whether_it_carried_the_departure(tmp_path):
@@ -116,3 +118,31 @@ def test_the_diagnosis_says_whether_it_carried_the_departure(tmp_path):
     assert d.findings[0].parameters == pytest.approx(without.findings[0].parameters, rel=1e-9)
     _, page = write_report(d, tmp_path / "out")
     assert "The map's departure is not carried: slit_width fits the images" in unescape(page.read_text())
+
+
+def test_a_fit_restarts_from_a_warm_fit_it_nests(tmp_path):
+    """``fit_effects(..., warm=...)``: J profiles of a 6 mm pupil shift, fitted from a start at
+    -6 mm, end at the prior's -10 mm bound with about twice the objective of the multi-start
+    fit; given that fit as ``warm`` the combination ends at its optimum, and a warm fit with a
+    parameter the combination does not hold is ignored."""
+    from dataclasses import replace
+
+    from diagnosis_cases import profile_image_case
+
+    from pipeline.diagnosis.fitting import fit
+    from pipeline.diagnosis.nominal import nominal_sag_map
+    from pipeline.diagnosis.ranking import parameters_of
+
+    manifest = load_manifest(profile_image_case(tmp_path, {"pupil_x_mm": 6.0, "pupil_y_mm": 1.0}, psf=False))
+    nominal = nominal_sag_map(manifest.simulation, None)
+    prob, nom = build_problem(manifest, load_data(manifest), nominal)
+    good = fit(prob, parameters_of(("pupil_shift",), prob.forwards))
+    start = {"pupil_x_mm": -6.0, "pupil_y_mm": 1.0}
+    w = prob.weights
+    _, cold = fit_effects(prob, nom, ("pupil_shift",), Criteria(), start=start)
+    assert cold.weighted_rss(w) > 1.5 * good.weighted_rss(w)  # the start's basin is a worse one
+    _, warm = fit_effects(prob, nom, ("pupil_shift",), Criteria(), start=start, warm=(good,))
+    assert warm.weighted_rss(w) <= good.weighted_rss(w) * (1 + 1e-6)
+    other = replace(good, parameters={**good.parameters, "slit_image_width_um": 30.0})
+    _, ignored = fit_effects(prob, nom, ("pupil_shift",), Criteria(), start=start, warm=(other,))
+    assert ignored.weighted_rss(w) == pytest.approx(cold.weighted_rss(w), rel=1e-9)
