@@ -40,7 +40,7 @@ from .noise import (SCATTERED_NOISE_REL_SD_SQRT_N, SIGNAL_DEPENDENT_NOISE_REL_SD
 from .nominal import DEFAULT_MATERIALS, thermal_factor
 from .quilt import QuiltComponents, quilt_components
 
-__all__ = ["FIT_LSF_SETTINGS", "FOOTPRINT_MARGIN_CELLS", "NOISE_LEAK_LIMIT", "PROFILE_KEYS", "SurfaceForward", "SpectrographImageModel", "ProfileForward", "profile_curve",
+__all__ = ["FIT_LSF_SETTINGS", "FOOTPRINT_MARGIN_CELLS", "NOISE_LEAK_LIMIT", "PROFILE_KEYS", "SurfaceForward", "SpectrographImageModel", "OpticsCurve", "ProfileForward", "profile_curve",
            "true_temperature", "deformation_factor", "blank_coordinates", "blank_shape_um", "map_terms_um",
            "collimator_terms", "spectrograph_optics", "quilt_parts", "lstsq_residual", "MAX_COUPLING", "coupled_lstsq", "coupled_at"]
 
@@ -479,6 +479,25 @@ class SpectrographImageModel:
         return out
 
 
+class OpticsCurve:
+    """The line profile the optics form (offsets ``u`` µm, intensity ``y``) and its spline,
+    built on first use: beside non-null detector terms the profile model is the spline of the
+    detected curve instead (:meth:`ProfileForward.curve`), and a spline costs about a fifth of
+    the optics' own evaluation (the wings check's fits build one detected spline per optics
+    evaluation)."""
+
+    __slots__ = ("u", "y", "_spline")
+
+    def __init__(self, u: np.ndarray, y: np.ndarray):
+        self.u, self.y, self._spline = u, y, None
+
+    @property
+    def spline(self) -> CubicSpline:
+        if self._spline is None:
+            self._spline = CubicSpline(self.u, self.y, extrapolate=False)
+        return self._spline
+
+
 class ProfileForward(SpectrographImageModel):
     """Line-profile model: ``flux * C_c[P](u - delta_um; params) + background``, ``C_c`` the
     detector's inter-pixel coupling: a fraction ``c`` of each pixel's signal read in each
@@ -527,12 +546,12 @@ class ProfileForward(SpectrographImageModel):
         (:func:`detected_profile`)."""
         wings = tuple(round(float(p.get(q, n)), 12) for q, n in self._DETECTED_NULLS.items())
         if wings == tuple(self._DETECTED_NULLS.values()):
-            return self._memo(p, self._build)[1]
+            return self._memo(p, self._build).spline
         key = self._key(p)[0] + wings
         hit = self._splines.get(key)
         if hit is None:
-            u, y = self._memo(p, self._build)[0]
-            hit = self._splines[key] = CubicSpline(u, detected_profile(u, y, p), extrapolate=False)
+            c = self._memo(p, self._build)
+            hit = self._splines[key] = CubicSpline(c.u, detected_profile(c.u, c.y, p), extrapolate=False)
             if len(self._splines) > self._cache_size:
                 self._splines.popitem(last=False)
         else:
@@ -560,10 +579,10 @@ class ProfileForward(SpectrographImageModel):
         return box[0] + sx, box[1] + sx, box[2] + sy, box[3] + sy
 
     def _build(self, sag, p):
-        """((offset_um, intensity) the optics form, its spline) for the deformed ``sag``."""
+        """The profile the optics form for the deformed ``sag`` (:class:`OpticsCurve`)."""
         u, y = profile_curve(self.m.grating, self.m.wavelength_um, self.m.order, self.m.pixel_scale_mas, sag, p,
                              self.m.slit_position, self.settings, detected=False)
-        return (u, y), CubicSpline(u, y, extrapolate=False)
+        return OpticsCurve(u, y)
 
     def predict(self, p: dict, delta_um: float = 0.0) -> np.ndarray:
         """Model profile at the measured offsets shifted by ``delta_um`` (before flux/background)."""
