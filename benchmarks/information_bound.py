@@ -7,7 +7,7 @@ forward models at the truth's parameter values, each measurement weighted by one
 noise the diagnosis estimates from its data (its white part) and the correlated noise the
 manifest states (a profile's covariance whitened by its Cholesky factor), the profiles' offset shifts and
 the linear nuisances (flux, background: projected out inside each forward) free beside them.
-Three sets of free parameters (:func:`SETS`): the injected effect alone (a perfect model: the
+Three sets of free parameters (:func:`free_sets`): the injected effect alone (a perfect model: the
 most the data can tell); the effect beside ``quilt_shape`` (the companion every independent
 truth carries, since its quilt's shape differs from the simulation's); and beside
 ``quilt_shape`` and ``amplitude_scale`` (the truth's quilt departs in its x fundamental too).
@@ -57,15 +57,13 @@ from pipeline.diagnosis.truth.generate import make_case  # noqa: E402
 #: for an offset shift (the profiles are smooth on both scales)
 PARAM_STEP = 0.005
 SHIFT_STEP_UM = 0.05
-#: whether the profiles' stated correlated noise enters the covariance (``--white-only``: not)
-STATED_CORRELATED_NOISE = True
 
 
-def _whitener(forward, sigma_w: float):
+def _whitener(forward, sigma_w: float, correlated: bool = True):
     """Residual -> residual in units of its noise: white noise ``sigma_w``, plus a line
     profile's stated correlated noise (squared-exponential, :class:`.noise.CorrelatedNoise`)
-    through the Cholesky factor of the covariance."""
-    cn = getattr(forward, "correlated_noise", None) if STATED_CORRELATED_NOISE else None
+    through the Cholesky factor of the covariance (``correlated=False``: white noise only)."""
+    cn = getattr(forward, "correlated_noise", None) if correlated else None
     if cn is None:
         return lambda r: r / sigma_w
     cov = sigma_w**2 * np.eye(len(forward.x)) + cn.rms_rel**2 * cn.correlation(forward.x)
@@ -73,11 +71,11 @@ def _whitener(forward, sigma_w: float):
     return lambda r: solve_triangular(chol, r, lower=True)
 
 
-def fisher_sigma(prob, params, p0: dict, deltas_um: dict) -> np.ndarray:
+def fisher_sigma(prob, params, p0: dict, deltas_um: dict, correlated: bool = True) -> np.ndarray:
     """Covariance of ``params`` (physical units) from ``J^T J`` of the noise-weighted residuals
     at ``p0``, every forward's position nuisances free beside them (marginalised)."""
     fws = prob.forwards
-    whiten = {f.name: _whitener(f, prob.noise[f.name]) for f in fws}
+    whiten = {f.name: _whitener(f, prob.noise[f.name], correlated) for f in fws}
 
     def resid(p, d):
         return np.concatenate([whiten[f.name](f.residual(p, d.get(f.name, 0.0))) for f in fws])
@@ -118,7 +116,7 @@ def within_rate(truth: dict, names: list, cov: np.ndarray, sign_free: set, rng, 
     return float(ok.mean())
 
 
-def SETS(effect: str) -> tuple:
+def free_sets(effect: str) -> tuple:
     """The sets of free effects the bound is taken with: the injected effect alone; beside
     ``quilt_shape``; beside ``quilt_shape`` and the quilt's amplitude (``amplitude_scale``, the
     x fundamental an independent truth's quilt also departs in), unless it is the effect."""
@@ -127,7 +125,7 @@ def SETS(effect: str) -> tuple:
             ("with_quilt_shape_and_amplitude", (effect, "quilt_shape") + amp))
 
 
-def case_bound(cfg, row: dict, nominal, base, rng_mc, draws: int) -> dict:
+def case_bound(cfg, row: dict, nominal, base, rng_mc, draws: int, correlated: bool = True) -> dict:
     """The bound for one recorded case row (both sets of free parameters)."""
     index, (kind, effect) = row["index"], case_type(cfg, row["index"])
     rng = np.random.default_rng([cfg.seed, index])
@@ -144,13 +142,13 @@ def case_bound(cfg, row: dict, nominal, base, rng_mc, draws: int) -> dict:
     out = {"index": index, "effect": effect, "measurement": row["measurement"], "truth": truth,
            "sign_degenerate": row.get("sign_degenerate") or [], "reported_sigma": row.get("uncertainties") or {},
            "recovery_error_measured": row.get("recovery_error_measured")}
-    for label, effects in SETS(effect):
+    for label, effects in free_sets(effect):
         params = parameters_of(effects, prob.forwards)
         p0 = {q.name: q.null for q in params}
         p0.update({n: truth[n] for n in names if n in p0})
         # the offset shifts where the truth's line lies for this model (public fit: nuisances only)
         deltas = fit(prob, (), fixed=p0).deltas_um
-        cov_all = fisher_sigma(prob, params, p0, deltas)
+        cov_all = fisher_sigma(prob, params, p0, deltas, correlated)
         idx = [i for i, q in enumerate(params) if q.name in names]
         cov = cov_all[np.ix_(idx, idx)]
         own = [params[i].name for i in idx]
@@ -168,8 +166,6 @@ def main(argv=None) -> int:
     ap.add_argument("--draws", type=int, default=20000, help="Monte Carlo readings per case")
     ap.add_argument("--white-only", action="store_true", help="leave the stated correlated noise out")
     a = ap.parse_args(argv)
-    global STATED_CORRELATED_NOISE
-    STATED_CORRELATED_NOISE = not a.white_only
     one_blas_thread()
     rng_mc = np.random.default_rng(7)
     rows = []
@@ -187,12 +183,12 @@ def main(argv=None) -> int:
                 continue
             if a.indices is not None and row["index"] not in a.indices:
                 continue
-            b = case_bound(cfg, row, nominal, base, rng_mc, a.draws)
+            b = case_bound(cfg, row, nominal, base, rng_mc, a.draws, correlated=not a.white_only)
             b["raw"] = path.name
             rows.append(b)
             print(path.name, b["index"], b["effect"], b["measurement"],
                   *(f"{k} {b[k]['p_within_20pct']:.2f} {({n: round(v, 4) for n, v in b[k]['sigma'].items()})}"
-                    for k, _ in SETS(b["effect"])), flush=True)
+                    for k, _ in free_sets(b["effect"])), flush=True)
             a.out.write_text(json.dumps(rows, indent=1, default=float))
     return 0
 

@@ -54,6 +54,9 @@ def test_linear_model_bound_is_the_analytic_covariance(correlated):
     X = np.column_stack([A, slope])  # the offset shift marginalised beside the parameters
     expected = np.linalg.inv(X.T @ np.linalg.solve(C, X))[:2, :2]
     np.testing.assert_allclose(cov, expected, rtol=1e-6)
+    # ``--white-only``: a stated correlated noise is left out of the covariance
+    white = mod.fisher_sigma(prob, params, {"a_um": 0.1, "b_um": -0.2}, {fw.name: 0.0}, correlated=False)
+    np.testing.assert_allclose(white, sigma_w**2 * np.linalg.inv(X.T @ X)[:2, :2], rtol=1e-6)
 
 
 def test_within_rate_is_the_gaussian_integral():
