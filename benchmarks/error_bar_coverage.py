@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.diagnosis.campaign import on_truth_side
 from pipeline.diagnosis.effects import parameter_spec
 
 HERE = Path(__file__).parent
@@ -54,8 +55,7 @@ def pulls(paths) -> dict:
                     seen.add(key)
                     fit = fitted[name]
                     if name in (r.get("sign_degenerate") or ()):
-                        o = parameter_spec(name).origin
-                        fit = fit if (fit - o) * (true - o) >= 0 else 2.0 * o - fit
+                        fit = on_truth_side(fit, true, parameter_spec(name).origin)
                     out[name].append((fit - true) / s)
     return dict(out)
 

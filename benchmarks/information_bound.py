@@ -45,7 +45,7 @@ from scipy.linalg import solve_triangular
 sys.path.insert(0, str(Path(__file__).parent))
 from rerun_cases import recorded_config  # noqa: E402  (a sibling script)
 
-from pipeline.diagnosis.campaign import campaign_maps, case_type, one_blas_thread  # noqa: E402
+from pipeline.diagnosis.campaign import campaign_maps, case_type, on_truth_side, one_blas_thread  # noqa: E402
 from pipeline.diagnosis.effects import parameter_spec  # noqa: E402
 from pipeline.diagnosis.engine import build_problem  # noqa: E402
 from pipeline.diagnosis.fitting import fit  # noqa: E402
@@ -109,9 +109,8 @@ def within_rate(truth: dict, names: list, cov: np.ndarray, sign_free: set, rng, 
     for j, n in enumerate(names):
         q = parameter_spec(n)
         v = x[:, j]
-        if n in sign_free:  # the fit's mirror on the truth's side, as the campaign compares it
-            o = q.origin
-            v = np.where((v - o) * (t[j] - o) >= 0, v, 2 * o - v)
+        if n in sign_free:  # compared by magnitude, as the campaign compares it
+            v = on_truth_side(v, t[j], q.origin)
         ok &= np.abs(v - t[j]) <= 0.2 * max(abs(t[j]), q.floor)
     return float(ok.mean())
 

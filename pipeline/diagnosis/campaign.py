@@ -84,7 +84,8 @@ from .synth import (blank_shape_map, shape_discrepancy, synthetic_profile, synth
                     unmodelled_shape)
 
 __all__ = ["CASE_TYPES", "EXTRA_CASE_TYPES", "DISCREPANCIES", "DISCREPANCY_PRESENT", "TRUTHS", "PROFILE_SETS", "PSF_IMAGE_SPEC",
-           "OUT_OF_LIBRARY", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "make_case", "case_type",
+           "OUT_OF_LIBRARY", "parse_types", "CampaignConfig", "score_case", "recovery_errors", "on_truth_side", "make_case",
+           "case_type",
            "run_case", "run_campaign",
            "one_blas_thread", "write_campaign"]
 
@@ -380,6 +381,16 @@ def make_case(kind: str, effect: str, rng: np.random.Generator, base: SagMap, ou
     return {"simulation": sim, "measurement": meas}, truth
 
 
+def on_truth_side(fit, true: float, origin: float):
+    """``fit`` (a value or an array of readings), each reading on the other side of ``origin``
+    from ``true`` replaced by its mirror ``2 origin - fit``: how a parameter whose sign the
+    engine does not claim (``sign_degenerate``) is compared with the truth, by its magnitude
+    about its sign origin (:attr:`.effects.Parameter.origin`)."""
+    v = np.asarray(fit, float)
+    out = np.where((v - origin) * (true - origin) >= 0, v, 2.0 * origin - v)
+    return float(out) if out.ndim == 0 else out
+
+
 def recovery_errors(d, effect: str, truth: dict, finding=None) -> dict | None:
     """Recovery of the injected parameters by the injected effect's own fit (or by
     ``finding``, a finding that holds the effect: the one the diagnosis names).
@@ -406,9 +417,8 @@ def recovery_errors(d, effect: str, truth: dict, finding=None) -> dict | None:
             errs.append(math.inf)
             sig_ok = False
             continue
-        if k in f.sign_degenerate:  # sign undetermined: the fit's mirror on the truth's side
-            o = parameter_spec(k).origin  # (magnitudes compared about the sign origin)
-            fit = fit if (fit - o) * (v - o) >= 0 else 2.0 * o - fit
+        if k in f.sign_degenerate:  # sign undetermined: magnitudes compared about the sign origin
+            fit = on_truth_side(fit, v, parameter_spec(k).origin)
         errs.append(abs(fit - v) / max(abs(v), floor))
         dv.append(fit - v)
         tv.append(v)
