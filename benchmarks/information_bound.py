@@ -165,6 +165,9 @@ def main(argv=None) -> int:
     ap.add_argument("--draws", type=int, default=20000, help="Monte Carlo readings per case")
     ap.add_argument("--white-only", action="store_true", help="leave the stated correlated noise out")
     a = ap.parse_args(argv)
+    if a.draws < 100:
+        ap.error(f"--draws={a.draws}: the Monte Carlo needs at least 100 readings a case (valid: >= 100; "
+                 "the pages use 20000)")
     one_blas_thread()
     rng_mc = np.random.default_rng(7)
     rows = []

@@ -68,3 +68,11 @@ def test_within_rate_is_the_gaussian_integral():
     # compared by magnitude about 0, window 0.2 x the 3 mm floor: ||x| - t| <= 0.6 <=> |x| <= 0.7
     p = mod.within_rate({"pupil_y_mm": 0.1}, ["pupil_y_mm"], np.array([[1.0]]), {"pupil_y_mm"}, rng, 200_000)
     assert p == pytest.approx(math.erf(0.7 / math.sqrt(2)), abs=0.005)
+
+
+def test_too_few_draws_are_refused_by_name(capsys):
+    mod = _module()
+    with pytest.raises(SystemExit):
+        mod.main([str(ROOT / "benchmarks" / "frozen_repeat_draw_raw.json"), "--out", "unused.json", "--draws", "0"])
+    err = capsys.readouterr().err
+    assert "--draws=0" in err and "valid: >= 100" in err
