@@ -141,3 +141,38 @@ def test_other_basin_moves_span_minima_inside_one_s2():
     np.testing.assert_allclose(other_basin_moves(minima, s2=0.44), [0.26, 0.1])
     np.testing.assert_allclose(other_basin_moves(minima, s2=2.0), [1.36, 2.9])
     np.testing.assert_allclose(other_basin_moves(minima[:1], s2=0.44), [0.0, 0.0])
+
+
+@pytest.mark.slow
+def test_each_two_part_pass_starts_from_the_pass_before(tmp_path, monkeypatch):
+    """Under the two-part error model a re-weighted pass refits every model. A fit's residual
+    per measurement does not depend on the weights, so every fit of the pass before is a point
+    of the new objective: no fit of the new pass may end above one it holds (J profiles of a
+    6 mm pupil shift, whose weights move after the first pass)."""
+    import pipeline.diagnosis.engine as engine
+
+    from diagnosis_cases import profile_image_case
+
+    calls, real = [], engine.rank
+
+    def recording(prob, nom, cands, criteria, memo, warm=()):
+        out = real(prob, nom, cands, criteria, memo, warm)
+        calls.append((prob, out[1], out[2], warm))
+        return out
+
+    monkeypatch.setattr(engine, "rank", recording)
+    p = profile_image_case(tmp_path, {"pupil_x_mm": 6.0, "pupil_y_mm": 1.0}, psf=False)
+    diagnose(p, criteria=Criteria(error_model="two_part"), heldout=False)
+    assert len(calls) >= 2  # the weights moved: a second pass ran
+
+    def every_fit(fits, joint_fits):
+        return list(fits.values()) + [fo for tried in joint_fits.values() for _, fo in tried]
+
+    for (_, fits0, joint0, _), (prob, fits1, joint1, warm) in zip(calls, calls[1:]):
+        before = every_fit(fits0, joint0)
+        assert all(any(b is w for w in warm) for b in before)
+        w = prob.weights
+        for fo in every_fit(fits1, joint1):
+            held = [b.weighted_rss(w) for b in before if b.parameters and set(b.parameters) <= set(fo.parameters)]
+            if held:
+                assert fo.weighted_rss(w) <= min(held) * (1 + 1e-6)

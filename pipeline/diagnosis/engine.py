@@ -261,7 +261,8 @@ def _ranked(manifest: Manifest, data: tuple, nominal, criteria: Criteria, cands,
     """Build the problem (the image models carrying a measured map's departure where
     ``map_in_optics``), fit and rank the candidate effects ``cands``, re-ranking under the
     error model (``docs/diagnosis.md``, steps 1-5); ``warm``: fits of the same model made
-    before, restarted from (:func:`.ranking.rank`)."""
+    before, restarted from (:func:`.ranking.rank`), as is each re-weighted pass from the
+    pass before it."""
     prob, nom = build_problem(manifest, data, nominal, criteria.weight_scale, map_in_optics)
     base_forwards = tuple(prob.forwards)  # one per measurement, in the manifest's order
     kinds = {f.kind for f in prob.forwards}
@@ -279,9 +280,14 @@ def _ranked(manifest: Manifest, data: tuple, nominal, criteria: Criteria, cands,
             new = two_part_problem(base_prob, errs)
             if weights_settled(prob, new, _N_EFF_RTOL):
                 break
-            prob, errors, memo = new, errs, {}  # new weights: every fit is redone
+            # New weights: every fit is redone, and each restarts from the previous pass's fit
+            # of a model it holds where it would end above it: the per-measurement residuals
+            # of a fit do not depend on the weights, so that fit is a point of this objective
+            # too, and a fit from scratch under new weights can land in a worse basin.
+            before = tuple(fits.values()) + tuple(fo for tried in joint_fits.values() for _, fo in tried)
+            prob, errors, memo = new, errs, {}
             nom = fit(prob, ())
-            findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo, warm)
+            findings, fits, joint_fits = rank(prob, nom, cands, criteria, memo, warm + before)
     elif criteria.n_eff_from == "best_fit":
         for _ in range(_N_EFF_PASSES):
             count = post_fit_n_eff(prob, fits[findings[0].effect])
