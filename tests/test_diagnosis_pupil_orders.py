@@ -5,6 +5,8 @@ no code with the engine's forward model. Nominal: the analytic sum quilt (no FEA
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from pipeline.diagnosis import diagnose
@@ -49,6 +51,9 @@ def test_check_applies_only_to_collimator_findings():
     g = with_check(with_check(f, ambiguous), ambiguous)
     assert g.degenerate_with == (OTHER_ORDERS_LABEL,)
     assert with_check(f, PupilOrdersCheck(0.0, 30.0, {}, False, "")) is f
+    assert PupilOrdersCheck(0.0, 30.0, {"pupil_spherical_um": 0.1}, False, "text", 24.3).summary() == {
+        "bic_finding": 0.0, "bic_other_orders": 30.0, "parameters": {"pupil_spherical_um": 0.1},
+        "ambiguous": False, "score_equal_count": 24.3}
 
 
 @pytest.mark.slow
@@ -77,3 +82,9 @@ def test_collimator_coma_is_still_the_collimators(tmp_path):
     assert d.verdict == "explained" and "collimator_wfe" in d.best.effects
     assert OTHER_ORDERS_LABEL not in d.best.degenerate_with
     assert d.best.parameters["coll_coma_um"] == pytest.approx(-0.2, abs=0.05)
+    # the check's outcome is recorded although it changed nothing; its four terms pay one
+    # parameter more than the collimator's three, one log N_eff of BIC the likelihood alone does not
+    check = d.to_dict()["checks"]["pupil_orders"]
+    assert not check["ambiguous"]
+    extra = check["bic_other_orders"] - check["bic_finding"] - check["score_equal_count"]
+    assert extra == pytest.approx(math.log(sum(d.baseline["n_count"].values())), rel=1e-6)

@@ -621,7 +621,7 @@ def run_case(args) -> dict:
             "top_unconstrained": list(best.unconstrained) if best else [],
             "unexplained_in": [g["measurement"] for g in d.unexplained_in],
             "ranking_note": d.ranking_note, "n_eff": d.baseline["n_eff"], "n_count": d.baseline["n_count"],
-            "map_departure_choice": d.baseline.get("map_departure_choice"),
+            "map_departure_choice": d.baseline.get("map_departure_choice"), "checks": d.checks,
             "seconds": time.perf_counter() - t0}
 
 

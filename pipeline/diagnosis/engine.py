@@ -72,6 +72,10 @@ class Diagnosis:
     #: (:func:`.alone.fits_alone`): whether the parts read one value or the gap is a
     #: missing effect.
     parts_alone: tuple = ()
+    #: The outcome of each check the best finding went through, by name (``pupil_orders``:
+    #: :class:`.pupil_orders.PupilOrdersCheck`, ``wings``: :class:`.wings.WingsCheck`), as
+    #: plain numbers, whether or not it changed the verdict.
+    checks: dict = field(default_factory=dict)
 
     @property
     def best(self) -> Finding | None:
@@ -92,7 +96,7 @@ class Diagnosis:
 
         return clean({"verdict": self.verdict, "unexplained_in": list(self.unexplained_in),
                       "ranking_note": self.ranking_note,
-                      "parts_alone": [p.to_dict() for p in self.parts_alone],
+                      "parts_alone": [p.to_dict() for p in self.parts_alone], "checks": self.checks,
                       "findings": [asdict(f) for f in self.findings],
                       "where": list(self.where), "where_after_best": list(self.where_after),
                       "baseline": self.baseline, "measurements": list(self.measurements),
@@ -394,14 +398,17 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
     if gap and findings and len(members_of(findings[0])) > 1 and not explains(findings[0], criteria):
         findings, note = member_explains(prob, findings, criteria, heldout)
     best = findings[0] if findings else None
+    done = {}
     if gap and checks(best) and explains(best, criteria):  # is the pupil aberration the collimator's?
         pupil = other_orders_check(prob, best, fits[best.effect], criteria)
         best = findings[0] = with_check(best, pupil)
         note = "; ".join(n for n in (note, pupil.note if pupil.ambiguous else "") if n)
+        done["pupil_orders"] = pupil.summary()
     if gap and wings_alternative.checks(prob, best) and explains(best, criteria):
         side = wings_alternative.wings_check(prob, best, fits[best.effect], criteria)  # detector side's light?
         best = findings[0] = wings_alternative.with_check(best, side)
         note = "; ".join(n for n in (note, side.note) if n)
+        done["wings"] = side.summary()
     if not gap:
         verdict = "no_gap"
     elif best and explains(best, criteria):  # the checks' outcomes are in best (verdict.failed_tests)
@@ -435,4 +442,5 @@ def diagnose(manifest_path_or_obj, *, effects: tuple | None = None, criteria: Cr
             curves["best"] = predictions(prob, fits[best.effect])
     t["total_s"] = time.perf_counter() - t.pop("start")
     return Diagnosis(verdict, tuple(findings), tuple(where), where_after, baseline, ms, criteria,
-                     {k: round(v, 3) for k, v in t.items()}, manifest.source, curves, unexplained_in, note, alone)
+                     {k: round(v, 3) for k, v in t.items()}, manifest.source, curves, unexplained_in, note, alone,
+                     done)

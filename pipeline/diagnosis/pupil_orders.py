@@ -55,7 +55,7 @@ the reason in the report. Otherwise nothing changes. The alternative is a single
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 
 from .criteria import Criteria
 from .effects.pupil_other_orders import PUPIL_OTHER_ORDERS
@@ -88,6 +88,14 @@ class PupilOrdersCheck:
     parameters: dict
     ambiguous: bool
     note: str
+    #: The alternative's score against the finding's were both charged the finding's
+    #: parameter count (the fit's likelihood alone; > 0: the alternative fits worse). The
+    #: BIC difference charges the alternative its one parameter more, one log N_eff.
+    score_equal_count: float = 0.0
+
+    def summary(self) -> dict:
+        """The outcome as plain numbers for ``diagnosis.json`` (the note is in the ranking note)."""
+        return {k: v for k, v in asdict(self).items() if k != "note"}
 
 
 def checks(finding: Finding | None) -> bool:
@@ -106,6 +114,7 @@ def other_orders_check(prob: Problem, finding: Finding, fo: FitOutcome, c: Crite
     start.update({q.name: q.null for q in OTHER_ORDER_PARAMETERS})
     alt = fit(prob, params, start=start)
     b_f, b_a = fo.bic(prob.weights), alt.bic(prob.weights)
+    equal = fo.score_change(alt.weighted_rss(prob.weights), prob.weights)
     ambiguous = bool(b_a <= b_f + c.degenerate_bic)
     terms = ", ".join(f"{q.name} {alt.parameters[q.name]:+.3f}" for q in OTHER_ORDER_PARAMETERS)
     if ambiguous:
@@ -114,7 +123,7 @@ def other_orders_check(prob: Problem, finding: Finding, fo: FitOutcome, c: Crite
                 f"the finding, margin {c.degenerate_bic:g}), so the data cannot say the aberration is the collimator's")
     else:
         note = (f"{finding.effect}: a pupil aberration of other orders fits worse (BIC {b_a - b_f:+.1f}; {terms} µm)")
-    return PupilOrdersCheck(float(b_f), float(b_a), dict(alt.parameters), ambiguous, note)
+    return PupilOrdersCheck(float(b_f), float(b_a), dict(alt.parameters), ambiguous, note, float(equal))
 
 
 def with_check(finding: Finding, check: PupilOrdersCheck) -> Finding:

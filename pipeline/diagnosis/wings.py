@@ -58,7 +58,7 @@ and raise it by 13.5.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 
 from .criteria import Criteria
 from .effects import applicable_effects
@@ -108,6 +108,10 @@ class WingsCheck:
     #: The wings lower it by ``Criteria.min_delta_bic`` or more: the finding is needed and so
     #: is light the library does not hold.
     needed_beside: bool = False
+
+    def summary(self) -> dict:
+        """The outcome as plain numbers for ``diagnosis.json`` (the note is in the ranking note)."""
+        return {k: v for k, v in asdict(self).items() if k != "note"}
 
 
 def checks(prob: Problem, finding: Finding | None) -> bool:
