@@ -88,9 +88,9 @@ class PupilOrdersCheck:
     parameters: dict
     ambiguous: bool
     note: str
-    #: The alternative's score against the finding's were both charged the finding's
-    #: parameter count (the fit's likelihood alone; > 0: the alternative fits worse). The
-    #: BIC difference charges the alternative its one parameter more, one log N_eff.
+    #: The alternative's score minus the finding's, were both charged the finding's parameter
+    #: count (the fits' likelihoods alone; > 0: the alternative fits worse). The BIC difference
+    #: also charges the alternative its one parameter more, one log N_eff.
     score_equal_count: float = 0.0
 
     def summary(self) -> dict:
