@@ -43,6 +43,7 @@ def test_table2_cases_deform_in_opposite_directions(eighth):
     assert _quilt_direction_um(surf.sag, Blank()) < -0.1   # ... lower with outer surfaces coated
 
 
+@pytest.mark.slow
 def test_film_response_is_linear_in_mismatch(eighth):
     a = solve(150, 0.75, prepared=eighth, stress_scale=1.0).sag.pv_um("center")
     b = solve(150, 0.75, prepared=eighth, stress_scale=0.5).sag.pv_um("center")
@@ -119,6 +120,7 @@ def test_bad_sweep_input_is_refused_before_meshing(axes, match):
         fea_grid(**axes)
 
 
+@pytest.mark.slow
 def test_cli_sweep_writes_table_and_reuses_cases(tmp_path, capsys):
     from pipeline.cli import main
 

@@ -21,6 +21,7 @@ def mesh():
     return blank_mesh(Blank(), COARSE)
 
 
+@pytest.mark.slow
 def test_cached_operators_equal_assembled(mesh, tmp_path):
     fresh = PreparedBlank(mesh, operator_cache=None)
     first = PreparedBlank(mesh, operator_cache=tmp_path)

@@ -149,6 +149,7 @@ def test_free_stiffness_on_bulk_pattern_equals_sparse_sum():
     assert abs(fast - ref).max() <= 1e-12 * abs(ref).max()
 
 
+@pytest.mark.slow
 def test_batched_statistics_equal_per_case(model):
     """statistics_many (one matrix product per chunk) gives statistics() per case."""
     s = build_surrogate(model, SurrogateDomain(), stress_scale=STRESS_SCALE, tol=5e-3)

@@ -3,6 +3,8 @@ import re
 import runpy
 from pathlib import Path
 
+import pytest
+
 README = Path(__file__).resolve().parents[1] / "README.md"
 
 
@@ -17,6 +19,7 @@ def test_readme_has_a_tested_example():
     assert readme_blocks(), "no python block between the readme-test markers"
 
 
+@pytest.mark.slow
 def test_readme_example_runs(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)          # the example writes runs/... relative to the working directory
     for i, block in enumerate(readme_blocks()):

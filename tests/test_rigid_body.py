@@ -110,6 +110,7 @@ def test_front_rigid_body_is_independent_of_how_the_body_is_pinned():
     np.testing.assert_allclose(list(moved.as_dict().values()), list(base.as_dict().values()), atol=1e-8)
 
 
+@pytest.mark.slow
 def test_own_fea_case_outputs_rigid_body_and_power(tmp_path):
     """Eighth model: symmetry forces dx, dy, rx, ry, rz to zero; dz is the face's mean sag
     (the blank's mean z motion is zero by the mid-plane mirror); P/V_center is unchanged."""

@@ -81,6 +81,7 @@ def test_config_check_reports_bad_files(tmp_path, capsys):
     _fails(["config", "--check", str(cfg)], capsys, "fea.bogus: unknown key")
 
 
+@pytest.mark.slow
 def test_small_whatif_end_to_end_on_a_coarse_mesh(tmp_path):
     """The AlSi40 what-if cut to one FEA case and two pixel scales (the full presets: slow tier)."""
     from pipeline.study.run import run_study

@@ -635,6 +635,7 @@ def test_truth_option_and_case_types():
         parse_types("line_profile:ool_stray", "model")
 
 
+@pytest.mark.slow
 def test_validate_default_path_smoke(tmp_path, monkeypatch):
     """Three map cases through ``diagnose --validate`` (default: independent truth), on
     analytic nominal/FEA stand-ins (an FEA solve takes minutes): every case runs, the
